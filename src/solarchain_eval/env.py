@@ -1,0 +1,278 @@
+"""The SolarChain-Eval Gymnasium environment (SPEC §3): one episode = 24 hourly decisions."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from .config import BenchmarkConfig, load_config
+from .data.default import default_dataset_dir
+from .data.table import HourlyTable, load_table
+from .market.actions import ActionCodec
+from .market.dynamics import PRICE_NOISE_STD, MarketHours, RewardWeights, market_step
+from .market.observation import (
+    OBS_LIMIT,
+    OBS_LIQUIDITY,
+    OBS_PREV_ALPHA,
+    OBS_PREV_ELL,
+    OBS_PRICE,
+    OBSERVATION_NAMES,
+    observation_template,
+)
+from .market.ops import SCALAR
+
+ActionMode = str  # "continuous" | "discrete"
+
+
+def resolve_config(config: BenchmarkConfig | str | Path | None) -> BenchmarkConfig:
+    if config is None:
+        return BenchmarkConfig()
+    if isinstance(config, BenchmarkConfig):
+        return config
+    return load_config(config)
+
+
+def resolve_table(data_dir: str | Path | None, config: BenchmarkConfig) -> HourlyTable:
+    """Explicit ``data_dir``, else the config's, else the embedded default dataset."""
+    chosen = data_dir if data_dir is not None else config.data_dir
+    return load_table(chosen if chosen is not None else default_dataset_dir())
+
+
+_HOURS_CACHE: dict[int, tuple[HourlyTable, MarketHours, np.ndarray]] = {}
+
+
+def market_inputs(table: HourlyTable) -> tuple[MarketHours, np.ndarray]:
+    """Derived per-hour inputs and observation template of a table (computed once per table)."""
+    cached = _HOURS_CACHE.get(id(table))
+    if cached is None or cached[0] is not table:
+        hours = MarketHours.from_table(table)
+        cached = (table, hours, observation_template(hours))
+        _HOURS_CACHE[id(table)] = cached
+    return cached[1], cached[2]
+
+
+def start_hours(n_hours: int, episode_steps: int) -> np.ndarray:
+    """Admissible episode starts: midnights with a full episode after them."""
+    if n_hours <= episode_steps:
+        return np.zeros(1, dtype=np.int64)
+    return np.arange(0, n_hours - episode_steps + 1, 24, dtype=np.int64)
+
+
+class SolarChainEnv(gym.Env):
+    """Hourly governance of a decentralised solar-energy market.
+
+    Parameters
+    ----------
+    data_dir : path, optional
+        Dataset directory (four CSVs). Defaults to the config's ``data_dir``, then the
+        embedded default dataset (built once into the user cache).
+    config : BenchmarkConfig or path to a YAML file, optional
+    no_physics_penalty : bool, optional
+        Drop λp (V + A) from the reward (V and A are still recorded). Overrides the config.
+    action_mode : {"continuous", "discrete"}, optional
+        ``Box(0, 1, (3,))`` or ``Discrete(levels**3)``. Overrides the config.
+    seed : int, optional
+        Seed of the env's generator until ``reset(seed=...)``; defaults to the config seed.
+    table : HourlyTable, optional
+        A preloaded hourly table (skips loading ``data_dir``).
+
+    Notes
+    -----
+    ``info`` holds every per-step quantity of SPEC §3/§4 under the original release's names,
+    plus ``cost`` = V + A (for safe-RL algorithms), ``fairness_variance`` (F) and
+    ``city_rewards``. Episodes truncate after ``episode_steps``; they never terminate.
+    """
+
+    metadata = {"render_modes": []}
+
+    def __init__(
+        self,
+        data_dir: str | Path | None = None,
+        *,
+        config: BenchmarkConfig | str | Path | None = None,
+        no_physics_penalty: bool | None = None,
+        action_mode: ActionMode | None = None,
+        seed: int | None = None,
+        table: HourlyTable | None = None,
+    ) -> None:
+        super().__init__()
+        cfg = resolve_config(config)
+        if action_mode is not None and action_mode not in ("continuous", "discrete"):
+            raise ValueError(f"action_mode must be 'continuous' or 'discrete', not {action_mode!r}")
+        cfg = cfg.with_updates(action_mode=action_mode, no_physics_penalty=no_physics_penalty)
+        self.config = cfg
+        self.table = table if table is not None else resolve_table(data_dir, cfg)
+        self.market_hours, self._obs_template = market_inputs(self.table)
+        self.codec = ActionCodec.from_config(cfg.market)
+        self.weights = RewardWeights.from_config(cfg)
+        self.action_mode = cfg.action_mode
+        self.episode_steps = cfg.episode_steps
+        self.cities = self.table.cities
+        self.observation_names = OBSERVATION_NAMES
+
+        if self.action_mode == "discrete":
+            self._discrete_actions = self.codec.discrete_table(cfg.discrete_levels)
+            self.action_space = spaces.Discrete(len(self._discrete_actions))
+        else:
+            self._discrete_actions = []
+            self.action_space = spaces.Box(low=0.0, high=1.0, shape=(3,), dtype=np.float32)
+        self.observation_space = spaces.Box(low=-OBS_LIMIT, high=OBS_LIMIT, shape=(12,), dtype=np.float32)
+
+        # Per-hour inputs as Python lists: list indexing of floats is the cheapest lookup.
+        hours, t = self.market_hours, self.table
+        self._n_hours = t.hours
+        self._starts = start_hours(t.hours, self.episode_steps)
+        self._verified = t.verified_mwh.tolist()
+        self._reported = t.reported_mwh.tolist()
+        self._unsafe = hours.unsafe_supply_mwh.tolist()
+        self._demand = hours.clearing_demand_mwh.tolist()
+        self._raw_rate = t.raw_violation_rate.tolist()
+        self._share = [tuple(row) for row in hours.city_share.tolist()]
+        self._trust = [tuple(row) for row in hours.city_trust.tolist()]
+        m = cfg.market
+        self._initial_liquidity = m.initial_liquidity
+        self._initial_price = m.initial_token_price
+        self._depth_scale = max(m.initial_liquidity, 1e-9)
+        self._initial_action = tuple(
+            float(np.float32(v)) for v in (m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate)
+        )
+
+        self._np_random = np.random.default_rng(cfg.seed if seed is None else seed)
+        self._episode_open = False
+        self._set_episode(0, [0.0] * self.episode_steps, None)
+
+    # --- episode bookkeeping ------------------------------------------------------------------
+    def _set_episode(self, start: int, noise: list, noise_state: dict | None) -> None:
+        self._start = start
+        self._k = 0
+        self._noise = noise
+        self._noise_state = noise_state
+        self._liquidity = self._peak_liquidity = self._initial_liquidity
+        self._price = self._peak_price = self._initial_price
+        self._prev = self._initial_action
+        self._city_totals = [0.0] * len(self.cities)
+
+    def _rewind_unused_noise(self) -> None:
+        """Return the generator to where drawing noise one step at a time would leave it."""
+        if self._episode_open and self._k < len(self._noise) and self._noise_state is not None:
+            self._np_random.bit_generator.state = self._noise_state
+            if self._k:
+                self._np_random.normal(0.0, PRICE_NOISE_STD, size=self._k)
+
+    def _observation(self, hour: int) -> np.ndarray:
+        obs = self._obs_template[hour].copy()
+        liquidity, price = self._liquidity, self._price
+        obs[OBS_LIQUIDITY] = liquidity if liquidity < OBS_LIMIT else OBS_LIMIT
+        obs[OBS_PRICE] = price if price < OBS_LIMIT else OBS_LIMIT
+        obs[OBS_PREV_ALPHA] = self._prev[0]
+        obs[OBS_PREV_ELL] = self._prev[1]
+        return obs
+
+    @property
+    def episode_start_hour(self) -> int:
+        return self._start
+
+    @property
+    def city_totals(self) -> dict[str, float]:
+        """Each city's accumulated reward tokens this episode."""
+        return dict(zip(self.cities, self._city_totals))
+
+    # --- Gymnasium API ------------------------------------------------------------------------
+    def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
+        if seed is None:
+            self._rewind_unused_noise()
+        super().reset(seed=seed)
+        rng = self._np_random
+        if options and "start_hour" in options:
+            start = int(np.clip(int(options["start_hour"]), 0, max(self._n_hours - self.episode_steps, 0)))
+        elif self._n_hours <= self.episode_steps:
+            start = 0
+        else:
+            start = int(rng.choice(self._starts))
+        state = rng.bit_generator.state
+        noise = rng.normal(0.0, PRICE_NOISE_STD, size=self.episode_steps).tolist()
+        self._set_episode(start, noise, state)
+        self._episode_open = True
+        return self._observation(start), {"episode_start_hour": start, "absolute_hour": start}
+
+    def decode_action(self, action: Any) -> tuple[float, float, float]:
+        """The executed (α, ℓ, b) for a policy action (float32 values)."""
+        if self.action_mode == "discrete":
+            index = int(np.asarray(action).reshape(-1)[0]) if np.ndim(action) else int(action)
+            if not 0 <= index < len(self._discrete_actions):
+                raise ValueError(f"discrete action {index} is outside 0..{len(self._discrete_actions) - 1}")
+            return self._discrete_actions[index]
+        return self.codec.decode(action)
+
+    def step(self, action: Any):
+        k = self._k
+        if not self._episode_open or k >= self.episode_steps:
+            raise RuntimeError("the episode is over (or was never started): call reset() first")
+        executed = self.decode_action(action)
+        hour = self._start + k
+        if hour >= self._n_hours:
+            hour = self._n_hours - 1
+        out = market_step(
+            SCALAR,
+            self.weights,
+            self._verified[hour],
+            self._unsafe[hour],
+            self._demand[hour],
+            self._share[hour],
+            self._trust[hour],
+            self._liquidity,
+            self._peak_liquidity,
+            self._price,
+            self._peak_price,
+            executed,
+            self._prev,
+            self._noise[k],
+        )
+        self._liquidity, self._peak_liquidity = out.liquidity, out.peak_liquidity
+        self._price, self._peak_price = out.token_price, out.peak_price
+        self._prev = executed
+        totals = self._city_totals
+        for i, value in enumerate(out.city_rewards):
+            totals[i] += value
+        k += 1
+        self._k = k
+        truncated = k >= self.episode_steps
+        if truncated:
+            self._episode_open = False
+        next_hour = self._start + k
+        obs = self._observation(next_hour if next_hour < self._n_hours else self._n_hours - 1)
+        info = {
+            "step": k - 1,
+            "reward": out.reward,
+            "absolute_hour": hour,
+            "episode_start_hour": self._start,
+            "hour": hour % 24,
+            "reward_ratio": executed[0],
+            "liquidity_ratio": executed[1],
+            "burn_rate": executed[2],
+            "verified_supply_MWh": self._verified[hour],
+            "reported_supply_MWh": self._reported[hour],
+            "physics_excess_MWh": self._unsafe[hour],
+            "unsafe_backed_MWh": out.unsafe_backed_mwh,
+            "artificial_liquidity_MWh": out.artificial_liquidity_mwh,
+            "physics_violation_rate": out.violation_rate,
+            "raw_physics_record_rate": self._raw_rate[hour],
+            "demand_MWh": self._demand[hour],
+            "matched_energy_MWh": out.matched_mwh,
+            "unmet_demand_MWh": out.unmet_mwh,
+            "liquidity": out.liquidity,
+            "liquidity_depth": out.liquidity / self._depth_scale,
+            "token_price": out.token_price,
+            "max_drawdown": out.drawdown,
+            "token_drawdown": out.token_drawdown,
+            "action_jitter": out.jitter,
+            "slippage": out.slippage,
+            "fairness_variance": out.fairness_variance,
+            "cost": out.violation_rate + out.unsafe_backed_mwh,
+            "city_rewards": dict(zip(self.cities, out.city_rewards)),
+        }
+        return obs, out.reward, False, truncated, info

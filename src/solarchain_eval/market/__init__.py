@@ -1,0 +1,18 @@
+"""Pure market dynamics: action decoding, physics gate, clearing, price and reward."""
+
+from .actions import ActionCodec, action_jitter_f32
+from .dynamics import MarketHours, RewardWeights, StepOutcome, market_step
+from .ops import BATCH, SCALAR, numpy_order_sum, numpy_order_variance
+
+__all__ = [
+    "ActionCodec",
+    "action_jitter_f32",
+    "MarketHours",
+    "RewardWeights",
+    "StepOutcome",
+    "market_step",
+    "BATCH",
+    "SCALAR",
+    "numpy_order_sum",
+    "numpy_order_variance",
+]

@@ -1,0 +1,118 @@
+"""Arithmetic back-ends for the market functions: Python floats or numpy arrays.
+
+The market dynamics are written once against this small interface. ``SCALAR`` runs them on
+Python floats (the single environment: no per-step numpy overhead), ``BATCH`` on float64
+arrays (the vector environment). Both evaluate the same IEEE double operations in the same
+order, so a sub-environment of the vector env reproduces the single env bit for bit.
+
+float32 rounding is exact in both: an operation on two float32 values evaluated in float64
+and then rounded to float32 equals the float32 operation (53 >= 2·24 + 2 bits, so double
+rounding is innocuous for +, -, ×, ÷).
+"""
+
+from __future__ import annotations
+
+import struct
+from typing import Any, Sequence
+
+import numpy as np
+
+_F1 = struct.Struct("f")
+_F3 = struct.Struct("3f")
+
+
+def _clip_scalar(x: float, lo: float, hi: float) -> float:
+    return lo if x < lo else (hi if x > hi else x)
+
+
+class ScalarOps:
+    """Python-float back-end."""
+
+    maximum = staticmethod(max)
+    minimum = staticmethod(min)
+    clip = staticmethod(_clip_scalar)
+
+    @staticmethod
+    def where(condition: bool, if_true: float, if_false: float) -> float:
+        return if_true if condition else if_false
+
+    @staticmethod
+    def nan_to_zero(x: float) -> float:
+        return 0.0 if x != x else x
+
+    @staticmethod
+    def f32(x: float) -> float:
+        return _F1.unpack(_F1.pack(x))[0]
+
+    @staticmethod
+    def f32x3(a: float, b: float, c: float) -> tuple[float, float, float]:
+        return _F3.unpack(_F3.pack(a, b, c))
+
+
+def _round_f32(x: np.ndarray) -> np.ndarray:
+    return np.asarray(x, dtype=np.float64).astype(np.float32).astype(np.float64)
+
+
+class BatchOps:
+    """numpy float64-array back-end."""
+
+    maximum = staticmethod(np.maximum)
+    minimum = staticmethod(np.minimum)
+    clip = staticmethod(np.clip)
+    where = staticmethod(np.where)
+
+    @staticmethod
+    def nan_to_zero(x: np.ndarray) -> np.ndarray:
+        return np.where(np.isnan(x), 0.0, x)
+
+    f32 = staticmethod(_round_f32)
+
+    @staticmethod
+    def f32x3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        return _round_f32(a), _round_f32(b), _round_f32(c)
+
+
+SCALAR = ScalarOps()
+BATCH = BatchOps()
+
+
+def numpy_order_sum(values: Sequence[Any]) -> Any:
+    """Sum ``values`` (floats, or equal-shape arrays) in the order ``numpy.add.reduce`` uses.
+
+    numpy sums a 1-D float64 array pairwise: fewer than 8 items left to right, up to 128 items
+    in 8 interleaved partial sums, larger blocks split in halves (multiples of 8). Reproducing
+    that order keeps per-city reductions identical to the original release's ``np.var``.
+    """
+    n = len(values)
+    if n == 0:
+        return 0.0
+    if n < 8:
+        total = values[0]
+        for value in values[1:n]:
+            total = total + value
+        return total
+    if n <= 128:
+        partial = list(values[:8])
+        stop = n - (n % 8)
+        for i in range(8, stop, 8):
+            for j in range(8):
+                partial[j] = partial[j] + values[i + j]
+        total = ((partial[0] + partial[1]) + (partial[2] + partial[3])) + (
+            (partial[4] + partial[5]) + (partial[6] + partial[7])
+        )
+        for value in values[stop:n]:
+            total = total + value
+        return total
+    half = n // 2
+    half -= half % 8
+    return numpy_order_sum(values[:half]) + numpy_order_sum(values[half:])
+
+
+def numpy_order_variance(values: Sequence[Any]) -> Any:
+    """Population variance in ``numpy.var``'s order of operations."""
+    n = len(values)
+    if n == 0:
+        return 0.0
+    mean = numpy_order_sum(values) / n
+    squares = [(value - mean) * (value - mean) for value in values]
+    return numpy_order_sum(squares) / n
