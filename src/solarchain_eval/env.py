@@ -12,8 +12,9 @@ from gymnasium import spaces
 from .config import BenchmarkConfig, load_config
 from .data.default import default_dataset_dir
 from .data.table import HourlyTable, load_table
-from .market.actions import ActionCodec
-from .market.dynamics import PRICE_NOISE_STD, MarketHours, RewardWeights, market_step
+from .episodes import PRICE_NOISE_STD, EpisodeStream
+from .market.actions import ActionCodec, action_jitter_f32
+from .market.dynamics import MarketHours, RewardWeights, market_step
 from .market.observation import (
     OBS_LIMIT,
     OBS_LIQUIDITY,
@@ -142,26 +143,20 @@ class SolarChainEnv(gym.Env):
         )
 
         self._np_random = np.random.default_rng(cfg.seed if seed is None else seed)
+        self._stream = EpisodeStream(self._np_random)
+        self._noise_buffer = np.empty(self.episode_steps)
         self._episode_open = False
-        self._set_episode(0, [0.0] * self.episode_steps, None)
+        self._set_episode(0, [0.0] * self.episode_steps)
 
     # --- episode bookkeeping ------------------------------------------------------------------
-    def _set_episode(self, start: int, noise: list, noise_state: dict | None) -> None:
+    def _set_episode(self, start: int, noise: list) -> None:
         self._start = start
         self._k = 0
         self._noise = noise
-        self._noise_state = noise_state
         self._liquidity = self._peak_liquidity = self._initial_liquidity
         self._price = self._peak_price = self._initial_price
         self._prev = self._initial_action
         self._city_totals = [0.0] * len(self.cities)
-
-    def _rewind_unused_noise(self) -> None:
-        """Return the generator to where drawing noise one step at a time would leave it."""
-        if self._episode_open and self._k < len(self._noise) and self._noise_state is not None:
-            self._np_random.bit_generator.state = self._noise_state
-            if self._k:
-                self._np_random.normal(0.0, PRICE_NOISE_STD, size=self._k)
 
     def _observation(self, hour: int) -> np.ndarray:
         obs = self._obs_template[hour].copy()
@@ -183,19 +178,19 @@ class SolarChainEnv(gym.Env):
 
     # --- Gymnasium API ------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        if seed is None:
-            self._rewind_unused_noise()
+        if seed is None and self._episode_open:
+            self._stream.truncate_last(self._k)  # an episode cut short drew fewer shocks
         super().reset(seed=seed)
-        rng = self._np_random
-        if options and "start_hour" in options:
+        if self._stream.rng is not self._np_random:  # reseeded (here or by the user)
+            self._stream = EpisodeStream(self._np_random)
+        fixed_start = options is not None and "start_hour" in options
+        draw_start = not fixed_start and self._n_hours > self.episode_steps
+        index = self._stream.begin(len(self._starts) if draw_start else 0, self._noise_buffer)
+        if fixed_start:
             start = int(np.clip(int(options["start_hour"]), 0, max(self._n_hours - self.episode_steps, 0)))
-        elif self._n_hours <= self.episode_steps:
-            start = 0
         else:
-            start = int(rng.choice(self._starts))
-        state = rng.bit_generator.state
-        noise = rng.normal(0.0, PRICE_NOISE_STD, size=self.episode_steps).tolist()
-        self._set_episode(start, noise, state)
+            start = int(self._starts[index]) if draw_start else 0
+        self._set_episode(start, (self._noise_buffer * PRICE_NOISE_STD).tolist())
         self._episode_open = True
         return self._observation(start), {"episode_start_hour": start, "absolute_hour": start}
 
@@ -229,7 +224,7 @@ class SolarChainEnv(gym.Env):
             self._price,
             self._peak_price,
             executed,
-            self._prev,
+            action_jitter_f32(executed, self._prev),
             self._noise[k],
         )
         self._liquidity, self._peak_liquidity = out.liquidity, out.peak_liquidity

@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..config import MarketConfig
-from .ops import BATCH, SCALAR
+from .ops import SCALAR
 
 _F32 = np.float32
 
@@ -33,6 +33,12 @@ class ActionCodec:
     lo32: tuple[float, float, float]
     width32: tuple[float, float, float]
     max_total_allocation: float
+
+    def __post_init__(self) -> None:
+        object.__setattr__(self, "_lo_column", np.array(self.lo, dtype=np.float64)[:, None])
+        object.__setattr__(self, "_hi_column", np.array(self.hi, dtype=np.float64)[:, None])
+        object.__setattr__(self, "_width32", tuple(_F32(w) for w in self.width32))
+        object.__setattr__(self, "_lo32", tuple(_F32(v) for v in self.lo32))
 
     @classmethod
     def from_config(cls, market: MarketConfig) -> "ActionCodec":
@@ -93,13 +99,37 @@ class ActionCodec:
         return np.clip(np.array(u, dtype=_F32), 0.0, 1.0)
 
     # --- batches ----------------------------------------------------------------------------
-    def decode_batch(self, actions: Any) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Decode an (N, 3) batch; returns float64 arrays holding float32 values."""
+    # Component-major (3, N) float32 arrays and native float32 arithmetic: the same IEEE
+    # operations the scalar path emulates, so results are identical (the tests compare both
+    # on adversarial inputs).
+    def decode_batch(self, actions: Any) -> np.ndarray:
+        """Decode (N, 3) normalised actions; returns executed actions as a (3, N) float32 array."""
         u = np.asarray(actions, dtype=_F32)
         if u.ndim != 2 or u.shape[1] != 3:
             raise ValueError(f"a batch of continuous actions has shape (N, 3), got {u.shape}")
-        u64 = u.astype(np.float64)
-        return self.decode_with(BATCH, u64[:, 0], u64[:, 1], u64[:, 2])
+        # fmax/fmin ignore NaN: NaN -> 0, -inf -> 0, +inf -> 1, i.e. nan_to_num then clip.
+        u = np.ascontiguousarray(u.T)
+        np.fmax(u, _F32(0.0), out=u)
+        np.fmin(u, _F32(1.0), out=u)
+        w0, w1, w2 = self._width32
+        market = np.empty_like(u)
+        np.multiply(u[0], w0, out=market[0])
+        np.multiply(u[1], w1, out=market[1])
+        np.multiply(u[2], w2, out=market[2])
+        market[0] += self._lo32[0]
+        market[1] += self._lo32[1]
+        return self.sanitize_batch(market)
+
+    def sanitize_batch(self, actions: np.ndarray) -> np.ndarray:
+        """Sanitise a (3, N) batch in market units (float64 work); (3, N) float32."""
+        a = np.array(actions, dtype=np.float64, order="C")
+        np.maximum(a, self._lo_column, out=a)
+        np.minimum(a, self._hi_column, out=a)
+        # cap / total >= 1 exactly when no scaling is needed, and x * 1.0 == x.
+        scale = np.minimum(self.max_total_allocation / (a[0] + a[1]), 1.0)
+        a[0] *= scale
+        a[1] *= scale
+        return a.astype(_F32)
 
     def discrete_grid(self, levels: int) -> np.ndarray:
         """The normalised grid {0, 1/(k-1), ..., 1}^3 in itertools.product order, float32."""
@@ -111,7 +141,13 @@ class ActionCodec:
         return [self.decode(point) for point in self.discrete_grid(levels)]
 
 
-def action_jitter_f32(ops: Any, a: tuple, prev: tuple) -> Any:
-    """|a - a_prev|_1 in float32 (numpy's float32 order: left to right)."""
-    d0, d1, d2 = ops.f32x3(abs(a[0] - prev[0]), abs(a[1] - prev[1]), abs(a[2] - prev[2]))
-    return ops.f32(ops.f32(d0 + d1) + d2)
+def action_jitter_f32(a: tuple, prev: tuple) -> float:
+    """J = |a - a_prev|_1 of float32 actions, in float32 (numpy's order: left to right)."""
+    d0, d1, d2 = SCALAR.f32x3(abs(a[0] - prev[0]), abs(a[1] - prev[1]), abs(a[2] - prev[2]))
+    return SCALAR.f32(SCALAR.f32(d0 + d1) + d2)
+
+
+def action_jitter_f32_batch(actions: np.ndarray, prev: np.ndarray) -> np.ndarray:
+    """J per sub-env of (3, N) float32 action arrays, in float32; returned as float64."""
+    d = np.abs(actions - prev)
+    return ((d[0] + d[1]) + d[2]).astype(np.float64)

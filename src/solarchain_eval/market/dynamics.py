@@ -9,14 +9,12 @@ the original release's order of operations, so results agree with it bit for bit
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Any, NamedTuple, Sequence
+from typing import Any, NamedTuple
 
 import numpy as np
 
 from ..config import BenchmarkConfig
 from ..data.table import HourlyTable
-from .actions import action_jitter_f32
-from .ops import numpy_order_variance
 
 # Market constants of SPEC §3 (not part of the paper's configuration).
 MIN_DEMAND_FACTOR = 0.75  # token burning can cut effective demand by at most 25 %
@@ -108,7 +106,12 @@ class StepOutcome(NamedTuple):
     violation_rate: Any
     artificial_liquidity_mwh: Any
     fairness_variance: Any
-    city_rewards: list
+    city_rewards: Any  # list of floats (scalar) or a (C, N) array (batch)
+
+
+def city_reward(reward_tokens: Any, ell: Any, share: Any, trust: Any) -> Any:
+    """A city's reward tokens: α G_b · share · (1 - violation rate) + ℓ · share · 0.01."""
+    return reward_tokens * share * trust + ell * share * LIQUIDITY_SHARE_WEIGHT
 
 
 def market_step(
@@ -117,14 +120,14 @@ def market_step(
     verified_mwh: Any,
     unsafe_supply_mwh: Any,
     demand_mwh: Any,
-    city_share: Sequence[Any],
-    city_trust: Sequence[Any],
+    city_share: Any,
+    city_trust: Any,
     liquidity: Any,
     peak_liquidity: Any,
     token_price: Any,
     peak_price: Any,
     action: tuple,
-    prev_action: tuple,
+    jitter: Any,
     noise: Any,
 ) -> StepOutcome:
     """Advance the market by one hour.
@@ -135,14 +138,16 @@ def market_step(
         Arithmetic back-end.
     verified_mwh, unsafe_supply_mwh, demand_mwh : float or ndarray
         G_v, X and the clearing demand Q_c of the hour, MWh.
-    city_share, city_trust : sequence (one item per city, alphabetical)
-        Share of verified power and 1 - violation rate.
+    city_share, city_trust : tuple of floats (scalar) or (C, N) arrays (batch)
+        Each city's share of verified power and 1 - its violation rate, cities alphabetical.
     liquidity, peak_liquidity : float or ndarray
         Pool L before the step and its running peak, MWh.
     token_price, peak_price : float or ndarray
         Token price p before the step and its running peak.
-    action, prev_action : (α, ℓ, b) tuples of float32-valued floats/arrays
-        Executed action and the previous executed action.
+    action : (α, ℓ, b) tuple of float32-valued floats/arrays
+        The executed action.
+    jitter : float or ndarray
+        J = |a - a_prev|_1 computed in float32 (see :mod:`.actions`).
     noise : float or ndarray
         The price shock, a normal(0, 0.004) draw.
     """
@@ -164,7 +169,6 @@ def market_step(
     peak_liquidity = ops.maximum(peak_liquidity, liquidity)
     drawdown = 1.0 - liquidity / ops.maximum(peak_liquidity, 1e-12)
     slippage = effective_demand / ops.maximum(available + SLIPPAGE_DEPTH_OFFSET_MWH, SLIPPAGE_DEPTH_OFFSET_MWH)
-    jitter = action_jitter_f32(ops, action, prev_action)
     # Token price.
     supply_gap = (verified_mwh - effective_demand) / ops.maximum(effective_demand, 1e-6)
     price_return = (
@@ -180,11 +184,8 @@ def market_step(
     peak_price = ops.maximum(peak_price, token_price)
     token_drawdown = 1.0 - token_price / ops.maximum(peak_price, 1e-12)
     # Spatial allocation of reward tokens.
-    city_rewards = [
-        reward_tokens * share * trust + ell * share * LIQUIDITY_SHARE_WEIGHT
-        for share, trust in zip(city_share, city_trust)
-    ]
-    fairness_variance = numpy_order_variance(city_rewards)
+    city_rewards = ops.per_city(city_reward, (reward_tokens, ell), (city_share, city_trust))
+    fairness_variance = ops.city_variance(city_rewards)
     reward = (
         matched
         - weights.drawdown * drawdown

@@ -26,7 +26,7 @@ def _clip_scalar(x: float, lo: float, hi: float) -> float:
 
 
 class ScalarOps:
-    """Python-float back-end."""
+    """Python-float back-end. Per-city values are tuples (one float per city)."""
 
     maximum = staticmethod(max)
     minimum = staticmethod(min)
@@ -48,17 +48,25 @@ class ScalarOps:
     def f32x3(a: float, b: float, c: float) -> tuple[float, float, float]:
         return _F3.unpack(_F3.pack(a, b, c))
 
+    @staticmethod
+    def per_city(formula: Any, per_env: tuple, city_columns: tuple) -> list:
+        """``formula(*per_env, *city_values)`` for each city; a list of floats."""
+        return [formula(*per_env, *values) for values in zip(*city_columns)]
+
+    @staticmethod
+    def city_variance(city_values: list) -> float:
+        return numpy_order_variance(city_values)
+
 
 def _round_f32(x: np.ndarray) -> np.ndarray:
     return np.asarray(x, dtype=np.float64).astype(np.float32).astype(np.float64)
 
 
 class BatchOps:
-    """numpy float64-array back-end."""
+    """numpy float64-array back-end: one element per sub-env; per-city values are (C, N)."""
 
     maximum = staticmethod(np.maximum)
     minimum = staticmethod(np.minimum)
-    clip = staticmethod(np.clip)
     where = staticmethod(np.where)
 
     @staticmethod
@@ -70,6 +78,24 @@ class BatchOps:
     @staticmethod
     def f32x3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         return _round_f32(a), _round_f32(b), _round_f32(c)
+
+    @staticmethod
+    def clip(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
+        return np.minimum(np.maximum(x, lo), hi)
+
+    @staticmethod
+    def per_city(formula: Any, per_env: tuple, city_columns: tuple) -> np.ndarray:
+        """``formula`` on (C, N) city arrays (per-env operands broadcast along rows); (C, N)."""
+        return formula(*per_env, *city_columns)
+
+    @staticmethod
+    def city_variance(city_values: np.ndarray) -> np.ndarray:
+        """numpy.var's operations per sub-env, with the (C, N) arrays' rows as the cities."""
+        n = city_values.shape[0]
+        if n == 0:
+            return np.zeros(city_values.shape[1:])
+        deviation = city_values - numpy_order_sum(list(city_values)) / n
+        return numpy_order_sum(list(deviation * deviation)) / n
 
 
 SCALAR = ScalarOps()

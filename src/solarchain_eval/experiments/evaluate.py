@@ -1,0 +1,119 @@
+"""The ``evaluate`` stage: policies × run seeds × episodes -> a run directory.
+
+Inputs are validated (dataset, policy names, config) before anything is written; every file
+is written atomically and ``run_metadata.json`` last, so a run directory with metadata is
+complete.
+"""
+
+from __future__ import annotations
+
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Callable, Sequence
+
+from ..config import BenchmarkConfig
+from ..data.build import DATASET_FILES, MANIFEST_FILE
+from ..data.default import default_dataset_dir
+from ..data.table import HourlyTable, load_table
+from ..env import SolarChainEnv
+from ..io import atomic_write_json, sha256_file
+from ..policies.registry import make_policy
+from ..versions import git_commit, package_versions
+from .records import METADATA_FILE, write_records
+from .rollout import SETTING_MAIN, SETTING_NO_PHYSICS, EpisodeResult, paper_episode_seeds, run_policy
+
+PAPER_SEEDS = (20260511, 20260512, 20260513)
+PAPER_EPISODES = 30
+
+
+@dataclass
+class EvaluationSpec:
+    policies: Sequence[str]
+    run_seeds: Sequence[int] = PAPER_SEEDS
+    episodes: int = PAPER_EPISODES
+    data_dir: Path | None = None
+    no_physics_penalty: bool = False
+    config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    models: dict[str, Path] = field(default_factory=dict)
+    episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds
+
+
+@dataclass
+class EvaluationOutcome:
+    run_dir: Path
+    results: list[EpisodeResult]
+    files: dict[str, Path]
+    wall_s: float
+
+
+def dataset_provenance(table: HourlyTable) -> dict:
+    root = Path(table.source)
+    info: dict = {"data_dir": str(root.resolve()), "files": {}}
+    for name in DATASET_FILES:
+        path = root / name
+        if path.is_file():
+            info["files"][name] = sha256_file(path)
+    manifest = root / MANIFEST_FILE
+    if manifest.is_file():
+        info["manifest_sha256"] = sha256_file(manifest)
+    return info
+
+
+def run_evaluation(
+    spec: EvaluationSpec,
+    run_dir: Path,
+    *,
+    on_episode: Callable[[EpisodeResult], None] | None = None,
+    command: Sequence[str] | None = None,
+) -> EvaluationOutcome:
+    started = time.perf_counter()
+    started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    data_dir = spec.data_dir or (Path(config.data_dir) if config.data_dir else default_dataset_dir())
+    table = load_table(data_dir)  # validates before anything is written
+    policies = [make_policy(name, config, spec.models) for name in spec.policies]
+    setting = SETTING_NO_PHYSICS if spec.no_physics_penalty else SETTING_MAIN
+
+    envs: dict[str, SolarChainEnv] = {}
+    results: list[EpisodeResult] = []
+    for policy in policies:
+        env = envs.get(policy.action_mode)
+        if env is None:
+            env = envs[policy.action_mode] = SolarChainEnv(config=config, table=table, action_mode=policy.action_mode)
+        results.extend(
+            run_policy(
+                env,
+                policy,
+                setting=setting,
+                run_seeds=spec.run_seeds,
+                episodes=spec.episodes,
+                episode_seeds=spec.episode_seeds,
+                on_episode=on_episode,
+            )
+        )
+
+    run_dir.mkdir(parents=True, exist_ok=True)
+    files = write_records(run_dir, results, table.cities)
+    wall_s = time.perf_counter() - started
+    metadata = {
+        "complete": True,
+        "command": list(command if command is not None else sys.argv),
+        "started_at": started_at,
+        "wall_s": round(wall_s, 3),
+        "git_commit": git_commit(),
+        "package_versions": package_versions(),
+        "setting": setting,
+        "policies": list(spec.policies),
+        "run_seeds": [int(s) for s in spec.run_seeds],
+        "episodes": int(spec.episodes),
+        "episode_seed_protocol": getattr(spec.episode_seeds, "__name__", "custom"),
+        "rows": {"metrics": len(results), "actions": sum(r.n_steps for r in results)},
+        "dataset": dataset_provenance(table),
+        "models": {k: str(v) for k, v in spec.models.items()},
+        "config": config.model_dump(),
+    }
+    files[METADATA_FILE] = atomic_write_json(run_dir / METADATA_FILE, metadata)
+    return EvaluationOutcome(run_dir=run_dir, results=results, files=files, wall_s=wall_s)

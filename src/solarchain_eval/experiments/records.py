@@ -1,0 +1,131 @@
+"""Tables of evaluation records (metrics, actions, city-hour) and their on-disk files."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+import pandas as pd
+
+from ..io import atomic_write_csv, atomic_write_json
+from ..metrics import METRIC_NAMES
+from .rollout import STEP_FIELDS, EpisodeResult
+
+METRICS_FILE = "metrics.csv"
+ACTIONS_FILE = "actions.csv"
+CITY_HOUR_FILE = "city_hour_policy.csv"
+SUMMARY_FILE = "summary.json"
+METADATA_FILE = "run_metadata.json"
+
+EPISODE_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "start_hour")
+
+
+def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
+    """One row per episode: identifiers, SPEC §4 metrics, then any extra per-episode metrics."""
+    rows = []
+    for r in results:
+        row = {k: getattr(r, k) for k in EPISODE_KEYS}
+        row.update(r.metrics)
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    if frame.empty:
+        return pd.DataFrame(columns=[*EPISODE_KEYS, *METRIC_NAMES])
+    ordered = [*EPISODE_KEYS, *METRIC_NAMES]
+    return frame[ordered + [c for c in frame.columns if c not in ordered]]
+
+
+def actions_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
+    """One row per step: identifiers and every per-step info field."""
+    columns: dict[str, Any] = {}
+    lengths = [r.n_steps for r in results]
+    for key in ("policy", "setting", "run_seed", "episode", "episode_seed"):
+        columns[key] = np.repeat([getattr(r, key) for r in results], lengths)
+    columns["step"] = np.concatenate([np.arange(n) for n in lengths]) if results else np.zeros(0, dtype=int)
+    for name in STEP_FIELDS:
+        columns[name] = [value for r in results for value in r.steps[name]]
+    return pd.DataFrame(columns)
+
+
+def city_hour_frame(results: Sequence[EpisodeResult], cities: Sequence[str]) -> pd.DataFrame:
+    """One row per step and city: the city's reward and the executed action."""
+    n_cities = len(cities)
+    keys: dict[str, list] = {k: [] for k in ("policy", "setting", "run_seed", "episode")}
+    step, absolute_hour, hour, alpha, ell, burn, city_reward = [], [], [], [], [], [], []
+    for r in results:
+        n = r.n_steps
+        for key in keys:
+            keys[key].extend([getattr(r, key)] * (n * n_cities))
+        for t in range(n):
+            step.extend([t] * n_cities)
+            absolute_hour.extend([r.steps["absolute_hour"][t]] * n_cities)
+            hour.extend([r.steps["hour"][t]] * n_cities)
+            alpha.extend([r.steps["reward_ratio"][t]] * n_cities)
+            ell.extend([r.steps["liquidity_ratio"][t]] * n_cities)
+            burn.extend([r.steps["burn_rate"][t]] * n_cities)
+            city_reward.extend(r.city_rewards[t])
+    city = list(cities) * (len(step) // n_cities if n_cities else 0)
+    return pd.DataFrame(
+        {
+            **keys,
+            "step": step,
+            "absolute_hour": absolute_hour,
+            "hour": hour,
+            "city": city,
+            "city_reward": city_reward,
+            "reward_ratio": alpha,
+            "liquidity_ratio": ell,
+            "burn_rate": burn,
+        }
+    )
+
+
+def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
+    """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric.
+
+    ``std`` is the sample standard deviation (ddof=1), as in the paper's tables.
+    """
+    if metrics.empty:
+        return []
+    summary = []
+    numeric = [c for c in metrics.columns if c not in EPISODE_KEYS and pd.api.types.is_numeric_dtype(metrics[c])]
+    static_slippage = {
+        setting: float(group["mean_slippage"].mean())
+        for (policy, setting), group in metrics.groupby(["policy", "setting"], sort=False)
+        if policy == "static"
+    }
+    for (policy, setting), group in metrics.groupby(["policy", "setting"], sort=False):
+        entry: dict[str, Any] = {
+            "policy": policy,
+            "setting": setting,
+            "episodes": int(len(group)),
+            "run_seeds": sorted(int(s) for s in group["run_seed"].unique()),
+            "distinct_episode_seeds": int(group["episode_seed"].nunique()),
+            "distinct_start_hours": int(group["start_hour"].nunique()),
+            "metrics": {
+                name: {
+                    "mean": float(group[name].mean()),
+                    "std": float(group[name].std(ddof=1)) if len(group) > 1 else 0.0,
+                    "min": float(group[name].min()),
+                    "max": float(group[name].max()),
+                }
+                for name in numeric
+            },
+        }
+        if setting in static_slippage and "mean_slippage" in group:
+            base = static_slippage[setting]
+            entry["slippage_reduction_vs_static"] = (base - float(group["mean_slippage"].mean())) / max(base, 1e-9)
+        summary.append(entry)
+    return summary
+
+
+def write_records(run_dir: Path, results: Sequence[EpisodeResult], cities: Sequence[str]) -> dict[str, Path]:
+    """Write metrics, actions and city-hour CSVs and the summary, each file atomically."""
+    metrics = metrics_frame(results)
+    paths = {
+        METRICS_FILE: atomic_write_csv(run_dir / METRICS_FILE, metrics),
+        ACTIONS_FILE: atomic_write_csv(run_dir / ACTIONS_FILE, actions_frame(results)),
+        CITY_HOUR_FILE: atomic_write_csv(run_dir / CITY_HOUR_FILE, city_hour_frame(results, cities)),
+    }
+    paths[SUMMARY_FILE] = atomic_write_json(run_dir / SUMMARY_FILE, summarize(metrics))
+    return paths

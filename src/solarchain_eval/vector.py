@@ -1,0 +1,362 @@
+"""Native batched vector environment: N sub-environments stepped with one array computation.
+
+Every sub-env has its own random generator, seeded like the single env (``reset(seed=s)``
+seeds sub-env i with s + i), and the step is the same :func:`market_step` evaluated on
+arrays, so sub-env i's trajectory equals ``SolarChainEnv`` reset with the same seed and fed
+the same actions, bit for bit.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Any, Sequence
+
+import numpy as np
+from gymnasium import spaces
+from gymnasium.vector import AutoresetMode, VectorEnv
+from gymnasium.vector.utils import batch_space
+
+from .config import BenchmarkConfig
+from .data.table import HourlyTable
+from .env import market_inputs, resolve_config, resolve_table, start_hours
+from .episodes import CHECKPOINT_EVERY, PRICE_NOISE_STD, EpisodeStream
+from .market.actions import ActionCodec, action_jitter_f32_batch
+from .market.dynamics import RewardWeights, market_step
+from .market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE
+from .market.ops import BATCH
+
+#: Per-step info arrays of the vector env (the single env's info keys, less ``city_rewards``).
+VECTOR_INFO_KEYS = (
+    "reward",
+    "absolute_hour",
+    "episode_start_hour",
+    "hour",
+    "reward_ratio",
+    "liquidity_ratio",
+    "burn_rate",
+    "verified_supply_MWh",
+    "reported_supply_MWh",
+    "physics_excess_MWh",
+    "unsafe_backed_MWh",
+    "artificial_liquidity_MWh",
+    "physics_violation_rate",
+    "raw_physics_record_rate",
+    "demand_MWh",
+    "matched_energy_MWh",
+    "unmet_demand_MWh",
+    "liquidity",
+    "liquidity_depth",
+    "token_price",
+    "max_drawdown",
+    "token_drawdown",
+    "action_jitter",
+    "slippage",
+    "fairness_variance",
+    "cost",
+)
+
+
+class SolarChainVectorEnv(VectorEnv):
+    """``num_envs`` SolarChain markets stepped together.
+
+    Accepts the single env's keyword arguments plus ``autoreset_mode``
+    (``NEXT_STEP``, Gymnasium's default, or ``SAME_STEP``). ``info`` maps each per-step
+    quantity to an array over sub-envs (with Gymnasium's ``_key`` masks) and
+    ``city_rewards`` to an (N, C) array. Unseeded sub-env i starts from config seed + i.
+    """
+
+    def __init__(
+        self,
+        num_envs: int = 1,
+        data_dir: str | Path | None = None,
+        *,
+        config: BenchmarkConfig | str | Path | None = None,
+        no_physics_penalty: bool | None = None,
+        action_mode: str | None = None,
+        seed: int | None = None,
+        table: HourlyTable | None = None,
+        autoreset_mode: AutoresetMode | str = AutoresetMode.NEXT_STEP,
+        max_episode_steps: int | None = None,
+    ) -> None:
+        if num_envs < 1:
+            raise ValueError("num_envs must be at least 1")
+        cfg = resolve_config(config).with_updates(action_mode=action_mode, no_physics_penalty=no_physics_penalty)
+        if max_episode_steps is not None:
+            cfg = cfg.with_updates(episode_steps=max_episode_steps)
+        mode = AutoresetMode(autoreset_mode)
+        if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
+            raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP")
+        self.metadata = {"autoreset_mode": mode, "render_modes": []}
+        self.config = cfg
+        self.num_envs = int(num_envs)
+        self.table = table if table is not None else resolve_table(data_dir, cfg)
+        self.market_hours, self._obs_template = market_inputs(self.table)
+        self.codec = ActionCodec.from_config(cfg.market)
+        self.weights = RewardWeights.from_config(cfg)
+        self.action_mode = cfg.action_mode
+        self.episode_steps = cfg.episode_steps
+        self.cities = self.table.cities
+
+        self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, shape=(12,), dtype=np.float32)
+        if self.action_mode == "discrete":
+            self._discrete = np.array(self.codec.discrete_table(cfg.discrete_levels), dtype=np.float32).T.copy()
+            self.single_action_space = spaces.Discrete(self._discrete.shape[1])
+        else:
+            self._discrete = None
+            self.single_action_space = spaces.Box(0.0, 1.0, shape=(3,), dtype=np.float32)
+        self.observation_space = batch_space(self.single_observation_space, self.num_envs)
+        self.action_space = batch_space(self.single_action_space, self.num_envs)
+
+        hours, t = self.market_hours, self.table
+        self._n_hours = t.hours
+        self._starts = start_hours(t.hours, self.episode_steps)
+        self._plain_starts = len(self._starts) if t.hours > self.episode_steps else 0
+        # One gather per step: the hour's scalar inputs side by side, and the city columns.
+        self._hour_inputs = np.ascontiguousarray(  # (5, H): gathers give contiguous (5, N) rows
+            np.vstack([t.verified_mwh, hours.unsafe_supply_mwh, hours.clearing_demand_mwh, t.reported_mwh, t.raw_violation_rate])
+        )
+        # (2C, H): one gather gives the (C, N) share and trust arrays with contiguous rows.
+        self._n_cities = len(self.cities)
+        self._city_inputs = np.ascontiguousarray(np.vstack([hours.city_share.T, hours.city_trust.T]))
+        m = cfg.market
+        self._initial = (m.initial_liquidity, m.initial_token_price)
+        self._depth_scale = max(m.initial_liquidity, 1e-9)
+        self._initial_action = np.array(
+            [m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate], dtype=np.float32
+        )[:, None]
+
+        n = self.num_envs
+        base = cfg.seed if seed is None else seed
+        self._streams = [EpisodeStream(np.random.default_rng(base + i)) for i in range(n)]
+        self._draw_int = [stream.rng.integers for stream in self._streams]
+        self._draw_normal = [stream.rng.standard_normal for stream in self._streams]
+        # Autoreset episodes drawn but not yet written to their stream's log (see _reset_many).
+        self._pending = np.zeros(n, dtype=np.int64)
+        self._since_checkpoint = np.zeros(n, dtype=np.int64)
+        self._noise = np.zeros((n, self.episode_steps))
+        self._noise_rows = list(self._noise)  # row views, filled in place by the streams
+        self._arange = np.arange(n)
+        self._start = np.zeros(n, dtype=np.int64)
+        self._k = np.zeros(n, dtype=np.int64)
+        self._open = np.zeros(n, dtype=bool)
+        self._needs_reset = np.zeros(n, dtype=bool)
+        self._liquidity = np.zeros(n)
+        self._peak_liquidity = np.zeros(n)
+        self._price = np.zeros(n)
+        self._peak_price = np.zeros(n)
+        self._prev = np.zeros((3, n), dtype=np.float32)  # component-major
+        self._city_totals = np.zeros((len(self.cities), n))
+        self._all_true = np.ones(n, dtype=bool)
+        self._all_true.setflags(write=False)  # shared by every info mask; read-only
+        self._info_masks = {"_" + key: self._all_true for key in (*VECTOR_INFO_KEYS, "city_rewards")}
+
+    # --- resets -------------------------------------------------------------------------------
+    def _flush(self, i: int) -> EpisodeStream:
+        """Write sub-env i's pending autoreset episodes into its stream's log."""
+        stream = self._streams[i]
+        if self._pending[i]:
+            stream.record(self._plain_starts, self.episode_steps, int(self._pending[i]))
+            self._pending[i] = 0
+        return stream
+
+    def _reset_many(self, mask: np.ndarray, seeds: Sequence[int | None], start_hours: Sequence[int | None]) -> None:
+        idx = np.flatnonzero(mask)
+        if idx.size == 0:
+            return
+        max_start = max(self._n_hours - self.episode_steps, 0)
+        can_draw = self._n_hours > self.episode_steps
+        n_starts = len(self._starts) if can_draw else 0
+        starts = self._start.copy()  # fresh arrays: the previous step's info may reference the old ones
+        rows = self._noise_rows
+        plain = not self._open[idx].any() and all(seeds[i] is None and start_hours[i] is None for i in idx)
+        if plain:
+            # The autoreset path: every sub-env draws a start and a full episode of shocks.
+            # Draws go straight to the generators; the streams' logs are updated in bulk.
+            for i in idx[self._since_checkpoint[idx] >= CHECKPOINT_EVERY].tolist():
+                self._flush(i).checkpoint()
+                self._since_checkpoint[i] = 0
+            ints, normals, int32 = self._draw_int, self._draw_normal, np.int32
+            if n_starts:
+                drawn = [(ints[i](0, n_starts, dtype=int32), normals[i](out=rows[i])) for i in idx.tolist()]
+                starts[idx] = self._starts[[d[0] for d in drawn]]
+            else:
+                for i in idx.tolist():
+                    normals[i](out=rows[i])
+                starts[idx] = 0
+            self._pending[idx] += 1
+            self._since_checkpoint[idx] += 1
+        else:
+            k, is_open = self._k, self._open
+            for i in idx.tolist():
+                stream = self._flush(i)
+                seed, fixed = seeds[i], start_hours[i]
+                if seed is not None:
+                    stream = self._streams[i] = EpisodeStream(np.random.default_rng(seed))
+                    self._draw_int[i], self._draw_normal[i] = stream.rng.integers, stream.rng.standard_normal
+                elif is_open[i]:
+                    stream.truncate_last(int(k[i]))
+                if fixed is not None:
+                    stream.begin(0, rows[i])
+                    starts[i] = min(max(int(fixed), 0), max_start)
+                else:
+                    index = stream.begin(n_starts, rows[i])
+                    starts[i] = self._starts[index] if n_starts else 0
+                self._since_checkpoint[i] = stream.episodes
+        self._noise[idx] *= PRICE_NOISE_STD
+        self._start = starts
+        self._k = np.where(mask, 0, self._k)
+        self._open = self._open | mask
+        self._needs_reset = self._needs_reset & ~mask
+        self._liquidity = np.where(mask, self._initial[0], self._liquidity)
+        self._peak_liquidity = np.where(mask, self._initial[0], self._peak_liquidity)
+        self._price = np.where(mask, self._initial[1], self._price)
+        self._peak_price = np.where(mask, self._initial[1], self._peak_price)
+        self._prev = np.where(mask, self._initial_action, self._prev)
+        self._city_totals = np.where(mask, 0.0, self._city_totals)
+
+    def _observations(self) -> np.ndarray:
+        hour = np.minimum(self._start + self._k, self._n_hours - 1)
+        obs = np.take(self._obs_template, hour, axis=0)
+        obs[:, OBS_LIQUIDITY] = np.minimum(self._liquidity, OBS_LIMIT)
+        obs[:, OBS_PRICE] = np.minimum(self._price, OBS_LIMIT)
+        obs[:, OBS_PREV_ALPHA] = self._prev[0]
+        obs[:, OBS_PREV_ELL] = self._prev[1]
+        return obs
+
+    def reset(self, *, seed: int | Sequence[int | None] | None = None, options: dict[str, Any] | None = None):
+        n = self.num_envs
+        if seed is None:
+            seeds: list[int | None] = [None] * n
+        elif isinstance(seed, (int, np.integer)):
+            seeds = [int(seed) + i for i in range(n)]
+        else:
+            seeds = list(seed)
+            if len(seeds) != n:
+                raise ValueError(f"got {len(seeds)} seeds for {n} sub-environments")
+        options = options or {}
+        mask = np.asarray(options.get("reset_mask", self._all_true), dtype=bool)
+        if mask.shape != (n,):
+            raise ValueError(f"reset_mask must have shape ({n},)")
+        start = options.get("start_hour")
+        starts = [None] * n if start is None else list(np.broadcast_to(np.asarray(start), (n,)).tolist())
+        self._reset_many(mask, seeds, starts)
+        info = {"episode_start_hour": self._start.copy(), "_episode_start_hour": mask.copy()}
+        return self._observations(), info
+
+    # --- stepping -----------------------------------------------------------------------------
+    def _decode(self, actions: Any) -> np.ndarray:
+        if self._discrete is not None:
+            index = np.asarray(actions).reshape(-1)
+            if index.shape != (self.num_envs,):
+                raise ValueError(f"expected {self.num_envs} discrete actions, got shape {np.shape(actions)}")
+            if index.size and (index.min() < 0 or index.max() >= self._discrete.shape[1]):
+                raise ValueError(f"discrete actions must lie in 0..{self._discrete.shape[1] - 1}")
+            return self._discrete[:, index]
+        batch = np.asarray(actions)
+        if batch.shape != (self.num_envs, 3):
+            raise ValueError(f"expected actions of shape ({self.num_envs}, 3), got {batch.shape}")
+        return self.codec.decode_batch(batch)
+
+    def step(self, actions: Any):
+        n = self.num_envs
+        autoreset = self.metadata["autoreset_mode"]
+        resetting = self._needs_reset
+        if resetting.all():
+            self._reset_many(resetting, [None] * n, [None] * n)
+            zeros, falses = np.zeros(n), np.zeros(n, dtype=bool)
+            return self._observations(), zeros, falses, falses.copy(), {}
+        partial = bool(resetting.any())
+        stepping = ~resetting
+        if not (self._open | resetting).all():
+            raise RuntimeError("a sub-environment's episode is over (or never started): call reset() first")
+
+        executed32 = self._decode(actions)
+        executed64 = executed32.astype(np.float64)
+        executed = (executed64[0], executed64[1], executed64[2])
+        k = np.minimum(self._k, self.episode_steps - 1)
+        hour = np.minimum(self._start + k, self._n_hours - 1)
+        inputs = np.take(self._hour_inputs, hour, axis=1)  # contiguous (5, N) rows
+        cities = np.take(self._city_inputs, hour, axis=1)
+        out = market_step(
+            BATCH,
+            self.weights,
+            inputs[0],
+            inputs[1],
+            inputs[2],
+            cities[: self._n_cities],
+            cities[self._n_cities :],
+            self._liquidity,
+            self._peak_liquidity,
+            self._price,
+            self._peak_price,
+            executed,
+            action_jitter_f32_batch(executed32, self._prev),
+            self._noise[self._arange, k],
+        )
+        if partial:  # sub-envs that reset this call keep their state until the reset below
+            self._liquidity = np.where(stepping, out.liquidity, self._liquidity)
+            self._peak_liquidity = np.where(stepping, out.peak_liquidity, self._peak_liquidity)
+            self._price = np.where(stepping, out.token_price, self._price)
+            self._peak_price = np.where(stepping, out.peak_price, self._peak_price)
+            self._prev = np.where(stepping, executed32, self._prev)
+            self._city_totals = self._city_totals + np.where(stepping, out.city_rewards, 0.0)
+            self._k = np.where(stepping, self._k + 1, self._k)
+        else:
+            self._liquidity, self._peak_liquidity = out.liquidity, out.peak_liquidity
+            self._price, self._peak_price = out.token_price, out.peak_price
+            self._prev = executed32
+            self._city_totals = self._city_totals + out.city_rewards
+            self._k = self._k + 1
+        truncated = stepping & (self._k >= self.episode_steps)
+        self._open = self._open & ~truncated
+
+        reward = np.where(stepping, out.reward, 0.0) if partial else out.reward
+        info = self._step_info(out, executed, hour, inputs, stepping if partial else self._all_true)
+        obs = self._observations()
+        if partial:
+            self._reset_many(resetting, [None] * n, [None] * n)
+            obs[resetting] = self._observations()[resetting]
+        if autoreset == AutoresetMode.SAME_STEP and truncated.any():
+            info["final_obs"] = obs.copy()
+            info["_final_obs"] = truncated.copy()
+            self._reset_many(truncated, [None] * n, [None] * n)
+            obs[truncated] = self._observations()[truncated]
+        elif autoreset == AutoresetMode.NEXT_STEP:
+            self._needs_reset = truncated
+        return obs, reward, np.zeros(n, dtype=bool), truncated, info
+
+    def _step_info(self, out: Any, executed: tuple, hour: np.ndarray, inputs: np.ndarray, mask: np.ndarray) -> dict:
+        values = {
+            "reward": out.reward,
+            "absolute_hour": hour,
+            "episode_start_hour": self._start.copy(),
+            "hour": hour % 24,
+            "reward_ratio": executed[0],
+            "liquidity_ratio": executed[1],
+            "burn_rate": executed[2],
+            "verified_supply_MWh": inputs[0],
+            "reported_supply_MWh": inputs[3],
+            "physics_excess_MWh": inputs[1],
+            "unsafe_backed_MWh": out.unsafe_backed_mwh,
+            "artificial_liquidity_MWh": out.artificial_liquidity_mwh,
+            "physics_violation_rate": out.violation_rate,
+            "raw_physics_record_rate": inputs[4],
+            "demand_MWh": inputs[2],
+            "matched_energy_MWh": out.matched_mwh,
+            "unmet_demand_MWh": out.unmet_mwh,
+            "liquidity": out.liquidity,
+            "liquidity_depth": out.liquidity / self._depth_scale,
+            "token_price": out.token_price,
+            "max_drawdown": out.drawdown,
+            "token_drawdown": out.token_drawdown,
+            "action_jitter": out.jitter,
+            "slippage": out.slippage,
+            "fairness_variance": out.fairness_variance,
+            "cost": out.violation_rate + out.unsafe_backed_mwh,
+            "city_rewards": out.city_rewards.T,
+        }
+        if mask is self._all_true:
+            values.update(self._info_masks)
+        else:
+            values.update({"_" + key: mask for key in list(values)})
+        return values
