@@ -1,0 +1,27 @@
+"""The ``solarchain-eval`` command: one typer app, a module per stage."""
+
+from __future__ import annotations
+
+import typer
+
+app = typer.Typer(
+    name="solarchain-eval",
+    help=(
+        "SolarChain-Eval: a physics-constrained benchmark for trustworthy economic agents in a "
+        "decentralised solar-energy market.\n\n"
+        "Start with [bold]solarchain-eval run[/bold] (builds the embedded default dataset and "
+        "evaluates the baselines), or build the paper's dataset with [bold]data build[/bold]."
+    ),
+    no_args_is_help=True,
+    add_completion=False,
+    rich_markup_mode="rich",
+    pretty_exceptions_show_locals=False,
+)
+
+from . import bench as _bench  # noqa: E402  (command modules register themselves on `app`)
+from . import data as _data  # noqa: E402
+from . import evaluate as _evaluate  # noqa: E402
+
+
+def main() -> None:
+    app()

@@ -1,0 +1,88 @@
+"""On-disk layout of runs: a single ``evaluate`` run directory, and a ``paper`` root.
+
+A single run directory (``solarchain-eval evaluate --out RUN_DIR``)::
+
+    RUN_DIR/metrics.csv  actions.csv  city_hour_policy.csv  summary.json  run_metadata.json
+           [agentic_logs.jsonl]            (agentic settings only)
+
+A paper root (``solarchain-eval paper --out ROOT``)::
+
+    ROOT/paper_metadata.json                            the grid spec, versions, dataset provenance
+    ROOT/units/train/<algo>-<setting>-<seed>/           one trained model (SB3 .zip, config, log)
+    ROOT/units/eval/<policy>-<setting>-<seed>/          one evaluation = a run directory
+    ROOT/combined/<setting>/metrics.csv ...             every unit of a setting concatenated
+    ROOT/report/                                        tables, figures, index.html
+
+Every unit directory gets the done-marker ``DONE`` written last; a unit without it is redone.
+``setting`` is one of :data:`~solarchain_eval.experiments.rollout.SETTINGS`.
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pandas as pd
+
+from .records import ACTIONS_FILE, CITY_HOUR_FILE, METADATA_FILE, METRICS_FILE
+
+AGENTIC_LOG_FILE = "agentic_logs.jsonl"
+DONE_MARKER = "DONE"
+PAPER_METADATA_FILE = "paper_metadata.json"
+UNITS_DIR = "units"
+COMBINED_DIR = "combined"
+REPORT_DIR = "report"
+
+
+def train_unit_dir(root: Path, algo: str, setting: str, seed: int) -> Path:
+    return Path(root) / UNITS_DIR / "train" / f"{algo}-{setting}-{seed}"
+
+
+def eval_unit_dir(root: Path, policy: str, setting: str, seed: int) -> Path:
+    return Path(root) / UNITS_DIR / "eval" / f"{policy}-{setting}-{seed}"
+
+
+def combined_dir(root: Path, setting: str) -> Path:
+    return Path(root) / COMBINED_DIR / setting
+
+
+def is_done(unit_dir: Path) -> bool:
+    return (Path(unit_dir) / DONE_MARKER).is_file()
+
+
+def is_paper_root(root: Path) -> bool:
+    return (Path(root) / COMBINED_DIR).is_dir() or (Path(root) / PAPER_METADATA_FILE).is_file()
+
+
+def run_table_paths(root: Path, name: str) -> list[Path]:
+    """The files holding table ``name`` (e.g. ``metrics.csv``) of a run dir or paper root."""
+    root = Path(root)
+    if is_paper_root(root):
+        return sorted((root / COMBINED_DIR).glob(f"*/{name}"))
+    path = root / name
+    return [path] if path.is_file() else []
+
+
+def read_run_table(root: Path, name: str = METRICS_FILE) -> pd.DataFrame:
+    """Concatenate table ``name`` over a run dir or a paper root's settings (empty if absent)."""
+    paths = run_table_paths(root, name)
+    if not paths:
+        return pd.DataFrame()
+    return pd.concat([pd.read_csv(path) for path in paths], ignore_index=True)
+
+
+__all__ = [
+    "ACTIONS_FILE",
+    "CITY_HOUR_FILE",
+    "METADATA_FILE",
+    "METRICS_FILE",
+    "AGENTIC_LOG_FILE",
+    "DONE_MARKER",
+    "PAPER_METADATA_FILE",
+    "train_unit_dir",
+    "eval_unit_dir",
+    "combined_dir",
+    "is_done",
+    "is_paper_root",
+    "run_table_paths",
+    "read_run_table",
+]
