@@ -1,0 +1,69 @@
+"""Shared fixtures.
+
+The paper's data is read from ``../shared/data`` beside the repository (override with the
+``SOLARCHAIN_SHARED_DATA`` environment variable); tests that need it skip with the reason when
+it is absent. Every test session gets its own cache directory, so nothing is written to the
+user's real cache.
+"""
+
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import pytest
+
+REPO_ROOT = Path(__file__).resolve().parents[1]
+PAPER_WEATHER = "open_meteo_weather_2026-04-01_2026-05-01.json"
+PUBLISHED = "published_2026_04"
+
+
+def shared_data_dir() -> Path:
+    return Path(os.environ.get("SOLARCHAIN_SHARED_DATA", REPO_ROOT.parent / "shared" / "data"))
+
+
+@pytest.fixture(scope="session")
+def published_dir() -> Path:
+    path = shared_data_dir() / PUBLISHED
+    if not (path / "spatiotemporal_generation.csv").is_file():
+        pytest.skip(f"the paper's published dataset is not at {path} (set SOLARCHAIN_SHARED_DATA)")
+    return path
+
+
+@pytest.fixture(scope="session")
+def paper_weather() -> Path:
+    path = shared_data_dir() / PAPER_WEATHER
+    if not path.is_file():
+        pytest.skip(f"the paper's cached weather is not at {path} (set SOLARCHAIN_SHARED_DATA)")
+    return path
+
+
+@pytest.fixture(scope="session", autouse=True)
+def isolated_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    cache = tmp_path_factory.mktemp("solarchain-cache")
+    os.environ["SOLARCHAIN_CACHE_DIR"] = str(cache)
+    return cache
+
+
+@pytest.fixture(scope="session")
+def tiny_dataset(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """A small synthetic dataset: 3 cities × 4 nodes over 4 days (fast to build and run)."""
+    from solarchain_eval.data.build import build_dataset
+    from solarchain_eval.data.cities import City
+    from solarchain_eval.data.synthetic import synthesize_weather
+
+    cities = (City("Wuhan", 30.5928, 114.3055), City("Xian", 34.3416, 108.9398), City("Kunming", 25.0389, 102.7183))
+    out = tmp_path_factory.mktemp("tiny-dataset")
+    weather = synthesize_weather(cities, "2026-06-01", "2026-06-05", 7, "Asia/Shanghai")
+    build_dataset(
+        weather,
+        out,
+        cities=cities,
+        seed=7,
+        start="2026-06-01",
+        end="2026-06-05",
+        nodes_per_city=4,
+        timezone="Asia/Shanghai",
+        weather_source="synthetic",
+    )
+    return out
