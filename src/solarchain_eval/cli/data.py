@@ -79,6 +79,7 @@ def build(
         None, help="Archive endpoint for --weather open-meteo (default: $SOLARCHAIN_OPEN_METEO_URL or the public API)."
     ),
     refresh_weather: bool = typer.Option(False, help="Re-download Open-Meteo weather even if it is cached."),
+    retries: int = typer.Option(4, min=0, help="Retries per Open-Meteo request (exponential back-off from 1 s)."),
     force: bool = typer.Option(False, "--force", help="Overwrite an existing dataset in --out."),
 ) -> None:
     """Build a dataset: nodes, hourly PV generation, false-data injection, market and P2P trades.
@@ -105,7 +106,9 @@ def build(
         else:
             url = open_meteo_url or archive_url()
             with progress_bar("downloading weather", len(cities)) as advance:
-                payload = fetch_weather(cities, start, end, timezone, url=url, on_city=lambda _name: advance(1))
+                payload = fetch_weather(
+                    cities, start, end, timezone, url=url, retries=retries, on_city=lambda _name: advance(1)
+                )
             write_weather_cache(cached, payload)
             err_console.print(f"cached the Open-Meteo payload in {cached}")
         source = SOURCE_NAME
