@@ -1,0 +1,61 @@
+"""The embedded default dataset: the paper's cities and month with synthetic weather.
+
+Built offline on first use into the user's cache directory and reused afterwards. The build
+goes to a temporary directory that is renamed into place, so concurrent first uses (worker
+processes) never see a half-built dataset.
+"""
+
+from __future__ import annotations
+
+import os
+import shutil
+import tempfile
+from pathlib import Path
+
+from .build import MANIFEST_FILE, build_dataset
+from .cities import DEFAULT_END, DEFAULT_NODES_PER_CITY, DEFAULT_SEED, DEFAULT_START, DEFAULT_TIMEZONE, PAPER_CITIES
+from .synthetic import SYNTHETIC_SOURCE, synthesize_weather
+
+DEFAULT_DATASET_NAME = f"default-synthetic-v1-{DEFAULT_SEED}"
+
+
+def cache_dir() -> Path:
+    """``$SOLARCHAIN_CACHE_DIR``, else ``$XDG_CACHE_HOME/solarchain-eval``, else ``~/.cache/solarchain-eval``."""
+    explicit = os.environ.get("SOLARCHAIN_CACHE_DIR")
+    if explicit:
+        return Path(explicit)
+    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
+    return Path(base) / "solarchain-eval"
+
+
+def default_dataset_dir(build: bool = True) -> Path:
+    """Directory of the default dataset, building it if it is not there yet."""
+    target = cache_dir() / "datasets" / DEFAULT_DATASET_NAME
+    if (target / MANIFEST_FILE).is_file() or not build:
+        return target
+    target.parent.mkdir(parents=True, exist_ok=True)
+    staging = Path(tempfile.mkdtemp(prefix=f".{DEFAULT_DATASET_NAME}.", dir=target.parent))
+    try:
+        weather = synthesize_weather(PAPER_CITIES, DEFAULT_START, DEFAULT_END, DEFAULT_SEED, DEFAULT_TIMEZONE)
+        build_dataset(
+            weather,
+            staging,
+            cities=PAPER_CITIES,
+            seed=DEFAULT_SEED,
+            start=DEFAULT_START,
+            end=DEFAULT_END,
+            nodes_per_city=DEFAULT_NODES_PER_CITY,
+            timezone=DEFAULT_TIMEZONE,
+            weather_source=SYNTHETIC_SOURCE,
+        )
+        if target.exists() and not (target / MANIFEST_FILE).is_file():
+            shutil.rmtree(target)  # a stale partial directory from an older version
+        try:
+            os.rename(staging, target)
+        except OSError:
+            if not (target / MANIFEST_FILE).is_file():  # lost a race to a broken writer
+                raise
+    finally:
+        if staging.exists():
+            shutil.rmtree(staging, ignore_errors=True)
+    return target
