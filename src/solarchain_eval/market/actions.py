@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..config import MarketConfig
-from .ops import SCALAR
+from .ops import _F3, SCALAR
 
 _F32 = np.float32
 
@@ -78,18 +78,46 @@ class ActionCodec:
 
     # --- single actions ---------------------------------------------------------------------
     def decode(self, action: Any) -> tuple[float, float, float]:
-        """Decode one continuous action (array-like of 3) to executed (α, ℓ, b)."""
+        """Decode one continuous action (array-like of 3) to executed (α, ℓ, b).
+
+        The same operations as :meth:`decode_with` on Python floats, written out because this
+        is the single env's hot path.
+        """
         u = action if isinstance(action, np.ndarray) and action.dtype == _F32 else np.asarray(action, dtype=_F32)
         if u.shape != (3,):
             u = u.reshape(-1)
             if u.shape != (3,):
                 raise ValueError(f"a continuous action has 3 components, got shape {np.shape(action)}")
         u0, u1, u2 = u.tolist()
-        return self.decode_with(SCALAR, u0, u1, u2)
+        # NaN -> 0; ±inf and everything else clipped to [0, 1].
+        u0 = 0.0 if u0 != u0 or u0 < 0.0 else (1.0 if u0 > 1.0 else u0)
+        u1 = 0.0 if u1 != u1 or u1 < 0.0 else (1.0 if u1 > 1.0 else u1)
+        u2 = 0.0 if u2 != u2 or u2 < 0.0 else (1.0 if u2 > 1.0 else u2)
+        w0, w1, w2 = self.width32
+        p0, p1, p2 = _F3.unpack(_F3.pack(u0 * w0, u1 * w1, u2 * w2))
+        alpha, ell, burn = _F3.unpack(_F3.pack(self.lo32[0] + p0, self.lo32[1] + p1, p2))
+        return self._sanitize_scalar(alpha, ell, burn)
+
+    def _sanitize_scalar(self, alpha: float, ell: float, burn: float) -> tuple[float, float, float]:
+        lo, hi = self.lo, self.hi
+        alpha = lo[0] if alpha < lo[0] else (hi[0] if alpha > hi[0] else alpha)
+        ell = lo[1] if ell < lo[1] else (hi[1] if ell > hi[1] else ell)
+        burn = lo[2] if burn < lo[2] else (hi[2] if burn > hi[2] else burn)
+        total = alpha + ell
+        if total > self.max_total_allocation:
+            scale = self.max_total_allocation / total
+            alpha, ell = alpha * scale, ell * scale
+        return _F3.unpack(_F3.pack(alpha, ell, burn))
 
     def sanitize(self, alpha: float, ell: float, burn: float) -> tuple[float, float, float]:
-        """Sanitise an action in market units (float32 inputs are promoted); float32 result."""
-        return self.sanitize_with(SCALAR, float(alpha), float(ell), float(burn))
+        """Sanitise an action in market units (float32 inputs are promoted); float32 result.
+
+        NaN components are rejected: sanitising is for targets a policy computed, not raw outputs.
+        """
+        values = (float(alpha), float(ell), float(burn))
+        if any(v != v for v in values):
+            raise ValueError(f"cannot sanitise an action with NaN components: {values}")
+        return self._sanitize_scalar(*values)
 
     def encode(self, alpha: float, ell: float, burn: float) -> np.ndarray:
         """Market-unit target -> normalised float32 action (sanitised first, then clipped)."""

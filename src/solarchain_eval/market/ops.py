@@ -50,11 +50,25 @@ class ScalarOps:
 
     @staticmethod
     def per_city(formula: Any, per_env: tuple, city_columns: tuple) -> list:
-        """``formula(*per_env, *city_values)`` for each city; a list of floats."""
-        return [formula(*per_env, *values) for values in zip(*city_columns)]
+        """``formula(a, b, share, trust)`` for each city; a list of floats."""
+        a, b = per_env
+        shares, trusts = city_columns
+        return [formula(a, b, share, trust) for share, trust in zip(shares, trusts)]
 
     @staticmethod
     def city_variance(city_values: list) -> float:
+        n = len(city_values)
+        if 0 < n < 8:  # numpy sums fewer than 8 items left to right
+            total = city_values[0]
+            for value in city_values[1:]:
+                total += value
+            mean = total / n
+            first = city_values[0] - mean
+            total = first * first
+            for value in city_values[1:]:
+                deviation = value - mean
+                total += deviation * deviation
+            return total / n
         return numpy_order_variance(city_values)
 
 
