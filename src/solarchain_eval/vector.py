@@ -146,6 +146,7 @@ class SolarChainVectorEnv(VectorEnv):
         self._peak_price = np.zeros(n)
         self._prev = np.zeros((3, n), dtype=np.float32)  # component-major
         self._city_totals = np.zeros((len(self.cities), n))
+        self._lockstep: int | None = None  # the common step index when all sub-envs share it
         self._all_true = np.ones(n, dtype=bool)
         self._all_true.setflags(write=False)  # shared by every info mask; read-only
         self._info_masks = {"_" + key: self._all_true for key in (*VECTOR_INFO_KEYS, "city_rewards")}
@@ -213,6 +214,9 @@ class SolarChainVectorEnv(VectorEnv):
         self._peak_price = np.where(mask, self._initial[1], self._peak_price)
         self._prev = np.where(mask, self._initial_action, self._prev)
         self._city_totals = np.where(mask, 0.0, self._city_totals)
+        # Lockstep: every sub-env at the same step of an open episode (scalar indexing applies).
+        everyone = bool(mask.all()) or (bool((self._open & (self._k == 0)).all()) and not self._needs_reset.any())
+        self._lockstep = 0 if everyone else None
 
     def _observations(self) -> np.ndarray:
         hour = np.minimum(self._start + self._k, self._n_hours - 1)
@@ -259,22 +263,53 @@ class SolarChainVectorEnv(VectorEnv):
 
     def step(self, actions: Any):
         n = self.num_envs
-        autoreset = self.metadata["autoreset_mode"]
         resetting = self._needs_reset
-        if resetting.all():
+        if resetting.all():  # NEXT_STEP autoreset of every sub-env
             self._reset_many(resetting, [None] * n, [None] * n)
             zeros, falses = np.zeros(n), np.zeros(n, dtype=bool)
             return self._observations(), zeros, falses, falses.copy(), {}
+        if self._lockstep is not None:
+            return self._step_lockstep(actions, self._lockstep)
         partial = bool(resetting.any())
         stepping = ~resetting
         if not (self._open | resetting).all():
             raise RuntimeError("a sub-environment's episode is over (or never started): call reset() first")
+        k = np.minimum(self._k, self.episode_steps - 1)
+        hour = np.minimum(self._start + k, self._n_hours - 1)
+        executed32, out, executed, inputs = self._advance(actions, hour, self._noise[self._arange, k])
+        if partial:  # sub-envs that reset this call keep their state until the reset below
+            self._liquidity = np.where(stepping, out.liquidity, self._liquidity)
+            self._peak_liquidity = np.where(stepping, out.peak_liquidity, self._peak_liquidity)
+            self._price = np.where(stepping, out.token_price, self._price)
+            self._peak_price = np.where(stepping, out.peak_price, self._peak_price)
+            self._prev = np.where(stepping, executed32, self._prev)
+            self._city_totals = self._city_totals + np.where(stepping, out.city_rewards, 0.0)
+            self._k = np.where(stepping, self._k + 1, self._k)
+        else:
+            self._commit(executed32, out)
+        truncated = stepping & (self._k >= self.episode_steps)
+        reward = np.where(stepping, out.reward, 0.0) if partial else out.reward
+        info = self._step_info(out, executed, hour, inputs, stepping if partial else self._all_true)
+        obs = self._observations()
+        if partial:
+            self._reset_many(resetting, [None] * n, [None] * n)
+            obs[resetting] = self._observations()[resetting]
+        return self._finish(obs, reward, truncated, info)
 
+    def _step_lockstep(self, actions: Any, k: int):
+        """Every sub-env is at step ``k`` of an open episode (the usual case): scalar indexing."""
+        hour = self._start + k if self._n_hours > self.episode_steps else np.minimum(self._start + k, self._n_hours - 1)
+        executed32, out, executed, inputs = self._advance(actions, hour, self._noise[:, k])
+        self._commit(executed32, out)
+        truncated = np.full(self.num_envs, k + 1 >= self.episode_steps)
+        info = self._step_info(out, executed, hour, inputs, self._all_true)
+        self._lockstep = k + 1 if k + 1 < self.episode_steps else None
+        return self._finish(self._observations(), out.reward, truncated, info)
+
+    def _advance(self, actions: Any, hour: np.ndarray, noise: np.ndarray):
         executed32 = self._decode(actions)
         executed64 = executed32.astype(np.float64)
         executed = (executed64[0], executed64[1], executed64[2])
-        k = np.minimum(self._k, self.episode_steps - 1)
-        hour = np.minimum(self._start + k, self._n_hours - 1)
         inputs = np.take(self._hour_inputs, hour, axis=1)  # contiguous (5, N) rows
         cities = np.take(self._city_inputs, hour, axis=1)
         out = market_step(
@@ -291,37 +326,27 @@ class SolarChainVectorEnv(VectorEnv):
             self._peak_price,
             executed,
             action_jitter_f32_batch(executed32, self._prev),
-            self._noise[self._arange, k],
+            noise,
         )
-        if partial:  # sub-envs that reset this call keep their state until the reset below
-            self._liquidity = np.where(stepping, out.liquidity, self._liquidity)
-            self._peak_liquidity = np.where(stepping, out.peak_liquidity, self._peak_liquidity)
-            self._price = np.where(stepping, out.token_price, self._price)
-            self._peak_price = np.where(stepping, out.peak_price, self._peak_price)
-            self._prev = np.where(stepping, executed32, self._prev)
-            self._city_totals = self._city_totals + np.where(stepping, out.city_rewards, 0.0)
-            self._k = np.where(stepping, self._k + 1, self._k)
-        else:
-            self._liquidity, self._peak_liquidity = out.liquidity, out.peak_liquidity
-            self._price, self._peak_price = out.token_price, out.peak_price
-            self._prev = executed32
-            self._city_totals = self._city_totals + out.city_rewards
-            self._k = self._k + 1
-        truncated = stepping & (self._k >= self.episode_steps)
-        self._open = self._open & ~truncated
+        return executed32, out, executed, inputs
 
-        reward = np.where(stepping, out.reward, 0.0) if partial else out.reward
-        info = self._step_info(out, executed, hour, inputs, stepping if partial else self._all_true)
-        obs = self._observations()
-        if partial:
-            self._reset_many(resetting, [None] * n, [None] * n)
-            obs[resetting] = self._observations()[resetting]
-        if autoreset == AutoresetMode.SAME_STEP and truncated.any():
-            info["final_obs"] = obs.copy()
-            info["_final_obs"] = truncated.copy()
-            self._reset_many(truncated, [None] * n, [None] * n)
-            obs[truncated] = self._observations()[truncated]
-        elif autoreset == AutoresetMode.NEXT_STEP:
+    def _commit(self, executed32: np.ndarray, out: Any) -> None:
+        self._liquidity, self._peak_liquidity = out.liquidity, out.peak_liquidity
+        self._price, self._peak_price = out.token_price, out.peak_price
+        self._prev = executed32
+        self._city_totals = self._city_totals + out.city_rewards
+        self._k = self._k + 1
+
+    def _finish(self, obs: np.ndarray, reward: np.ndarray, truncated: np.ndarray, info: dict):
+        n = self.num_envs
+        self._open = self._open & ~truncated
+        if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP:
+            if truncated.any():
+                info["final_obs"] = obs.copy()
+                info["_final_obs"] = truncated.copy()
+                self._reset_many(truncated, [None] * n, [None] * n)
+                obs[truncated] = self._observations()[truncated]
+        else:
             self._needs_reset = truncated
         return obs, reward, np.zeros(n, dtype=bool), truncated, info
 
@@ -329,7 +354,7 @@ class SolarChainVectorEnv(VectorEnv):
         values = {
             "reward": out.reward,
             "absolute_hour": hour,
-            "episode_start_hour": self._start.copy(),
+            "episode_start_hour": self._start,  # replaced, never mutated, on reset
             "hour": hour % 24,
             "reward_ratio": executed[0],
             "liquidity_ratio": executed[1],
