@@ -17,7 +17,8 @@ from ..config import ConfigError
 from ..data.load import DatasetError
 from ..data.weather import WeatherError
 
-console = Console()
+# Tables stay readable when output goes to a file or CI log (rich would assume 80 columns).
+console = Console(width=None if Console().is_terminal else 140)
 err_console = Console(stderr=True)
 
 #: Errors caused by the user's input: reported in one line, exit status 2, no traceback.

@@ -82,9 +82,9 @@ def build(
     retries: int = typer.Option(4, min=0, help="Retries per Open-Meteo request (exponential back-off from 1 s)."),
     force: bool = typer.Option(False, "--force", help="Overwrite an existing dataset in --out."),
 ) -> None:
-    """Build a dataset: nodes, hourly PV generation, false-data injection, market and P2P trades.
+    """Build a dataset: nodes, hourly PV generation, false-data injection, market, trades.
 
-    With [bold]--weather-cache ../shared/data/open_meteo_weather_2026-04-01_2026-05-01.json[/bold] and the
+    Writes the four CSVs and manifest.json (row counts, sha256, seed, weather source, versions). With [bold]--weather-cache ../shared/data/open_meteo_weather_2026-04-01_2026-05-01.json[/bold] and the
     defaults, the four CSVs are byte-identical to the paper's published dataset.
     """
     cities = _cities(city)
@@ -160,7 +160,11 @@ def build(
 @data_app.command("check")
 @reports_errors
 def check(data_dir: Path = typer.Argument(..., help="Dataset directory to validate.")) -> None:
-    """Validate a dataset directory; exit status 2 with the file, column and row at fault."""
+    """Validate a dataset directory.
+
+    Checks files, columns, numbers (no NaN or negative power), duplicates, missing hours, statuses
+    and the trade window; on a problem prints the file, column and first offending row and exits 2.
+    """
     raw = load_raw_dataset(data_dir)
     from ..data.table import table_from_raw
 

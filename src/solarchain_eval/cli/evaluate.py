@@ -73,8 +73,12 @@ def evaluate(
         None, "--models", help="Trained models: a directory, or NAME=PATH per learned policy (repeatable)."
     ),
 ) -> None:
-    """Evaluate policies over run seeds × episodes and write metrics, per-step actions, city-hour
-    rewards, a summary and run metadata to the run directory (each file written atomically)."""
+    """Evaluate policies over run seeds × episodes.
+
+    Writes metrics.csv (one row per episode), actions.csv (one row per step), city_hour_policy.csv
+    (one row per step and city), summary.json and run_metadata.json to the run directory, each
+    file atomically. Episode e of run seed s is reset with seed s + e (the paper's protocol).
+    """
     cfg = load_config(config) if config else BenchmarkConfig()
     try:
         names = parse_policy_list(policies)
@@ -106,8 +110,12 @@ def run(
     episodes: int = typer.Option(PAPER_EPISODES, min=1, help="Episodes per run seed."),
     seeds: str = typer.Option(_SEEDS, help="Comma-separated run seeds."),
 ) -> None:
-    """The main job: build (once) or reuse the embedded default dataset offline, evaluate the
-    Static, Random and Myopic baselines with the paper's protocol, print the results table."""
+    """The main job: evaluate the baselines on the embedded default dataset.
+
+    Builds the default dataset offline once (synthetic weather for the paper's cities and month)
+    into the user cache directory and reuses it afterwards; evaluates Static, Random and Myopic
+    with the paper's protocol and prints the results table and the files written.
+    """
     dataset = default_dataset_dir(build=False)
     if not dataset.joinpath("manifest.json").is_file():
         err_console.print(f"building the embedded default dataset in {dataset} (once)...")
