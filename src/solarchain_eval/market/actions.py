@@ -15,7 +15,7 @@ from typing import Any
 import numpy as np
 
 from ..config import MarketConfig
-from .ops import _F3, SCALAR
+from .ops import _F1, _F3
 
 _F32 = np.float32
 
@@ -53,35 +53,13 @@ class ActionCodec:
             max_total_allocation=market.max_total_allocation,
         )
 
-    # --- generic (ops-parameterised) core -------------------------------------------------
-    def sanitize_with(self, ops: Any, alpha: Any, ell: Any, burn: Any) -> tuple[Any, Any, Any]:
-        """Clip to ranges and enforce α + ℓ <= max_total_allocation; returns float32 values."""
-        alpha = ops.clip(alpha, self.lo[0], self.hi[0])
-        ell = ops.clip(ell, self.lo[1], self.hi[1])
-        burn = ops.clip(burn, self.lo[2], self.hi[2])
-        total = alpha + ell
-        over = total > self.max_total_allocation
-        scale = self.max_total_allocation / ops.maximum(total, 1e-300)
-        alpha = ops.where(over, alpha * scale, alpha)
-        ell = ops.where(over, ell * scale, ell)
-        return ops.f32x3(alpha, ell, burn)
-
-    def decode_with(self, ops: Any, u0: Any, u1: Any, u2: Any) -> tuple[Any, Any, Any]:
-        """Decode float32-valued normalised components (NaN -> 0, ±inf clipped)."""
-        u0 = ops.clip(ops.nan_to_zero(u0), 0.0, 1.0)
-        u1 = ops.clip(ops.nan_to_zero(u1), 0.0, 1.0)
-        u2 = ops.clip(ops.nan_to_zero(u2), 0.0, 1.0)
-        w0, w1, w2 = self.width32
-        p0, p1, p2 = ops.f32x3(u0 * w0, u1 * w1, u2 * w2)
-        alpha, ell, burn = ops.f32x3(self.lo32[0] + p0, self.lo32[1] + p1, p2)
-        return self.sanitize_with(ops, alpha, ell, burn)
-
     # --- single actions ---------------------------------------------------------------------
     def decode(self, action: Any) -> tuple[float, float, float]:
         """Decode one continuous action (array-like of 3) to executed (α, ℓ, b).
 
-        The same operations as :meth:`decode_with` on Python floats, written out because this
-        is the single env's hot path.
+        Each float32 operation is evaluated in float64 and rounded to float32, which equals the
+        float32 operation itself (53 >= 2·24 + 2 bits); :meth:`decode_batch` performs the same
+        operations natively in float32 and the tests check that both agree.
         """
         u = action if isinstance(action, np.ndarray) and action.dtype == _F32 else np.asarray(action, dtype=_F32)
         if u.shape != (3,):
@@ -122,8 +100,8 @@ class ActionCodec:
     def encode(self, alpha: float, ell: float, burn: float) -> np.ndarray:
         """Market-unit target -> normalised float32 action (sanitised first, then clipped)."""
         a, l, b = self.sanitize(alpha, ell, burn)
-        u = SCALAR.f32x3(a - self.lo32[0], l - self.lo32[1], b)
-        u = SCALAR.f32x3(u[0] / self.width32[0], u[1] / self.width32[1], u[2] / self.width32[2])
+        u = _F3.unpack(_F3.pack(a - self.lo32[0], l - self.lo32[1], b))
+        u = _F3.unpack(_F3.pack(u[0] / self.width32[0], u[1] / self.width32[1], u[2] / self.width32[2]))
         return np.clip(np.array(u, dtype=_F32), 0.0, 1.0)
 
     # --- batches ----------------------------------------------------------------------------
@@ -171,8 +149,9 @@ class ActionCodec:
 
 def action_jitter_f32(a: tuple, prev: tuple) -> float:
     """J = |a - a_prev|_1 of float32 actions, in float32 (numpy's order: left to right)."""
-    d0, d1, d2 = SCALAR.f32x3(abs(a[0] - prev[0]), abs(a[1] - prev[1]), abs(a[2] - prev[2]))
-    return SCALAR.f32(SCALAR.f32(d0 + d1) + d2)
+    d0, d1, d2 = _F3.unpack(_F3.pack(abs(a[0] - prev[0]), abs(a[1] - prev[1]), abs(a[2] - prev[2])))
+    (partial,) = _F1.unpack(_F1.pack(d0 + d1))
+    return _F1.unpack(_F1.pack(partial + d2))[0]
 
 
 def action_jitter_f32_batch(actions: np.ndarray, prev: np.ndarray) -> np.ndarray:

@@ -5,9 +5,10 @@ Python floats (the single environment: no per-step numpy overhead), ``BATCH`` on
 arrays (the vector environment). Both evaluate the same IEEE double operations in the same
 order, so a sub-environment of the vector env reproduces the single env bit for bit.
 
-float32 rounding is exact in both: an operation on two float32 values evaluated in float64
-and then rounded to float32 equals the float32 operation (53 >= 2·24 + 2 bits, so double
-rounding is innocuous for +, -, ×, ÷).
+``_F1``/``_F3`` round Python floats to float32 (struct packing); :mod:`.actions` uses them for
+the float32 parts of the step. An operation on two float32 values evaluated in float64 and then
+rounded to float32 equals the float32 operation (53 >= 2·24 + 2 bits, so double rounding is
+innocuous for +, -, ×, ÷).
 """
 
 from __future__ import annotations
@@ -33,22 +34,6 @@ class ScalarOps:
     clip = staticmethod(_clip_scalar)
 
     @staticmethod
-    def where(condition: bool, if_true: float, if_false: float) -> float:
-        return if_true if condition else if_false
-
-    @staticmethod
-    def nan_to_zero(x: float) -> float:
-        return 0.0 if x != x else x
-
-    @staticmethod
-    def f32(x: float) -> float:
-        return _F1.unpack(_F1.pack(x))[0]
-
-    @staticmethod
-    def f32x3(a: float, b: float, c: float) -> tuple[float, float, float]:
-        return _F3.unpack(_F3.pack(a, b, c))
-
-    @staticmethod
     def per_city(formula: Any, per_env: tuple, city_columns: tuple) -> list:
         """``formula(a, b, share, trust)`` for each city; a list of floats."""
         a, b = per_env
@@ -72,26 +57,11 @@ class ScalarOps:
         return numpy_order_variance(city_values)
 
 
-def _round_f32(x: np.ndarray) -> np.ndarray:
-    return np.asarray(x, dtype=np.float64).astype(np.float32).astype(np.float64)
-
-
 class BatchOps:
     """numpy float64-array back-end: one element per sub-env; per-city values are (C, N)."""
 
     maximum = staticmethod(np.maximum)
     minimum = staticmethod(np.minimum)
-    where = staticmethod(np.where)
-
-    @staticmethod
-    def nan_to_zero(x: np.ndarray) -> np.ndarray:
-        return np.where(np.isnan(x), 0.0, x)
-
-    f32 = staticmethod(_round_f32)
-
-    @staticmethod
-    def f32x3(a: np.ndarray, b: np.ndarray, c: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        return _round_f32(a), _round_f32(b), _round_f32(c)
 
     @staticmethod
     def clip(x: np.ndarray, lo: float, hi: float) -> np.ndarray:
