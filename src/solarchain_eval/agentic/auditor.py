@@ -3,6 +3,7 @@
 - ``rule``: SPEC §6 with §7's float32 arithmetic. If ν > τν: α × 0.85, ℓ × 0.90,
   b = max(b, 0.12); if gap < τΔ: ℓ = max(ℓ, 0.80), α × 0.90; if κ > τκ: a = 0.6 a_prev + 0.4 a;
   then sanitise; "revise" when the result moved by more than 1e-6 (L1), else "approve".
+  The three conditions are exactly the step's triggers as the scheduler evaluated them.
 - ``approve-only``: always approves (isolates the effect of the Planner's bounds).
 - ``llm``: the model's structured verdict; a revised action is sanitised (each clip logged).
 
@@ -92,19 +93,19 @@ class Auditor(Protocol):
 
 def rule_revision(context: StepContext, codec: ActionCodec) -> tuple[Action, list[str]]:
     """The rule auditor's revised action (sanitised float32) and the risks that drove it."""
-    plan = context.plan
+    # The risk conditions are the step's triggers (same comparisons as the scheduler's).
     a = np.array(context.bounded_action, dtype=_F32)
     risks = []
-    if context.violation_rate > plan.violation_threshold:
+    if "violation" in context.hard_reasons:
         risks.append("physics")
         a[0] = a[0] * _F32(0.85)
         a[1] = a[1] * _F32(0.90)
         a[2] = max(a[2], _F32(min(0.12, codec.hi[2])))
-    if context.supply_gap < plan.gap_threshold:
+    if "gap" in context.hard_reasons:
         risks.append("liquidity")
         a[1] = max(a[1], _F32(min(0.80, codec.hi[1])))
         a[0] = a[0] * _F32(0.90)
-    if context.kappa > plan.jitter_threshold:
+    if context.soft_trigger:  # κ > τκ
         risks.append("jitter")
         previous = np.array(context.previous_action, dtype=_F32)
         a = _F32(0.6) * previous + _F32(0.4) * a  # float32 throughout

@@ -2,8 +2,8 @@
 
 Per step: the proposed action is clipped to the plan's bounds and sanitised (ā); the audit-side
 jitter κ = |ā - a_prev|_1 (float64); hard triggers H (violation, gap, slippage, read from the
-observation) and the soft trigger S (κ above the jitter threshold) decide whether the Auditor
-is called. Hard-triggered audits bypass the budget and the cooldown but still count as used;
+float32 observation and compared at float32 precision) and the soft trigger S (κ above the
+jitter threshold, float64) decide whether the Auditor is called. Hard-triggered audits bypass the budget and the cooldown but still count as used;
 soft ones need audits used < B and, when the cooldown c > 0, step - last audited step > c.
 """
 
@@ -53,13 +53,20 @@ def action_delta(final: Action, proposed: Action) -> float:
 
 
 def hard_reasons(violation_rate: float, supply_gap: float, static_slippage: float, plan: Plan) -> list[str]:
-    """The hard triggers that hold: ν > τν, gap < τΔ, σ > τσ (in that order)."""
+    """The hard triggers that hold: ν > τν, gap < τΔ, σ > τσ (in that order).
+
+    The signals are float32 observation fields and are compared with the thresholds at
+    float32 precision, as the original release's float32 arrays do under numpy 2. This
+    matters on ties: ν = 5/50 read as float32(0.1) does not exceed a threshold of 0.1
+    (in float64 it would, by 1.5e-9).
+    """
+    f32 = np.float32
     reasons = []
-    if violation_rate > plan.violation_threshold:
+    if f32(violation_rate) > f32(plan.violation_threshold):
         reasons.append("violation")
-    if supply_gap < plan.gap_threshold:
+    if f32(supply_gap) < f32(plan.gap_threshold):
         reasons.append("gap")
-    if static_slippage > plan.slippage_threshold:
+    if f32(static_slippage) > f32(plan.slippage_threshold):
         reasons.append("slippage")
     return reasons
 
