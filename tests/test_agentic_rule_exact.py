@@ -11,7 +11,6 @@ every per-episode agentic metric must match.
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from solarchain_eval.agentic import AgenticOptions, Governance, GovernedPolicy
 from solarchain_eval.agentic.auditor import RuleAuditor

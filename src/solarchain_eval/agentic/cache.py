@@ -92,6 +92,12 @@ class ResponseCache:
             except FileExistsError:
                 existing = self.get(key, entry["request"])
                 return existing if existing is not None else entry
+            except OSError:
+                # No hard links on this file system: an atomic rename, unless the entry exists.
+                if path.exists():
+                    existing = self.get(key, entry["request"])
+                    return existing if existing is not None else entry
+                os.replace(tmp_name, path)
         finally:
             Path(tmp_name).unlink(missing_ok=True)
         return entry
