@@ -173,6 +173,9 @@ def test_record_then_replay_offline_and_replay_miss(tmp_path):
     assert len(entries) == 1 and entries[0].name == f"{recorded.meta['cache_key']}.json"
     entry = json.loads(entries[0].read_text())
     assert entry["request"]["model"] == "fake-model" and entry["request_id"] == "req-test-1"
+    assert entry["usage"] == {"input_tokens": 130, "output_tokens": 45} and entry["retries"] == 0
+    assert entry["response"]["output"][1]["content"][0]["text"] == json.dumps(VALID_AUDIT)  # the raw body
+    assert entry["latency_s"] == recorded.meta["latency_s"] > 0
     assert KEY not in entries[0].read_text() and "127.0.0.1" not in entries[0].read_text()
     # Replay: the server is gone, and no key is needed (no client is built).
     settings = resolve_llm_settings(api="responses", model="fake-model", base_url="http://127.0.0.1:9/v1", environ={})

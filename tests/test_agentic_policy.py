@@ -119,3 +119,16 @@ def test_evaluate_agentic_unit_writes_a_complete_run_dir(tiny_dataset, tmp_path)
     assert len(outcome.results) == 2
     with pytest.raises(ValueError, match="not an agentic setting"):
         evaluate_agentic_unit(policy, setting="main", run_seed=1, run_dir=tmp_path / "x", data_dir=tiny_dataset)
+
+
+@pytest.mark.parametrize("name", ["static", "myopic"])
+def test_neutral_layer_reproduces_the_plain_run(tiny_dataset, name):
+    """Full bounds + approve-only change nothing: a policy whose actions survive re-encoding
+    (static, myopic) gives bit-identical per-step records with and without the layer."""
+    config = BenchmarkConfig()
+    env = SolarChainEnv(tiny_dataset, config=config)
+    plain = list(run_policy(env, make_baseline(name), setting="main", run_seeds=[4], episodes=4))
+    _, governed = run(tiny_dataset, make_baseline(name), AgenticOptions(planner="default", auditor="approve-only"), episodes=4, seed=4)
+    for a, b in zip(plain, governed):
+        assert a.steps == b.steps and a.metrics == b.metrics
+        assert b.extras["agentic_metrics"]["modification_rate"] == 0.0

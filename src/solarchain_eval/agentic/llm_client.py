@@ -220,7 +220,8 @@ class StructuredLLM:
             if self.cache_mode == "replay":
                 raise LLMCacheMissError(f"key {key} is not in {self.cache.root if self.cache else '?'}")
             entry = self._call(request)
-            READERS[self.settings.api](entry["response"], output_type)  # record accepted outputs only
+            _, usage = READERS[self.settings.api](entry["response"], output_type)  # record accepted outputs only
+            entry["usage"] = {"input_tokens": usage.input_tokens, "output_tokens": usage.output_tokens}
             if self.cache is not None:
                 entry = self.cache.put(key, entry)
         output, usage = READERS[self.settings.api](entry["response"], output_type)
