@@ -18,6 +18,7 @@ import numpy as np
 from pydantic import BaseModel, ConfigDict, Field
 
 from ..market.actions import ActionCodec
+from .errors import LLMConfigError
 
 #: Maximum lengths of the free-text fields (characters); longer text is cut and logged.
 GOVERNANCE_MODE_MAX_CHARS = 64
@@ -111,15 +112,16 @@ def response_format(output_type: type[BaseModel], api: str) -> dict[str, Any]:
         ``chat`` gives the ``response_format`` parameter of Chat Completions, ``responses`` the
         ``text.format`` parameter of the Responses API (what ``.parse()`` would send).
     """
-    if api == "chat":
+    try:
         from openai.lib._parsing._completions import type_to_response_format_param
-
+        from openai.lib._parsing._responses import type_to_text_format_param
+    except ImportError as error:  # the helpers behind the SDK's .parse() methods
+        raise LLMConfigError(f"the installed openai package lacks its structured-output helpers ({error}); install openai>=1.66") from None
+    if api == "chat":
         return dict(type_to_response_format_param(output_type))
     if api == "responses":
-        from openai.lib._parsing._responses import type_to_text_format_param
-
         return dict(type_to_text_format_param(output_type))
-    raise ValueError(f"unknown LLM API {api!r} (choose 'responses' or 'chat')")
+    raise LLMConfigError(f"unknown LLM API {api!r} (choose 'responses' or 'chat')")
 
 
 # --- validated forms -------------------------------------------------------------------------
