@@ -16,7 +16,7 @@ from solarchain_eval.data.published import PAPER_DATASET_SHA256
 from solarchain_eval.data.weather import WeatherError
 from solarchain_eval.io import sha256_file
 
-from .openmeteo_server import ArchiveServer
+from openmeteo_server import ArchiveServer
 
 CENTRES = {c.name: (c.latitude, c.longitude) for c in PAPER_CITIES}
 

@@ -14,6 +14,7 @@ from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, 
 from ..experiments.records import summarize, metrics_frame
 from ..policies.registry import known_policies, parse_policy_list
 from . import app
+from . import agentic as agentic_cli
 from .common import (
     CliError,
     console,
@@ -49,7 +50,10 @@ def _evaluate(spec: EvaluationSpec, out: Path, title: str) -> None:
     total = len(spec.policies) * len(spec.run_seeds) * spec.episodes
     with progress_bar("evaluating", total) as advance:
         outcome = run_evaluation(spec, out, on_episode=lambda _r: advance(1), command=invoked_command())
-    console.print(results_table(summarize(metrics_frame(outcome.results)), title))
+    summary = summarize(metrics_frame(outcome.results))
+    console.print(results_table(summary, title))
+    if spec.agentic is not None:
+        console.print(agentic_cli.agentic_table(summary, f"Planner/Auditor ({spec.agentic.planner} planner, {spec.agentic.auditor} auditor)"))
     show_files(outcome.files, f"wrote {len(outcome.results)} episodes in {outcome.wall_s:.1f} s to {out}")
 
 
@@ -72,18 +76,49 @@ def evaluate(
     models: Optional[list[str]] = typer.Option(
         None, "--models", help="Trained models: a directory, or NAME=PATH per learned policy (repeatable)."
     ),
+    agentic: str = agentic_cli.AGENTIC,
+    planner: Optional[str] = agentic_cli.PLANNER,
+    auditor: Optional[str] = agentic_cli.AUDITOR,
+    llm_api: Optional[str] = agentic_cli.LLM_API,
+    llm_model: Optional[str] = agentic_cli.LLM_MODEL,
+    llm_base_url: Optional[str] = agentic_cli.LLM_BASE_URL,
+    llm_temperature: Optional[float] = agentic_cli.LLM_TEMPERATURE,
+    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
+    llm_max_retries: int = agentic_cli.LLM_MAX_RETRIES,
+    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
+    llm_cache: Optional[Path] = agentic_cli.LLM_CACHE,
+    llm_cache_mode: Optional[str] = agentic_cli.LLM_CACHE_MODE,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
 
     Writes metrics.csv (one row per episode), actions.csv (one row per step), city_hour_policy.csv
     (one row per step and city), summary.json and run_metadata.json to the run directory, each
     file atomically. Episode e of run seed s is reset with seed s + e (the paper's protocol).
+
+    With [bold]--agentic planner_auditor[/bold] every policy runs behind the Planner/Auditor layer
+    (rule planner and rule auditor by default; [bold]--planner llm[/bold] / [bold]--auditor llm[/bold]
+    call an OpenAI-compatible endpoint, recordable and replayable with [bold]--llm-cache[/bold]),
+    and the run also writes agentic_logs.jsonl.
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     try:
         names = parse_policy_list(policies)
     except ValueError as error:
         raise CliError(str(error)) from None
+    governance = agentic_cli.agentic_options(
+        agentic=agentic,
+        planner=planner,
+        auditor=auditor,
+        llm_api=llm_api,
+        llm_model=llm_model,
+        llm_base_url=llm_base_url,
+        llm_temperature=llm_temperature,
+        llm_timeout=llm_timeout,
+        llm_max_retries=llm_max_retries,
+        llm_max_output_tokens=llm_max_output_tokens,
+        llm_cache=llm_cache,
+        llm_cache_mode=llm_cache_mode,
+    )
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_int_list(seeds, "seeds"),
@@ -92,6 +127,7 @@ def evaluate(
         no_physics_penalty=no_physics_penalty,
         config=cfg,
         models=_models(models),
+        agentic=governance,
     )
     try:
         from ..policies.registry import make_policy
@@ -100,7 +136,8 @@ def evaluate(
             make_policy(name, cfg.with_updates(no_physics_penalty=no_physics_penalty), spec.models)
     except (ValueError, FileNotFoundError) as error:
         raise CliError(str(error)) from None
-    _evaluate(spec, out or _default_run_dir(cfg, "evaluate"), "evaluation")
+    label = "evaluate" if governance is None else f"evaluate-{spec.setting}"
+    _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation")
 
 
 @app.command("run")

@@ -9,21 +9,34 @@ from __future__ import annotations
 
 import sys
 import time
+from contextlib import ExitStack
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
 from typing import Callable, Sequence
 
+from ..agentic.build import AgenticOptions, Governance
 from ..config import BenchmarkConfig
 from ..data.build import DATASET_FILES, MANIFEST_FILE
 from ..data.default import default_dataset_dir
 from ..data.table import HourlyTable, load_table
 from ..env import SolarChainEnv
 from ..io import atomic_write_json, sha256_file
+from ..policies.base import Policy
 from ..policies.registry import make_policy
 from ..versions import git_commit, package_versions
 from .records import METADATA_FILE, write_records
-from .rollout import SETTING_MAIN, SETTING_NO_PHYSICS, EpisodeResult, paper_episode_seeds, run_policy
+from .rollout import (
+    SETTING_AGENTIC,
+    SETTING_AGENTIC_NO_PHYSICS,
+    SETTING_MAIN,
+    SETTING_NO_PHYSICS,
+    EpisodeResult,
+    paper_episode_seeds,
+    run_policy,
+    setting_has_physics_penalty,
+    setting_is_agentic,
+)
 
 PAPER_SEEDS = (20260511, 20260512, 20260513)
 PAPER_EPISODES = 30
@@ -31,7 +44,14 @@ PAPER_EPISODES = 30
 
 @dataclass
 class EvaluationSpec:
-    policies: Sequence[str]
+    """What to evaluate.
+
+    ``policies`` are names (built with ``make_policy``) or ready :class:`Policy` objects.
+    With ``agentic`` set, every policy is wrapped by the Planner/Auditor layer and the
+    setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``).
+    """
+
+    policies: Sequence[str | Policy]
     run_seeds: Sequence[int] = PAPER_SEEDS
     episodes: int = PAPER_EPISODES
     data_dir: Path | None = None
@@ -39,6 +59,13 @@ class EvaluationSpec:
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     models: dict[str, Path] = field(default_factory=dict)
     episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds
+    agentic: AgenticOptions | None = None
+
+    @property
+    def setting(self) -> str:
+        if self.agentic is not None:
+            return SETTING_AGENTIC_NO_PHYSICS if self.no_physics_penalty else SETTING_AGENTIC
+        return SETTING_NO_PHYSICS if self.no_physics_penalty else SETTING_MAIN
 
 
 @dataclass
@@ -74,26 +101,30 @@ def run_evaluation(
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
     data_dir = spec.data_dir or (Path(config.data_dir) if config.data_dir else default_dataset_dir())
     table = load_table(data_dir)  # validates before anything is written
-    policies = [make_policy(name, config, spec.models) for name in spec.policies]
-    setting = SETTING_NO_PHYSICS if spec.no_physics_penalty else SETTING_MAIN
+    policies = [p if not isinstance(p, str) else make_policy(p, config, spec.models) for p in spec.policies]
+    setting = spec.setting
 
     envs: dict[str, SolarChainEnv] = {}
     results: list[EpisodeResult] = []
-    for policy in policies:
-        env = envs.get(policy.action_mode)
-        if env is None:
-            env = envs[policy.action_mode] = SolarChainEnv(config=config, table=table, action_mode=policy.action_mode)
-        results.extend(
-            run_policy(
-                env,
-                policy,
-                setting=setting,
-                run_seeds=spec.run_seeds,
-                episodes=spec.episodes,
-                episode_seeds=spec.episode_seeds,
-                on_episode=on_episode,
+    with ExitStack() as stack:
+        if spec.agentic is not None:
+            governance = stack.enter_context(Governance(spec.agentic, config.market))
+            policies = [governance.wrap(policy) for policy in policies]
+        for policy in policies:
+            env = envs.get(policy.action_mode)
+            if env is None:
+                env = envs[policy.action_mode] = SolarChainEnv(config=config, table=table, action_mode=policy.action_mode)
+            results.extend(
+                run_policy(
+                    env,
+                    policy,
+                    setting=setting,
+                    run_seeds=spec.run_seeds,
+                    episodes=spec.episodes,
+                    episode_seeds=spec.episode_seeds,
+                    on_episode=on_episode,
+                )
             )
-        )
 
     run_dir.mkdir(parents=True, exist_ok=True)
     files = write_records(run_dir, results, table.cities)
@@ -106,7 +137,8 @@ def run_evaluation(
         "git_commit": git_commit(),
         "package_versions": package_versions(),
         "setting": setting,
-        "policies": list(spec.policies),
+        "policies": [p if isinstance(p, str) else p.name for p in spec.policies],
+        "agentic": spec.agentic.describe() if spec.agentic is not None else None,
         "run_seeds": [int(s) for s in spec.run_seeds],
         "episodes": int(spec.episodes),
         "episode_seed_protocol": getattr(spec.episode_seeds, "__name__", "custom"),
@@ -117,3 +149,50 @@ def run_evaluation(
     }
     files[METADATA_FILE] = atomic_write_json(run_dir / METADATA_FILE, metadata)
     return EvaluationOutcome(run_dir=run_dir, results=results, files=files, wall_s=wall_s)
+
+
+def evaluate_agentic_unit(
+    policy: Policy,
+    *,
+    setting: str,
+    run_seed: int,
+    run_dir: Path,
+    agentic: AgenticOptions | None = None,
+    episodes: int = PAPER_EPISODES,
+    config: BenchmarkConfig | None = None,
+    data_dir: Path | None = None,
+    episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds,
+    on_episode: Callable[[EpisodeResult], None] | None = None,
+    command: Sequence[str] | None = None,
+) -> EvaluationOutcome:
+    """Evaluate one agentic unit of the paper grid: ``policy`` behind the Planner/Auditor.
+
+    Parameters
+    ----------
+    policy : Policy
+        Any policy (the paper wraps the learned PPO, SAC and DQN policies).
+    setting : {"llm", "llm_no_physics"}
+        The agentic setting; ``llm_no_physics`` drops the physics penalty from the reward.
+    run_seed : int
+        Episode e is reset with ``run_seed + e`` (the paper's protocol).
+    run_dir : Path
+        The unit's run directory (metrics, actions, city-hour, ``agentic_logs.jsonl``,
+        summary, and ``run_metadata.json`` last). The caller writes its done-marker.
+    agentic : AgenticOptions, optional
+        Planner and auditor kinds and LLM options; default: rule planner and rule auditor.
+    episodes, config, data_dir, episode_seeds, on_episode, command
+        As for :func:`run_evaluation`.
+    """
+    if not setting_is_agentic(setting):
+        raise ValueError(f"setting {setting!r} is not an agentic setting ({SETTING_AGENTIC}, {SETTING_AGENTIC_NO_PHYSICS})")
+    spec = EvaluationSpec(
+        policies=[policy],
+        run_seeds=[int(run_seed)],
+        episodes=episodes,
+        data_dir=data_dir,
+        no_physics_penalty=not setting_has_physics_penalty(setting),
+        config=config if config is not None else BenchmarkConfig(),
+        episode_seeds=episode_seeds,
+        agentic=agentic if agentic is not None else AgenticOptions(),
+    )
+    return run_evaluation(spec, Path(run_dir), on_episode=on_episode, command=command)

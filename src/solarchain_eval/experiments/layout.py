@@ -23,9 +23,8 @@ from pathlib import Path
 
 import pandas as pd
 
-from .records import ACTIONS_FILE, CITY_HOUR_FILE, METADATA_FILE, METRICS_FILE
+from .records import ACTIONS_FILE, AGENTIC_LOG_FILE, CITY_HOUR_FILE, METADATA_FILE, METRICS_FILE
 
-AGENTIC_LOG_FILE = "agentic_logs.jsonl"
 DONE_MARKER = "DONE"
 PAPER_METADATA_FILE = "paper_metadata.json"
 UNITS_DIR = "units"

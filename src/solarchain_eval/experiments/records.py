@@ -2,13 +2,15 @@
 
 from __future__ import annotations
 
+import json
 from pathlib import Path
 from typing import Any, Sequence
 
 import numpy as np
 import pandas as pd
 
-from ..io import atomic_write_csv, atomic_write_json
+from ..agentic.policy import EXTRA_LOG_KEY, EXTRA_METRICS_KEY
+from ..io import atomic_write_csv, atomic_write_json, atomic_write_text
 from ..metrics import METRIC_NAMES
 from .rollout import STEP_FIELDS, EpisodeResult
 
@@ -17,6 +19,7 @@ ACTIONS_FILE = "actions.csv"
 CITY_HOUR_FILE = "city_hour_policy.csv"
 SUMMARY_FILE = "summary.json"
 METADATA_FILE = "run_metadata.json"
+AGENTIC_LOG_FILE = "agentic_logs.jsonl"
 
 EPISODE_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "start_hour")
 
@@ -27,6 +30,7 @@ def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
     for r in results:
         row = {k: getattr(r, k) for k in EPISODE_KEYS}
         row.update(r.metrics)
+        row.update(r.extras.get(EXTRA_METRICS_KEY, {}))
         rows.append(row)
     frame = pd.DataFrame(rows)
     if frame.empty:
@@ -80,6 +84,18 @@ def city_hour_frame(results: Sequence[EpisodeResult], cities: Sequence[str]) -> 
     )
 
 
+def agentic_log_text(results: Sequence[EpisodeResult]) -> str | None:
+    """JSON Lines of every agentic step row (episode identifiers first), or None if none."""
+    if not any(EXTRA_LOG_KEY in r.extras for r in results):
+        return None
+    lines = []
+    for r in results:
+        ids = {"policy": r.policy, "setting": r.setting, "run_seed": r.run_seed, "episode": r.episode, "episode_seed": r.episode_seed}
+        for row in r.extras.get(EXTRA_LOG_KEY, ()):
+            lines.append(json.dumps({**ids, **row}, ensure_ascii=False, allow_nan=False))
+    return "".join(line + "\n" for line in lines)
+
+
 def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
     """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric.
 
@@ -120,12 +136,16 @@ def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
 
 
 def write_records(run_dir: Path, results: Sequence[EpisodeResult], cities: Sequence[str]) -> dict[str, Path]:
-    """Write metrics, actions and city-hour CSVs and the summary, each file atomically."""
+    """Write metrics, actions and city-hour CSVs, the agentic log (agentic runs only) and the
+    summary, each file atomically."""
     metrics = metrics_frame(results)
     paths = {
         METRICS_FILE: atomic_write_csv(run_dir / METRICS_FILE, metrics),
         ACTIONS_FILE: atomic_write_csv(run_dir / ACTIONS_FILE, actions_frame(results)),
         CITY_HOUR_FILE: atomic_write_csv(run_dir / CITY_HOUR_FILE, city_hour_frame(results, cities)),
     }
+    log = agentic_log_text(results)
+    if log is not None:
+        paths[AGENTIC_LOG_FILE] = atomic_write_text(run_dir / AGENTIC_LOG_FILE, log)
     paths[SUMMARY_FILE] = atomic_write_json(run_dir / SUMMARY_FILE, summarize(metrics))
     return paths

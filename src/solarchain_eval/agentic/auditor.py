@@ -1,0 +1,153 @@
+"""Auditors: called for the steps the scheduler selects; they approve or revise ā.
+
+- ``rule``: SPEC §6 with §7's float32 arithmetic. If ν > τν: α × 0.85, ℓ × 0.90,
+  b = max(b, 0.12); if gap < τΔ: ℓ = max(ℓ, 0.80), α × 0.90; if κ > τκ: a = 0.6 a_prev + 0.4 a;
+  then sanitise; "revise" when the result moved by more than 1e-6 (L1), else "approve".
+  The three conditions are exactly the step's triggers as the scheduler evaluated them.
+- ``approve-only``: always approves (isolates the effect of the Planner's bounds).
+- ``llm``: the model's structured verdict; a revised action is sanitised (each clip logged).
+
+``approve`` keeps ā; ``revise`` executes the sanitised final action.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, Protocol
+
+import numpy as np
+
+from ..market.actions import ActionCodec
+from .errors import CallSite
+from .llm_client import StructuredLLM
+from .prompts import auditor_messages
+from .schemas import ACTION_FIELDS, AuditorOutput, Plan, validate_audit
+from .scheduler import Action, action_delta
+
+AUDITOR_KINDS = ("rule", "llm", "approve-only")
+REVISION_TOLERANCE = 1e-6  # L1 distance below which a rule revision counts as "approve"
+
+_F32 = np.float32
+
+
+@dataclass(frozen=True)
+class StepContext:
+    """What an auditor sees at one step (actions in market units, float32 values).
+
+    ``observation`` holds the named observation fields; ``recent`` the previous step's market
+    outcome (None at step 0).
+    """
+
+    step: int
+    hour: int
+    observation: dict[str, float]
+    violation_rate: float
+    supply_gap: float
+    static_slippage: float
+    bounded_action: Action
+    previous_action: Action
+    kappa: float
+    plan: Plan
+    hard_reasons: tuple[str, ...]
+    soft_trigger: bool
+    recent: dict[str, float] | None
+
+    def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
+        def named(action: Action) -> dict[str, float]:
+            return {name: round(float(v), 6) for name, v in zip(ACTION_FIELDS, action)}
+
+        return {
+            "step": self.step,
+            "hour_of_day": self.hour,
+            "observation": {k: float(f"{v:.6g}") for k, v in self.observation.items()},
+            "bounded_proposed_action": named(self.bounded_action),
+            "previous_action": named(self.previous_action),
+            "action_change_l1": round(self.kappa, 6),
+            "triggers": {"hard": list(self.hard_reasons), "soft_jitter": self.soft_trigger},
+            "planner_policy": self.plan.to_log(),
+            "previous_hour_outcome": (
+                None if self.recent is None else {k: float(f"{v:.6g}") for k, v in self.recent.items()}
+            ),
+            "benchmark_ranges": {
+                "reward_ratio": [codec.lo[0], codec.hi[0]],
+                "liquidity_ratio": [codec.lo[1], codec.hi[1]],
+                "burn_rate": [codec.lo[2], codec.hi[2]],
+                "max_total_allocation": codec.max_total_allocation,
+            },
+        }
+
+
+@dataclass(frozen=True)
+class AuditOutcome:
+    decision: str  # "approve" | "revise"
+    final_action: Action
+    reason: str
+    llm: dict[str, Any] | None = None  # call metadata and clip events (LLM auditor only)
+
+
+class Auditor(Protocol):
+    kind: str
+
+    def audit(self, context: StepContext, site: CallSite) -> AuditOutcome: ...
+
+
+def rule_revision(context: StepContext, codec: ActionCodec) -> tuple[Action, list[str]]:
+    """The rule auditor's revised action (sanitised float32) and the risks that drove it."""
+    # The risk conditions are the step's triggers (same comparisons as the scheduler's).
+    a = np.array(context.bounded_action, dtype=_F32)
+    risks = []
+    if "violation" in context.hard_reasons:
+        risks.append("physics")
+        a[0] = a[0] * _F32(0.85)
+        a[1] = a[1] * _F32(0.90)
+        a[2] = max(a[2], _F32(min(0.12, codec.hi[2])))
+    if "gap" in context.hard_reasons:
+        risks.append("liquidity")
+        a[1] = max(a[1], _F32(min(0.80, codec.hi[1])))
+        a[0] = a[0] * _F32(0.90)
+    if context.soft_trigger:  # κ > τκ
+        risks.append("jitter")
+        previous = np.array(context.previous_action, dtype=_F32)
+        a = _F32(0.6) * previous + _F32(0.4) * a  # float32 throughout
+    return codec.sanitize(float(a[0]), float(a[1]), float(a[2])), risks
+
+
+class RuleAuditor:
+    """SPEC §6's rule auditor (float32 arithmetic of SPEC §7)."""
+
+    kind = "rule"
+
+    def __init__(self, codec: ActionCodec) -> None:
+        self.codec = codec
+
+    def audit(self, context: StepContext, site: CallSite) -> AuditOutcome:
+        revised, risks = rule_revision(context, self.codec)
+        if action_delta(revised, context.bounded_action) > REVISION_TOLERANCE:
+            return AuditOutcome("revise", revised, f"rule auditor revised for risk: {', '.join(risks)}")
+        return AuditOutcome("approve", context.bounded_action, "rule auditor approved the bounded action")
+
+
+class ApproveOnlyAuditor:
+    """Approves every audited step."""
+
+    kind = "approve-only"
+
+    def audit(self, context: StepContext, site: CallSite) -> AuditOutcome:
+        return AuditOutcome("approve", context.bounded_action, "approve-only auditor")
+
+
+class LLMAuditor:
+    """The model's verdict from the fixed auditor prompt; a revision is sanitised."""
+
+    kind = "llm"
+
+    def __init__(self, client: StructuredLLM, codec: ActionCodec) -> None:
+        self.client = client
+        self.codec = codec
+
+    def audit(self, context: StepContext, site: CallSite) -> AuditOutcome:
+        reply = self.client.request(auditor_messages(context.to_prompt(self.codec)), AuditorOutput, site)
+        verdict, events = validate_audit(reply.output, self.codec)  # type: ignore[arg-type]
+        llm = {**reply.meta, "clipped": [e.to_log() for e in events]}
+        final = verdict.final_action if verdict.decision == "revise" else context.bounded_action
+        return AuditOutcome(verdict.decision, final, verdict.reason, llm)

@@ -1,0 +1,205 @@
+"""The Planner/Auditor layer as a policy wrapper around any base policy (evaluation only).
+
+:class:`GovernedPolicy` uses the rollout hooks, so ``experiments.rollout.run_episode`` drives
+it like any policy: ``begin_episode`` asks the planner for the episode's plan, ``act`` decodes
+the base policy's proposal, bounds it, runs the scheduler and (if selected) the auditor, and
+returns the final action re-encoded to [0, 1]^3; ``observe`` records the executed action;
+``end_episode`` returns the per-step log rows and the episode's agentic metrics.
+
+The wrapper always acts in continuous mode (a discrete base policy's index is decoded with the
+env's discrete table), as the original release did.
+"""
+
+from __future__ import annotations
+
+from typing import Any, Callable
+
+import numpy as np
+
+from ..market.observation import OBS_GAP, OBS_SLIPPAGE, OBS_VIOLATION, OBSERVATION_NAMES
+from ..policies.base import Policy
+from .auditor import Auditor, StepContext
+from .errors import CallSite
+from .metrics import episode_agentic_metrics
+from .planner import Planner, episode_context
+from .scheduler import AuditScheduler, action_delta, audit_budget, bound_action, hard_reasons, kappa
+from .schemas import as_f32_list
+
+#: The previous step's outcome shown to the auditor (``info`` keys).
+RECENT_FIELDS = (
+    "reward",
+    "matched_energy_MWh",
+    "unmet_demand_MWh",
+    "liquidity",
+    "token_price",
+    "slippage",
+    "physics_violation_rate",
+    "artificial_liquidity_MWh",
+)
+_HOOKS = ("begin_episode", "observe", "end_episode")
+
+#: Keys of the dict ``end_episode`` returns (merged into ``EpisodeResult.extras``): the
+#: episode's agentic metrics (extra ``metrics.csv`` columns) and its step log rows.
+EXTRA_METRICS_KEY = "agentic_metrics"
+EXTRA_LOG_KEY = "agentic_log"
+
+
+class GovernedPolicy:
+    """A base policy behind the Planner/Auditor scheduler of SPEC §6.
+
+    Parameters
+    ----------
+    base : Policy
+        Any policy (continuous or discrete); its name is kept.
+    planner : Planner
+    auditor : Auditor
+    """
+
+    action_mode = "continuous"
+
+    def __init__(self, base: Policy, planner: Planner, auditor: Auditor) -> None:
+        self.base = base
+        self.name = base.name
+        self.planner = planner
+        self.auditor = auditor
+        self._run_seed = 0
+        self._rows: list[dict[str, Any]] = []
+        self._base_hooks = {hook: getattr(base, hook, None) for hook in _HOOKS}
+
+    # --- Policy protocol ----------------------------------------------------------------------
+    def begin_run(self, run_seed: int) -> None:
+        self._run_seed = int(run_seed)
+        self.base.begin_run(run_seed)
+
+    def begin_episode(self, *, env: Any, episode: int, run_seed: int, episode_seed: int, start_hour: int) -> None:
+        self._env = env
+        self._codec = env.codec
+        self._episode = int(episode)
+        self._run_seed = int(run_seed)
+        self._decode = _proposal_decoder(env, self.base.action_mode)
+        self._steps = int(env.episode_steps)
+        site = CallSite("planner", self.name, self._run_seed, self._episode, None)
+        outcome = self.planner.plan(episode_context(env, int(start_hour)), site)
+        self._plan = outcome.plan
+        self._plan_log = {**outcome.plan.to_log(), "llm": outcome.llm}
+        self._budget = audit_budget(self._plan.max_audits_per_episode, self._plan.target_audit_rate, self._steps)
+        self._scheduler = AuditScheduler(self._budget, self._plan.cooldown_steps)
+        m = env.config.market
+        # a_prev at reset: the configured static action in float32, as the env starts from it.
+        self._previous = tuple(float(np.float32(v)) for v in (m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate))
+        self._recent: dict[str, float] | None = None
+        self._step = 0
+        self._rows = []
+        self._pending: dict[str, Any] | None = None
+        self._planner_retries = int((outcome.llm or {}).get("retries", 0))
+        hook = self._base_hooks["begin_episode"]
+        if hook is not None:
+            hook(env=env, episode=episode, run_seed=run_seed, episode_seed=episode_seed, start_hour=start_hour)
+
+    def act(self, observation: np.ndarray) -> np.ndarray:
+        plan, step = self._plan, self._step
+        proposed = self._decode(self.base.act(observation))
+        bounded = bound_action(proposed, plan, self._codec)
+        violation = float(observation[OBS_VIOLATION])
+        gap = float(observation[OBS_GAP])
+        slippage = float(observation[OBS_SLIPPAGE])
+        k = kappa(bounded, self._previous)
+        reasons = hard_reasons(violation, gap, slippage, plan)
+        soft = k > plan.jitter_threshold
+        decision = self._scheduler.step(step, bool(reasons), soft)
+        final, verdict, reason, llm = bounded, None, None, None
+        if decision.audited:
+            context = StepContext(
+                step=step,
+                hour=(self._env.episode_start_hour + step) % 24,
+                observation={name: float(v) for name, v in zip(OBSERVATION_NAMES, observation)},
+                violation_rate=violation,
+                supply_gap=gap,
+                static_slippage=slippage,
+                bounded_action=bounded,
+                previous_action=self._previous,
+                kappa=k,
+                plan=plan,
+                hard_reasons=tuple(reasons),
+                soft_trigger=soft,
+                recent=self._recent,
+            )
+            outcome = self.auditor.audit(context, CallSite("auditor", self.name, self._run_seed, self._episode, step))
+            final, verdict, reason, llm = outcome.final_action, outcome.decision, outcome.reason, outcome.llm
+        self._pending = {
+            "step": step,
+            "absolute_hour": None,
+            "hour": None,
+            "raw_violation_rate": violation,
+            "supply_gap": gap,
+            "static_slippage": slippage,
+            "kappa": k,
+            "hard_trigger": bool(reasons),
+            "soft_trigger": soft,
+            "hard_reasons": reasons,
+            "audited": decision.audited,
+            "skip_reason": decision.skip_reason,
+            "plan": self._plan_log,
+            "proposed_action": as_f32_list(proposed),
+            "bounded_action": as_f32_list(bounded),
+            "final_action": as_f32_list(final),
+            "executed_action": None,
+            "decision": verdict,
+            "action_delta": action_delta(final, proposed),
+            "reason": reason,
+            "audits_used": decision.audits_used,
+            "audit_budget": self._budget,
+            "llm": llm,
+        }
+        return self._codec.encode(*final)
+
+    def observe(self, info: dict[str, Any]) -> None:
+        row = self._pending
+        if row is None:
+            raise RuntimeError("observe() called without a preceding act()")
+        executed = (info["reward_ratio"], info["liquidity_ratio"], info["burn_rate"])
+        row["absolute_hour"] = int(info["absolute_hour"])
+        row["hour"] = int(info["hour"])
+        row["executed_action"] = as_f32_list(executed)
+        self._rows.append(row)
+        self._pending = None
+        self._previous = tuple(float(v) for v in executed)
+        self._recent = {name: float(info[name]) for name in RECENT_FIELDS}
+        self._step += 1
+        hook = self._base_hooks["observe"]
+        if hook is not None:
+            hook(info)
+
+    def end_episode(self) -> dict[str, Any]:
+        metrics = episode_agentic_metrics(
+            self._rows,
+            plan=self._plan,
+            budget=self._budget,
+            steps=self._steps,
+            planner=self.planner.kind,
+            auditor=self.auditor.kind,
+            planner_retries=self._planner_retries,
+        )
+        extras: dict[str, Any] = {}
+        hook = self._base_hooks["end_episode"]
+        if hook is not None:
+            extras.update(hook() or {})
+        extras.update({EXTRA_METRICS_KEY: metrics, EXTRA_LOG_KEY: self._rows})
+        return extras
+
+
+def _proposal_decoder(env: Any, action_mode: str) -> Callable[[Any], tuple[float, float, float]]:
+    """Decode a base-policy action to market units (float32 values), by the base's mode."""
+    if action_mode == "discrete":
+        table = env.codec.discrete_table(env.config.discrete_levels)
+
+        def decode_index(action: Any) -> tuple[float, float, float]:
+            index = int(np.asarray(action).reshape(-1)[0])
+            if not 0 <= index < len(table):
+                raise ValueError(f"discrete action {index} is outside 0..{len(table) - 1}")
+            return table[index]
+
+        return decode_index
+    if action_mode != "continuous":
+        raise ValueError(f"unknown action mode {action_mode!r}")
+    return env.codec.decode

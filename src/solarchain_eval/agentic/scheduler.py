@@ -1,0 +1,119 @@
+"""The Planner/Auditor scheduler of SPEC §6, identical for every planner and auditor.
+
+Per step: the proposed action is clipped to the plan's bounds and sanitised (ā); the audit-side
+jitter κ = |ā - a_prev|_1 (float64); hard triggers H (violation, gap, slippage, read from the
+float32 observation and compared at float32 precision) and the soft trigger S (κ above the
+jitter threshold, float64) decide whether the Auditor is called. Hard-triggered audits bypass the budget and the cooldown but still count as used;
+soft ones need audits used < B and, when the cooldown c > 0, step - last audited step > c.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..market.actions import ActionCodec, action_jitter_f32
+from .schemas import Plan
+
+HARD_REASONS = ("violation", "gap", "slippage")
+SKIP_BUDGET = "budget"
+SKIP_COOLDOWN = "cooldown"
+
+Action = tuple[float, float, float]
+
+
+def audit_budget(max_audits: int, target_rate: float, episode_steps: int) -> int:
+    """B = clip(min(max audits, max(round(target rate · steps), 1)), 1, steps).
+
+    ``round`` is numpy's (half to even), as in the original release.
+    """
+    target = int(np.round(float(target_rate) * float(episode_steps)))
+    return int(np.clip(min(int(max_audits), max(target, 1)), 1, episode_steps))
+
+
+def bound_action(proposed: Action, plan: Plan, codec: ActionCodec) -> Action:
+    """ā: each component clipped to the plan's bounds, kept float32, then sanitised.
+
+    The clipped values are rounded to float32 before sanitising, as the original release
+    did with its float32 arrays (this decides the α + ℓ scaling to the last bit).
+    """
+    clipped = [float(np.float32(min(max(x, lo), hi))) for x, (lo, hi) in zip(proposed, plan.bounds)]
+    return codec.sanitize(*clipped)
+
+
+def kappa(bounded: Action, previous: Action) -> float:
+    """κ = |ā - a_prev|_1 in float64 on the float32 actions (SPEC §7)."""
+    return abs(bounded[0] - previous[0]) + abs(bounded[1] - previous[1]) + abs(bounded[2] - previous[2])
+
+
+def action_delta(final: Action, proposed: Action) -> float:
+    """|final - proposed|_1 in float32 (SPEC §7), returned as a Python float."""
+    return float(action_jitter_f32(final, proposed))
+
+
+def hard_reasons(violation_rate: float, supply_gap: float, static_slippage: float, plan: Plan) -> list[str]:
+    """The hard triggers that hold: ν > τν, gap < τΔ, σ > τσ (in that order).
+
+    The signals are float32 observation fields and are compared with the thresholds at
+    float32 precision, as the original release's float32 arrays do under numpy 2. This
+    matters on ties: ν = 5/50 read as float32(0.1) does not exceed a threshold of 0.1
+    (in float64 it would, by 1.5e-9).
+    """
+    f32 = np.float32
+    reasons = []
+    if f32(violation_rate) > f32(plan.violation_threshold):
+        reasons.append("violation")
+    if f32(supply_gap) < f32(plan.gap_threshold):
+        reasons.append("gap")
+    if f32(static_slippage) > f32(plan.slippage_threshold):
+        reasons.append("slippage")
+    return reasons
+
+
+@dataclass(frozen=True)
+class Decision:
+    """The scheduler's answer for one step."""
+
+    audited: bool
+    skip_reason: str | None  # None, "budget" or "cooldown" (only for a soft-only trigger)
+    audits_used: int  # after this step
+
+
+class AuditScheduler:
+    """Budget and cooldown state of one episode.
+
+    Parameters
+    ----------
+    budget : int
+        B, the episode's audit budget (≥ 1).
+    cooldown_steps : int
+        c; 0 disables the cooldown.
+    """
+
+    def __init__(self, budget: int, cooldown_steps: int) -> None:
+        if budget < 1:
+            raise ValueError(f"audit budget must be at least 1, got {budget}")
+        if cooldown_steps < 0:
+            raise ValueError(f"cooldown must be non-negative, got {cooldown_steps}")
+        self.budget = int(budget)
+        self.cooldown_steps = int(cooldown_steps)
+        self.audits_used = 0
+        self.last_audited_step: int | None = None
+
+    def step(self, step: int, hard: bool, soft: bool) -> Decision:
+        """Decide whether ``step`` is audited, and record the audit if so."""
+        if not (hard or soft):
+            return Decision(False, None, self.audits_used)
+        if not hard:
+            if self.audits_used >= self.budget:
+                return Decision(False, SKIP_BUDGET, self.audits_used)
+            if (
+                self.cooldown_steps > 0
+                and self.last_audited_step is not None
+                and step - self.last_audited_step <= self.cooldown_steps
+            ):
+                return Decision(False, SKIP_COOLDOWN, self.audits_used)
+        self.audits_used += 1
+        self.last_audited_step = step
+        return Decision(True, None, self.audits_used)
