@@ -14,7 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 
 from ..config import ConfigError
-from ..data.load import DatasetError
+from ..data.errors import DatasetError
 from ..data.weather import WeatherError
 
 # Tables stay readable when output goes to a file or CI log (rich would assume 80 columns).

@@ -10,7 +10,7 @@ from typing import Optional
 import typer
 from rich.table import Table
 
-from ..data.build import DATASET_FILES, MANIFEST_FILE, build_dataset
+from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.cities import (
     DEFAULT_END,
     DEFAULT_NODES_PER_CITY,
@@ -22,7 +22,7 @@ from ..data.cities import (
     parse_city,
 )
 from ..data.default import cache_dir
-from ..data.load import load_raw_dataset
+
 from ..data.published import matches_published
 from ..data.weather import read_weather_cache, write_weather_cache
 from ..io import sha256_file
@@ -122,6 +122,8 @@ def build(
             raise CliError(str(error)) from None
         source = SYNTHETIC_SOURCE
 
+    from ..data.build import build_dataset
+
     total_nodes = nodes_per_city * len(cities)
     with progress_bar("building dataset", total_nodes) as advance:
         done = [0]
@@ -165,9 +167,10 @@ def check(data_dir: Path = typer.Argument(..., help="Dataset directory to valida
     Checks files, columns, numbers (no NaN or negative power), duplicates, missing hours, statuses
     and the trade window; on a problem prints the file, column and first offending row and exits 2.
     """
-    raw = load_raw_dataset(data_dir)
+    from ..data.load import load_raw_dataset
     from ..data.table import table_from_raw
 
+    raw = load_raw_dataset(data_dir)
     table = table_from_raw(raw)
     gen = raw.generation
     summary = Table(title=f"{data_dir}: valid", title_justify="left", show_header=False)

@@ -21,12 +21,7 @@ from .cities import City, check_unique_prefixes, factories_for
 from .pv import capped_irradiance_wm2, max_power_w, solar_geometry, temperature_factor
 from .weather import CityWeather, WeatherError
 
-NODES_FILE = "urban_energy_nodes.csv"
-GENERATION_FILE = "spatiotemporal_generation.csv"
-MARKET_FILE = "market_liquidity.csv"
-TRADES_FILE = "p2p_trades.csv"
-MANIFEST_FILE = "manifest.json"
-DATASET_FILES = (NODES_FILE, GENERATION_FILE, MARKET_FILE, TRADES_FILE)
+from .files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE  # noqa: F401
 
 FDIA_FRACTION = 0.05
 FDIA_MULTIPLIERS = [0.42, 1.38, 1.55, 1.82]

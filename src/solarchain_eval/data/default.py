@@ -12,9 +12,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
-from .build import MANIFEST_FILE, build_dataset
 from .cities import DEFAULT_END, DEFAULT_NODES_PER_CITY, DEFAULT_SEED, DEFAULT_START, DEFAULT_TIMEZONE, PAPER_CITIES
-from .synthetic import SYNTHETIC_SOURCE, synthesize_weather
+from .files import MANIFEST_FILE
 
 DEFAULT_DATASET_NAME = f"default-synthetic-v1-{DEFAULT_SEED}"
 
@@ -34,6 +33,9 @@ def default_dataset_dir(build: bool = True) -> Path:
     if (target / MANIFEST_FILE).is_file() or not build:
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
+    from .build import build_dataset  # pvlib is only needed when building
+    from .synthetic import SYNTHETIC_SOURCE, synthesize_weather
+
     staging = Path(tempfile.mkdtemp(prefix=f".{DEFAULT_DATASET_NAME}.", dir=target.parent))
     try:
         weather = synthesize_weather(PAPER_CITIES, DEFAULT_START, DEFAULT_END, DEFAULT_SEED, DEFAULT_TIMEZONE)

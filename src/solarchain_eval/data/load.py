@@ -13,7 +13,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .build import GENERATION_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE
+from .errors import DatasetError
+from .files import GENERATION_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE
 
 VALID_STATUSES = ("verified", "rejected")
 
@@ -23,19 +24,6 @@ REQUIRED_COLUMNS = {
     MARKET_FILE: ("timestamp", "total_verified_MW", "slippage_solarchain_pct"),
     TRADES_FILE: ("timestamp", "energy_purchased_MW"),
 }
-
-
-class DatasetError(ValueError):
-    """A dataset directory is missing a file or holds invalid data."""
-
-    def __init__(self, path: Path | str, message: str, column: str | None = None, row: int | None = None):
-        self.path, self.column, self.row = Path(path), column, row
-        where = str(self.path)
-        if column is not None:
-            where += f", column '{column}'"
-        if row is not None:
-            where += f", row {row + 1} (line {row + 2})"
-        super().__init__(f"{where}: {message}")
 
 
 @dataclass(frozen=True)

@@ -17,7 +17,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .build import DATASET_FILES
+from .files import DATASET_FILES
 from .load import RawDataset, load_raw_dataset
 
 

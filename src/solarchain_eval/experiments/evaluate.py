@@ -17,7 +17,7 @@ from typing import Callable, Sequence
 
 from ..agentic.build import AgenticOptions, Governance
 from ..config import BenchmarkConfig
-from ..data.build import DATASET_FILES, MANIFEST_FILE
+from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.default import default_dataset_dir
 from ..data.table import HourlyTable, load_table
 from ..env import SolarChainEnv
