@@ -53,8 +53,11 @@ def _paired_rows(
 ) -> tuple[list[dict], list[str]]:
     """One row per (label, policy) of matched deltas; notes on unmatched rollouts."""
     rows, notes = [], []
+    metrics = data.metrics
     for label, base, treated in pairs:
-        deltas = paired_deltas(data.metrics, base, treated, columns)
+        # Only policies evaluated in both settings are compared (baselines never get the LLM layer).
+        both = set(metrics.loc[metrics["setting"] == base, "policy"]) & set(metrics.loc[metrics["setting"] == treated, "policy"])
+        deltas = paired_deltas(metrics[metrics["policy"].isin(both)], base, treated, columns)
         if deltas.unmatched:
             notes.append(
                 f"{label}: {deltas.unmatched} rollout(s) of {base} / {treated} have no partner "

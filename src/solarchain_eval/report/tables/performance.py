@@ -174,7 +174,11 @@ def four_setting_aggregate(data: ReportData, options: ReportOptions) -> ReportTa
         columns=_setting_columns([Column("Setting", text("setting"), align="l")]),
         data=frame,
         basis=basis_sentence(sizes_of(frame), "rollouts"),
-        notes=[f"{r['setting']}: pooled over {r['policies']}." for r in rows],
+        notes=(
+            [f"Every row pools {rows[0]['policies']}."]
+            if len({r["policies"] for r in rows}) == 1
+            else [f"{r['setting']}: pooled over {r['policies']}." for r in rows]
+        ),
     )
 
 
