@@ -178,13 +178,24 @@ def basis_sentence(sizes: Sequence[SampleSize], unit: str) -> str:
 _LATEX_SPECIAL = {"&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{", "}": r"\}"}
 
 
+_LATEX_SYMBOLS = {
+    "±": r"$\pm$",
+    "–": "--",
+    "Δ": r"$\Delta$",
+    "≥": r"$\geq$",
+    "×": r"$\times$",
+    "½": r"$\tfrac{1}{2}$",
+    "κ": r"$\kappa$",
+    "ℓ": r"$\ell$",
+    "α": r"$\alpha$",
+    "ν": r"$\nu$",
+    "∝": r"$\propto$",
+}
+
+
 def latex_escape(value: str) -> str:
-    """Escape LaTeX specials and turn "±", "–", "Δ", "≥" into LaTeX."""
-    out = "".join(_LATEX_SPECIAL.get(ch, ch) for ch in value)
-    return (
-        out.replace("±", r"$\pm$").replace("–", "--").replace("Δ", r"$\Delta$").replace("≥", r"$\geq$")
-        .replace("κ", r"$\kappa$")
-    )
+    """Escape LaTeX specials and turn the symbols the report prints ("±", "–", "Δ", "×", ...) into LaTeX."""
+    return "".join(_LATEX_SPECIAL.get(ch) or _LATEX_SYMBOLS.get(ch, ch) for ch in value)
 
 
 def to_markdown(table: ReportTable, *, heading: bool = True) -> str:
