@@ -6,6 +6,7 @@ from __future__ import annotations
 from pathlib import Path
 
 import numpy as np
+from matplotlib.patches import Patch
 from scipy import stats
 
 from ...experiments.rollout import SETTING_AGENTIC, SETTING_MAIN
@@ -36,12 +37,16 @@ def jitter_change(data: ReportData, options: ReportOptions, out_dir: Path) -> Fi
                 values = metrics.loc[(metrics["policy"] == policy) & (metrics["setting"] == setting), "action_jitter"].to_numpy(float)
                 ax.bar(i + offset, values.mean(), width=0.36, color=colour, alpha=alpha, edgecolor=colour, hatch=hatch)
                 ax.scatter(i + offset + rng.uniform(-0.1, 0.1, values.size), values, s=5, color=colour, alpha=0.4, linewidths=0)
-        ax.bar([], [], color="grey", alpha=0.25, label=GOVERNANCE_LABELS[SETTING_MAIN])
-        ax.bar([], [], color="grey", alpha=0.6, hatch="//", label=GOVERNANCE_LABELS[SETTING_AGENTIC])
         label_categories(ax, [policy_label(p) for p in policies])
         ax.set_ylabel("Action jitter (mean L1 change per step)")
         ax.set_title(title)
-        ax.legend(loc="best")
+        ax.legend(
+            handles=[
+                Patch(facecolor="#888888", alpha=0.25, edgecolor="#888888", label=GOVERNANCE_LABELS[SETTING_MAIN]),
+                Patch(facecolor="#888888", alpha=0.6, edgecolor="#888888", hatch="//", label=GOVERNANCE_LABELS[SETTING_AGENTIC]),
+            ],
+            loc="best",
+        )
         caption = "Action stability: mean action jitter of each learned policy without (RL) and with (RL+LLM) the Planner/Auditor layer; points are rollouts."
         return save_figure(figure, out_dir, key, title, caption)
 

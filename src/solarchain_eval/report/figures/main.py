@@ -8,6 +8,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 from matplotlib.axes import Axes
+from matplotlib.ticker import MaxNLocator
 
 from ...experiments.rollout import SETTING_MAIN
 from ..loading import ReportData
@@ -84,6 +85,7 @@ def trajectory(ax: Axes, frame: pd.DataFrame, value: str, colour: str, label: st
     intervals = [t_interval(per_episode.get_group(e).to_numpy(float), confidence) for e in episodes]
     mean = np.array([i.estimate for i in intervals])
     ax.plot(episodes, mean, color=colour, linewidth=1.4, label=label)
+    ax.xaxis.set_major_locator(MaxNLocator(integer=True))
     low, high = np.array([i.low for i in intervals]), np.array([i.high for i in intervals])
     if np.isfinite(low).any():
         ax.fill_between(episodes, low, high, color=colour, alpha=0.15, linewidth=0)
