@@ -207,3 +207,24 @@ def test_loading_errors_name_the_file_and_field(tmp_path, paper_root):
         load_report_data(run)
     with pytest.raises(ReportDataError, match="no such directory"):
         load_report_data(tmp_path / "missing")
+
+
+def test_latex_tables_compile_with_booktabs(tables, tmp_path):
+    import shutil
+    import subprocess
+
+    if shutil.which("pdflatex") is None:
+        pytest.skip("pdflatex is not installed (Debian: texlive-latex-base texlive-latex-recommended)")
+    body = "\n\\clearpage\n".join(to_latex(t) for t in tables.values())
+    source = tmp_path / "tables.tex"
+    source.write_text(
+        "\\documentclass{article}\n\\usepackage[T1]{fontenc}\n\\usepackage[utf8]{inputenc}\n\\usepackage{booktabs}\n"
+        "\\usepackage[margin=0.5in,landscape]{geometry}\n\\begin{document}\n" + body + "\n\\end{document}\n",
+        encoding="utf-8",
+    )
+    result = subprocess.run(
+        ["pdflatex", "-interaction=nonstopmode", "-halt-on-error", source.name],
+        cwd=tmp_path, capture_output=True, text=True, timeout=120,
+    )
+    assert result.returncode == 0, result.stdout[-2000:]
+    assert (tmp_path / "tables.pdf").stat().st_size > 0

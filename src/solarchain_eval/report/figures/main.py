@@ -60,7 +60,7 @@ def utility_safety_frontier(data: ReportData, options: ReportOptions, out_dir: P
         ax = axes[0, 0]
         for policy in policies:
             group = rollouts[rollouts["policy"] == policy]
-            sizes = 8 + 120 * group["artificial_liquidity_MWh"].to_numpy(float) / largest
+            sizes = 8 + 120 * np.clip(group["artificial_liquidity_MWh"].to_numpy(float), 0.0, None) / largest
             ax.scatter(
                 group["physics_violation_rate"], group["cumulative_reward"], s=sizes, alpha=0.45,
                 color=policy_colour(policy, policies), label=policy_label(policy), linewidths=0,

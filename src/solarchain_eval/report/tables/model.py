@@ -184,7 +184,7 @@ _LATEX_SYMBOLS = {
     "Δ": r"$\Delta$",
     "≥": r"$\geq$",
     "×": r"$\times$",
-    "½": r"$\tfrac{1}{2}$",
+    "½": r"$\frac{1}{2}$",
     "κ": r"$\kappa$",
     "ℓ": r"$\ell$",
     "α": r"$\alpha$",
