@@ -16,7 +16,7 @@ from .provenance import dataset_records, metadata_dump, run_records
 from .tables.model import ReportTable, Skipped, to_html
 
 CSS = """
-body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0 auto;max-width:1180px;padding:1.5rem;color:#1d1d1f;line-height:1.45}
+body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0 auto;max-width:1440px;padding:1.5rem;color:#1d1d1f;line-height:1.45}
 h1{margin-bottom:.2rem}h2{border-bottom:2px solid #e5e5e5;padding-bottom:.2rem;margin-top:2.2rem}
 .meta{color:#555}.warning{background:#fff6d6;border-left:4px solid #e6a700;padding:.6rem .9rem;margin:1rem 0}
 table{border-collapse:collapse;margin:.4rem 0;font-size:.88rem}
@@ -34,6 +34,7 @@ figure.table{overflow-x:auto}
 code,pre{font-family:ui-monospace,SFMono-Regular,Menlo,monospace;font-size:.82rem}
 pre{background:#f6f6f6;padding:.7rem;overflow-x:auto}
 .skipped li{color:#666}
+.scroll{overflow-x:auto}
 td.wrap{white-space:normal;text-align:left}
 #case_study td{white-space:normal;text-align:left}
 """
@@ -113,7 +114,11 @@ def _run_metadata(data: ReportData) -> str:
         return _escape(" ".join(value) if isinstance(value, list) and all(isinstance(v, str) for v in value) else json.dumps(value) if isinstance(value, (list, dict)) else value)
 
     body = "".join("<tr>" + "".join(f'<td class="wrap">{fmt(r.get(k, ""))}</td>' for k in keys) + "</tr>" for r in records)
-    table = f"<table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table>" if records else "<p>No run metadata found.</p>"
+    table = (
+        f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>'
+        if records
+        else "<p>No per-run metadata found.</p>"
+    )
     name = "paper_metadata.json" if data.kind == "paper" else "run_metadata.json"
     return f"{table}\n<details><summary>{name}</summary><pre>{_escape(metadata_dump(data))}</pre></details>\n"
 
