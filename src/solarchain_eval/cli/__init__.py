@@ -21,6 +21,7 @@ app = typer.Typer(
 from . import bench as _bench  # noqa: E402  (command modules register themselves on `app`)
 from . import data as _data  # noqa: E402
 from . import evaluate as _evaluate  # noqa: E402
+from . import report as _report  # noqa: E402
 
 
 def main() -> None:

@@ -1,0 +1,123 @@
+"""Build the whole report: load, tables, figures, files (Markdown, LaTeX, CSV) and index.html."""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Sequence
+
+from ..experiments.layout import REPORT_DIR
+from ..io import atomic_write_text
+from .figures import FigureFile, build_figures
+from .figures.heatmap import HEATMAPS
+from .html import render_html
+from .loading import ReportData, load_report_data
+from .options import ReportOptions
+from .tables import TABLE_BUILDERS, ReportTable, Skipped, build_tables, overlap_warning, to_csv, to_latex, to_markdown
+
+FORMATS = ("md", "tex", "csv", "html")
+TABLE_FORMATS = {"md": to_markdown, "tex": to_latex, "csv": to_csv}
+INDEX_FILE = "index.html"
+MARKDOWN_FILE = "report.md"
+
+
+@dataclass
+class ReportOutcome:
+    """What :func:`build_report` made: output folder, tables and figures (or why not), files, warnings."""
+
+    out_dir: Path
+    data: ReportData
+    tables: list[ReportTable | Skipped]
+    figures: list[FigureFile | Skipped]
+    files: list[Path] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+
+
+def parse_formats(text: str) -> tuple[str, ...]:
+    """``"md,tex"`` -> ("md", "tex"); raises ValueError on an unknown format."""
+    formats = tuple(dict.fromkeys(part.strip().lower() for part in text.split(",") if part.strip()))
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown or not formats:
+        raise ValueError(f"unknown report format(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(FORMATS)}")
+    return formats
+
+
+def _remove_stale(out_dir: Path, tables: Sequence[ReportTable | Skipped], figures: Sequence[FigureFile | Skipped]) -> None:
+    """Delete earlier outputs of tables/figures this run skips, so nothing stale is left beside new files."""
+    for item in tables:
+        if isinstance(item, Skipped):
+            for ext in TABLE_FORMATS:
+                (out_dir / "tables" / f"{item.key}.{ext}").unlink(missing_ok=True)
+    for item in figures:
+        if isinstance(item, Skipped):
+            for ext in ("png", "svg"):
+                (out_dir / "figures" / f"{item.key}.{ext}").unlink(missing_ok=True)
+
+
+def _markdown_report(outcome: ReportOutcome) -> str:
+    lines = [f"# SolarChain-Eval report: {outcome.data.root}", ""]
+    lines += [f"> **Warning.** {w}\n" for w in outcome.warnings]
+    lines += ["## Tables", ""]
+    for table in outcome.tables:
+        if isinstance(table, ReportTable):
+            lines.append(to_markdown(table))
+    skipped = [t for t in outcome.tables if isinstance(t, Skipped)] + [f for f in outcome.figures if isinstance(f, Skipped)]
+    if skipped:
+        lines += ["## Not produced for this run", ""] + [f"- **{s.title}** (`{s.key}`): {s.reason}" for s in skipped] + [""]
+    figures = [f for f in outcome.figures if isinstance(f, FigureFile)]
+    if figures:
+        lines += ["## Figures", ""] + [f"![{f.title}](figures/{f.key}.png)\n\n*{f.caption}*\n" for f in figures]
+    return "\n".join(lines)
+
+
+def build_report(
+    root: Path,
+    out_dir: Path | None = None,
+    *,
+    formats: Sequence[str] = FORMATS,
+    options: ReportOptions = ReportOptions(),
+    figures: bool = True,
+) -> ReportOutcome:
+    """Regenerate every table and figure the run at ``root`` supports.
+
+    Parameters
+    ----------
+    root
+        A run directory (``solarchain-eval evaluate --out``) or a paper root.
+    out_dir
+        Output folder (default ``root/report``).
+    formats
+        Any of "md", "tex", "csv" (one file per table each) and "html" (``index.html``).
+    options
+        Resampling and selection options.
+    figures
+        Draw the figures (PNG + SVG); the HTML embeds them.
+
+    Raises
+    ------
+    ReportDataError
+        The run's files are missing or malformed.
+    """
+    data = load_report_data(Path(root))
+    out = Path(out_dir) if out_dir is not None else Path(root) / REPORT_DIR
+    tables = build_tables(data, options)
+    drawn = build_figures(data, options, out / "figures") if figures else []
+    warning = overlap_warning(data.metrics, options.cluster_by)
+    outcome = ReportOutcome(out_dir=out, data=data, tables=tables, figures=drawn, warnings=[warning] if warning else [])
+    outcome.files += [p for f in drawn if isinstance(f, FigureFile) for p in (f.png, f.svg)]
+    for table in tables:
+        if isinstance(table, ReportTable):
+            for fmt in formats:
+                if fmt in TABLE_FORMATS:
+                    outcome.files.append(atomic_write_text(out / "tables" / f"{table.key}.{fmt}", TABLE_FORMATS[fmt](table)))
+    _remove_stale(out, tables, drawn)
+    if "md" in formats:
+        outcome.files.append(atomic_write_text(out / MARKDOWN_FILE, _markdown_report(outcome)))
+    if "html" in formats:
+        outcome.files.append(atomic_write_text(out / INDEX_FILE, render_html(data, tables, drawn, outcome.warnings)))
+    return outcome
+
+
+#: Every table and figure key the report knows (for docs and tests).
+TABLE_KEYS = tuple(builder.__name__ for builder in TABLE_BUILDERS)
+HEATMAP_KEYS = tuple(spec[0] for spec in HEATMAPS)

@@ -1,0 +1,261 @@
+"""Read a run directory or a ``paper`` root into validated frames for the report.
+
+The layout is the one :mod:`solarchain_eval.experiments.layout` defines; files are read one by
+one (the same paths :func:`~solarchain_eval.experiments.layout.read_run_table` concatenates) so
+that an error names the file, column and row at fault.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Literal
+
+import numpy as np
+import pandas as pd
+
+from ..experiments.layout import (
+    ACTIONS_FILE,
+    AGENTIC_LOG_FILE,
+    CITY_HOUR_FILE,
+    COMBINED_DIR,
+    METADATA_FILE,
+    METRICS_FILE,
+    PAPER_METADATA_FILE,
+    UNITS_DIR,
+    is_paper_root,
+    run_table_paths,
+)
+from ..experiments.records import EPISODE_KEYS
+from ..metrics import METRIC_NAMES
+from .naming import SETTINGS
+
+#: Keys of one agentic log step that the report reads (the agentic contract has more).
+LOG_KEYS = (
+    "policy",
+    "setting",
+    "run_seed",
+    "episode",
+    "episode_seed",
+    "step",
+    "absolute_hour",
+    "hour",
+    "raw_violation_rate",
+    "supply_gap",
+    "static_slippage",
+    "kappa",
+    "hard_trigger",
+    "soft_trigger",
+    "audited",
+    "proposed_action",
+    "final_action",
+    "decision",
+    "action_delta",
+    "reason",
+)
+ACTION_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "step", "episode_start_hour")
+CITY_HOUR_KEYS = ("policy", "setting", "run_seed", "episode", "step", "hour", "city", "city_reward", "liquidity_ratio")
+#: Rollout identity: one row per (setting, policy, run seed, episode).
+ROLLOUT_KEY = ["setting", "policy", "run_seed", "episode"]
+
+
+class ReportDataError(ValueError):
+    """The run's files are missing, malformed or inconsistent (the message names file, column, row)."""
+
+
+@dataclass
+class ReportData:
+    """Everything the report reads from one run directory or paper root.
+
+    Attributes
+    ----------
+    metrics, actions, city_hour, logs
+        One row per rollout, per step, per step and city, per agentic log step (frames may be
+        empty when the run did not write that file). ``logs`` gains ``start_hour``.
+    metadata
+        ``paper_metadata.json`` (paper root) or ``run_metadata.json`` (run directory), or ``{}``.
+    unit_metadata
+        ``run_metadata.json`` of every evaluation unit of a paper root, by unit name.
+    sources
+        The files read, by table name.
+    """
+
+    root: Path
+    kind: Literal["paper", "run"]
+    metrics: pd.DataFrame
+    actions: pd.DataFrame
+    city_hour: pd.DataFrame
+    logs: pd.DataFrame
+    metadata: dict[str, Any] = field(default_factory=dict)
+    unit_metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
+    sources: dict[str, list[Path]] = field(default_factory=dict)
+
+    @property
+    def settings(self) -> list[str]:
+        """Settings with rollouts, in :data:`SETTINGS` order."""
+        present = set(self.metrics["setting"])
+        return [s for s in SETTINGS if s in present]
+
+    def rollouts(self, setting: str) -> pd.DataFrame:
+        """The metrics rows of one setting."""
+        return self.metrics[self.metrics["setting"] == setting]
+
+
+def _read_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
+    try:
+        frame = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
+        raise ReportDataError(f"{path}: not a readable CSV ({error})") from None
+    missing = [c for c in required if c not in frame.columns]
+    if missing:
+        raise ReportDataError(f"{path}: missing column(s) {', '.join(missing)}")
+    return frame
+
+
+def _check_numeric(frame: pd.DataFrame, columns: tuple[str, ...], path: Path) -> None:
+    for column in columns:
+        if not pd.api.types.is_numeric_dtype(frame[column]):
+            values = pd.to_numeric(frame[column], errors="coerce")
+            bad = int(np.flatnonzero(values.isna() & frame[column].notna())[0])
+            raise ReportDataError(
+                f"{path}: column {column} row {bad + 2} holds {frame[column].iloc[bad]!r}, not a number"
+            )
+
+
+def _check_settings(frame: pd.DataFrame, path: Path, kind: str) -> None:
+    unknown = sorted(set(frame["setting"].astype(str)) - set(SETTINGS))
+    if unknown:
+        row = int(np.flatnonzero(frame["setting"].astype(str) == unknown[0])[0])
+        raise ReportDataError(
+            f"{path}: row {row + 2} has setting {unknown[0]!r} (expected one of {', '.join(SETTINGS)})"
+        )
+    if kind == "paper" and path.parent.parent.name == COMBINED_DIR:
+        other = sorted(set(frame["setting"]) - {path.parent.name})
+        if other:
+            raise ReportDataError(f"{path}: holds setting {other[0]!r} but lies in the folder of {path.parent.name!r}")
+
+
+def _read_table(
+    root: Path, name: str, required: tuple[str, ...], kind: str, numeric: tuple[str, ...] = ()
+) -> tuple[pd.DataFrame, list[Path]]:
+    paths = run_table_paths(root, name)
+    frames = []
+    for path in paths:
+        frame = _read_csv(path, required)
+        _check_settings(frame, path, kind)
+        _check_numeric(frame, numeric, path)
+        frames.append(frame)
+    if not frames:
+        return pd.DataFrame(columns=list(required)), []
+    return pd.concat(frames, ignore_index=True), paths
+
+
+def _flatten_log(record: dict[str, Any]) -> dict[str, Any]:
+    row = {key: record[key] for key in LOG_KEYS}
+    for key in ("proposed_action", "final_action"):
+        row[key] = tuple(float(v) for v in record[key])
+    return row
+
+
+def read_agentic_logs(path: Path) -> pd.DataFrame:
+    """One row per logged agentic step of ``path`` (``agentic_logs.jsonl``), validated.
+
+    Raises
+    ------
+    ReportDataError
+        A line is not JSON, lacks a key the report reads, or has an action that is not 3 numbers.
+    """
+    rows = []
+    with open(path, encoding="utf-8") as handle:
+        for number, line in enumerate(handle, start=1):
+            if not line.strip():
+                continue
+            try:
+                record = json.loads(line)
+            except json.JSONDecodeError as error:
+                raise ReportDataError(f"{path}: line {number} is not JSON ({error.msg})") from None
+            missing = [k for k in LOG_KEYS if k not in record]
+            if missing:
+                raise ReportDataError(f"{path}: line {number} lacks key(s) {', '.join(missing)}")
+            for key in ("proposed_action", "final_action"):
+                value = record[key]
+                if not (isinstance(value, list) and len(value) == 3):
+                    raise ReportDataError(f"{path}: line {number} field {key} is not a list of 3 numbers")
+            rows.append(_flatten_log(record))
+    frame = pd.DataFrame(rows, columns=list(LOG_KEYS))
+    if not frame.empty:
+        _check_settings(frame, path, "paper" if path.parent.parent.name == COMBINED_DIR else "run")
+    return frame
+
+
+def _read_json(path: Path) -> dict[str, Any]:
+    if not path.is_file():
+        return {}
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except json.JSONDecodeError as error:
+        raise ReportDataError(f"{path}: not valid JSON ({error.msg} at line {error.lineno})") from None
+
+
+def _unit_metadata(root: Path) -> dict[str, dict[str, Any]]:
+    units = root / UNITS_DIR / "eval"
+    if not units.is_dir():
+        return {}
+    return {unit.name: _read_json(unit / METADATA_FILE) for unit in sorted(units.iterdir()) if unit.is_dir()}
+
+
+def _check_unique_rollouts(metrics: pd.DataFrame, paths: list[Path]) -> None:
+    duplicated = metrics.duplicated(ROLLOUT_KEY, keep=False)
+    if duplicated.any():
+        row = metrics[duplicated].iloc[0]
+        key = ", ".join(f"{k}={row[k]}" for k in ROLLOUT_KEY)
+        raise ReportDataError(
+            f"{', '.join(str(p) for p in paths)}: rollout ({key}) appears more than once; "
+            "paired deltas need one row per setting, policy, run seed and episode"
+        )
+
+
+def load_report_data(root: Path) -> ReportData:
+    """Read and validate the run directory or paper root ``root``.
+
+    Raises
+    ------
+    ReportDataError
+        ``root`` holds no metrics, or a file is malformed (the message says which and where).
+    """
+    root = Path(root)
+    if not root.is_dir():
+        raise ReportDataError(f"{root}: no such directory (expected a run directory or a paper root)")
+    kind: Literal["paper", "run"] = "paper" if is_paper_root(root) else "run"
+    metrics, metric_paths = _read_table(root, METRICS_FILE, (*EPISODE_KEYS, *METRIC_NAMES), kind, METRIC_NAMES)
+    if not metric_paths:
+        where = f"{root}/{COMBINED_DIR}/<setting>/{METRICS_FILE}" if kind == "paper" else f"{root}/{METRICS_FILE}"
+        raise ReportDataError(f"{root}: no {METRICS_FILE} found (looked for {where})")
+    if metrics.empty:
+        raise ReportDataError(f"{', '.join(str(p) for p in metric_paths)}: no rollouts (only a header)")
+    _check_unique_rollouts(metrics, metric_paths)
+    actions, action_paths = _read_table(root, ACTIONS_FILE, ACTION_KEYS, kind)
+    city_hour, city_paths = _read_table(root, CITY_HOUR_FILE, CITY_HOUR_KEYS, kind)
+    log_paths = run_table_paths(root, AGENTIC_LOG_FILE)
+    logs = [read_agentic_logs(path) for path in log_paths]
+    log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=list(LOG_KEYS))
+    # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
+    log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
+    metadata_file = PAPER_METADATA_FILE if kind == "paper" else METADATA_FILE
+    return ReportData(
+        root=root,
+        kind=kind,
+        metrics=metrics,
+        actions=actions,
+        city_hour=city_hour,
+        logs=log_frame,
+        metadata=_read_json(root / metadata_file),
+        unit_metadata=_unit_metadata(root) if kind == "paper" else {},
+        sources={
+            METRICS_FILE: metric_paths,
+            ACTIONS_FILE: action_paths,
+            CITY_HOUR_FILE: city_paths,
+            AGENTIC_LOG_FILE: log_paths,
+        },
+    )

@@ -1,0 +1,94 @@
+"""Display names and row orders of policies and settings, as the paper prints them.
+
+One home for every label the report shows, so tables and figures agree.
+"""
+
+from __future__ import annotations
+
+from typing import Iterable
+
+from ..experiments.rollout import (
+    SETTING_AGENTIC,
+    SETTING_AGENTIC_NO_PHYSICS,
+    SETTING_LABELS,
+    SETTING_MAIN,
+    SETTING_NO_PHYSICS,
+    SETTINGS,
+)
+from ..policies.baselines import BASELINES
+
+#: Policy display names (the paper's spelling).
+POLICY_DISPLAY = {"static": "Static", "random": "Random", "myopic": "Myopic", "ppo": "PPO", "sac": "SAC", "dqn": "DQN"}
+#: The paper's policy order in the main tables and figures.
+PAPER_POLICY_ORDER = ("static", "random", "myopic", "ppo", "sac", "dqn")
+#: The paper's learned-policy order in the body tables (PPO, SAC, DQN).
+LEARNED_ORDER = ("ppo", "sac", "dqn")
+
+#: Setting labels of the four-setting tables ("Governance" / "Setting" columns of the body).
+GOVERNANCE_LABELS = {
+    SETTING_MAIN: "RL",
+    SETTING_NO_PHYSICS: "RL no-physics",
+    SETTING_AGENTIC: "RL+LLM",
+    SETTING_AGENTIC_NO_PHYSICS: "RL+LLM no-physics",
+}
+#: Row order of the four-setting appendix tables (RL, RL+LLM, RL no-physics, RL+LLM no-physics).
+GOVERNANCE_ORDER = (SETTING_MAIN, SETTING_AGENTIC, SETTING_NO_PHYSICS, SETTING_AGENTIC_NO_PHYSICS)
+#: The LLM appendix tables name an agentic setting by its reward ("Main" / "No-physics").
+AGENTIC_REWARD_LABELS = {SETTING_AGENTIC: "Main", SETTING_AGENTIC_NO_PHYSICS: "No-physics"}
+#: Each agentic setting and the raw-RL setting with the same reward (for RL+LLM - RL deltas).
+AGENTIC_BASE = {SETTING_AGENTIC: SETTING_MAIN, SETTING_AGENTIC_NO_PHYSICS: SETTING_NO_PHYSICS}
+#: Each physics-penalised setting and its no-physics ablation (for no-physics - physics deltas).
+ABLATION_PAIRS = {SETTING_MAIN: SETTING_NO_PHYSICS, SETTING_AGENTIC: SETTING_AGENTIC_NO_PHYSICS}
+
+__all__ = [
+    "SETTINGS",
+    "SETTING_LABELS",
+    "POLICY_DISPLAY",
+    "PAPER_POLICY_ORDER",
+    "LEARNED_ORDER",
+    "GOVERNANCE_LABELS",
+    "GOVERNANCE_ORDER",
+    "AGENTIC_REWARD_LABELS",
+    "AGENTIC_BASE",
+    "ABLATION_PAIRS",
+    "policy_label",
+    "setting_label",
+    "is_learned",
+    "paper_order",
+    "alphabetical_order",
+    "learned_order",
+]
+
+
+def policy_label(policy: str) -> str:
+    """Display name of ``policy`` (the paper's spelling; unknown names are shown as given)."""
+    return POLICY_DISPLAY.get(policy, policy)
+
+
+def setting_label(setting: str) -> str:
+    """Display name of a setting as the appendix prints it ("Main", "LLM No-physics", ...)."""
+    return SETTING_LABELS.get(setting, setting)
+
+
+def is_learned(policy: str) -> bool:
+    """True for every policy that is not a rule baseline (PPO, SAC, DQN and any new learner)."""
+    return policy not in BASELINES
+
+
+def paper_order(policies: Iterable[str]) -> list[str]:
+    """``policies`` in the paper's order: Static, Random, Myopic, PPO, SAC, DQN, then others by name."""
+    present = set(policies)
+    known = [p for p in PAPER_POLICY_ORDER if p in present]
+    return known + sorted(present - set(known))
+
+
+def alphabetical_order(policies: Iterable[str]) -> list[str]:
+    """``policies`` sorted by display name (the appendix tables' order: DQN, Myopic, PPO, ...)."""
+    return sorted(set(policies), key=lambda p: (policy_label(p), p))
+
+
+def learned_order(policies: Iterable[str]) -> list[str]:
+    """The learned policies among ``policies``: PPO, SAC, DQN first, then others by name."""
+    learned = {p for p in policies if is_learned(p)}
+    known = [p for p in LEARNED_ORDER if p in learned]
+    return known + sorted(learned - set(known))

@@ -1,0 +1,187 @@
+"""Planner/Auditor tables: operation rates, trigger diagnostics and the case-study audit trace."""
+
+from __future__ import annotations
+
+import pandas as pd
+
+from ...experiments.rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS
+from ..casestudy import select_case
+from ..loading import ReportData
+from ..naming import AGENTIC_REWARD_LABELS, alphabetical_order, policy_label, setting_label
+from ..options import ReportOptions
+from .common import agentic_rollouts, means, pooled_revision_rate, size_fields, sizes_of
+from .model import Column, ReportTable, Skipped, basis_sentence, cell, fixed, integer, text
+
+AGENTIC_SETTINGS = (SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS)
+TRIGGER_COLUMNS = (
+    ("physics_trigger_rate", "Physics Trig."),
+    ("gap_trigger_rate", "Gap Trig."),
+    ("slippage_trigger_rate", "Slippage Trig."),
+    ("jitter_trigger_rate", "Jitter Trig."),
+    ("plan_violation_threshold", "Viol. Thr."),
+    ("plan_gap_threshold", "Gap Thr."),
+    ("plan_jitter_threshold", "Jitter Thr."),
+    ("plan_slippage_threshold", "Slip Thr."),
+)
+NO_AGENTIC = "the run has no agentic setting (llm / llm_no_physics): evaluate with the Planner/Auditor layer"
+
+
+def _agentic_groups(data: ReportData, key: str, title: str):
+    """(setting, policy, rows) of every agentic group, or a Skipped."""
+    frame, missing = agentic_rollouts(data, AGENTIC_SETTINGS)
+    if frame.empty:
+        return Skipped(key, title, NO_AGENTIC)
+    if missing:
+        return Skipped(key, title, f"metrics of the agentic settings lack column(s) {', '.join(missing)}")
+    groups = []
+    for setting in AGENTIC_SETTINGS:
+        in_setting = frame[frame["setting"] == setting]
+        for policy in alphabetical_order(in_setting["policy"]):
+            groups.append((setting, policy, in_setting[in_setting["policy"] == policy]))
+    return groups
+
+
+def _step_count(data: ReportData, setting: str, policy: str, episodes: int) -> tuple[int, str]:
+    """Governance steps of a group: log rows, else action rows, else none."""
+    for name, frame in (("agentic_logs.jsonl", data.logs), ("actions.csv", data.actions)):
+        if not frame.empty:
+            rows = int(((frame["setting"] == setting) & (frame["policy"] == policy)).sum())
+            if rows:
+                return rows, name
+    return 0, "none"
+
+
+def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
+    """Appendix: audit, revision and modification rates, mean action delta, not-triggered rate."""
+    title = "Detailed LLM governance operation rates"
+    groups = _agentic_groups(data, "llm_operations", title)
+    if isinstance(groups, Skipped):
+        return groups
+    rows, sources = [], set()
+    for setting, policy, group in groups:
+        steps, source = _step_count(data, setting, policy, len(group))
+        sources.add(source)
+        rows.append(
+            {
+                "setting": AGENTIC_REWARD_LABELS[setting],
+                "policy": policy_label(policy),
+                **size_fields(group),
+                "steps": steps,
+                "audit_rate": float(group["audit_rate"].mean()),
+                "revision_given_audit": pooled_revision_rate(group),
+                **means(group, ["modification_rate", "mean_action_delta", "not_triggered_rate", "plan_validity_rate"]),
+                "llm_failure_count": int(group["llm_failure_count"].sum()),
+            }
+        )
+    frame = pd.DataFrame(rows)
+    columns = [
+        Column("Setting", text("setting"), align="l"),
+        Column("Policy", text("policy"), align="l"),
+        Column("Steps", integer("steps")),
+        Column("Audit Rate", cell("audit_rate", 3)),
+        Column("Revision Given Audit", cell("revision_given_audit", 3)),
+        Column("Modification Rate", cell("modification_rate", 3)),
+        Column("Mean Action Δ", cell("mean_action_delta", 3), latex=r"Mean Action $\Delta$"),
+        Column("Not Triggered", cell("not_triggered_rate", 3)),
+    ]
+    notes = []
+    if (frame["llm_failure_count"] == 0).all():
+        notes.append("The LLM failure count is zero for every row and is therefore not shown.")
+    else:
+        columns.append(Column("LLM Failures", integer("llm_failure_count")))
+    if sources - {"agentic_logs.jsonl"}:
+        notes.append("Steps count actions.csv rows where a group has no agentic log.")
+    return ReportTable(
+        key="llm_operations",
+        label="tab:app-llm-ops",
+        title=title,
+        caption=(
+            "Detailed LLM governance operation rates per agentic setting (\"Main\": RL+LLM; \"No-physics\": "
+            "RL+LLM no-physics) and policy. Rates are pooled over the group's governance steps; revision given "
+            "audit is revisions per audit."
+        ),
+        columns=columns,
+        data=frame,
+        basis=basis_sentence(sizes_of(frame), "rollouts"),
+        notes=notes,
+    )
+
+
+def llm_triggers(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
+    """Appendix: post-hoc trigger rates and the Planner's mean thresholds."""
+    title = "Detailed LLM trigger diagnostics and mean Planner thresholds"
+    groups = _agentic_groups(data, "llm_triggers", title)
+    if isinstance(groups, Skipped):
+        return groups
+    rows = [
+        {
+            "setting": AGENTIC_REWARD_LABELS[setting],
+            "policy": policy_label(policy),
+            **size_fields(group),
+            **means(group, [c for c, _ in TRIGGER_COLUMNS]),
+        }
+        for setting, policy, group in groups
+    ]
+    frame = pd.DataFrame(rows)
+    columns = [Column("Setting", text("setting"), align="l"), Column("Policy", text("policy"), align="l")]
+    columns += [Column(header, cell(name, 3)) for name, header in TRIGGER_COLUMNS]
+    return ReportTable(
+        key="llm_triggers",
+        label="tab:app-llm-triggers",
+        title=title,
+        caption=(
+            "Detailed LLM post-hoc trigger diagnostics and mean Planner thresholds. Trigger columns report the "
+            "fraction of logged steps satisfying each trigger condition, audited or not."
+        ),
+        columns=columns,
+        data=frame,
+        basis=basis_sentence(sizes_of(frame), "rollouts"),
+    )
+
+
+def _action(values) -> str:
+    r, l, b = (float(v) for v in values)
+    return f"r={fixed(r, 3)}, l={fixed(l, 3)}, b={fixed(b, 3)}"
+
+
+def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
+    """A representative audit trace from ``agentic_logs.jsonl`` (field/value rows)."""
+    title = "Representative LLM audit trace"
+    if data.logs.empty:
+        return Skipped("case_study", title, "the run has no agentic_logs.jsonl (no agentic setting)")
+    case, rule = select_case(data.logs, options)
+    if case is None:
+        return Skipped("case_study", title, f"the agentic logs hold no revised audit ({rule})")
+    reason = case["reason"] if isinstance(case["reason"], str) and case["reason"] else "(none logged)"
+    fields = [
+        ("policy / setting", f"{policy_label(case['policy'])} / {setting_label(case['setting'])}"),
+        (
+            "Episode and step",
+            f"Episode {int(case['episode'])}, step {int(case['step'])}, hour {int(case['hour'])} "
+            f"(run seed {int(case['run_seed'])})",
+        ),
+        (
+            "Trigger context",
+            f"raw violation {fixed(case['raw_violation_rate'], 2)}; gap {fixed(case['supply_gap'], 2)}; "
+            f"static slippage {fixed(case['static_slippage'], 2)}",
+        ),
+        ("RL proposed action", _action(case["proposed_action"])),
+        ("Audited final action", _action(case["final_action"])),
+        ("Action delta", fixed(case["action_delta"], 3)),
+        ("Auditor rationale", reason),
+    ]
+    frame = pd.DataFrame(fields, columns=["field", "value"])
+    return ReportTable(
+        key="case_study",
+        label="tab:app-case-study",
+        title=title,
+        caption=(
+            "Representative LLM audit trace selected from agentic_logs.jsonl. The row records the market "
+            "context, proposed RL action, audited final action, and action delta."
+        ),
+        columns=[Column("Field", text("field"), align="p{0.28\\linewidth}"), Column("Value", text("value"), align="p{0.62\\linewidth}")],
+        data=frame,
+        basis=f"n = 1 logged step, chosen among {len(data.logs)} agentic log steps.",
+        notes=[f"Selected as {rule}."],
+        wide=False,
+    )
