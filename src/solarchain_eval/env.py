@@ -14,7 +14,7 @@ from .data.default import default_dataset_dir
 from .data.table import HourlyTable, load_table
 from .episodes import PRICE_NOISE_STD, EpisodeStream
 from .market.actions import ActionCodec, action_jitter_f32
-from .market.dynamics import MarketHours, RewardWeights, market_step
+from .market.dynamics import MarketHours, RewardWeights, StepOutcome, market_step
 from .market.observation import (
     OBS_LIMIT,
     OBS_LIQUIDITY,
@@ -27,6 +27,76 @@ from .market.observation import (
 from .market.ops import SCALAR
 
 ActionMode = str  # "continuous" | "discrete"
+
+
+#: Per-step quantities in ``info`` (SPEC §4's record, the original release's names), plus
+#: ``fairness_variance`` (F) and ``cost`` = V + A. ``info`` also has ``step`` and ``city_rewards``.
+STEP_INFO_KEYS = (
+    "reward",
+    "absolute_hour",
+    "episode_start_hour",
+    "hour",
+    "reward_ratio",
+    "liquidity_ratio",
+    "burn_rate",
+    "verified_supply_MWh",
+    "reported_supply_MWh",
+    "physics_excess_MWh",
+    "unsafe_backed_MWh",
+    "artificial_liquidity_MWh",
+    "physics_violation_rate",
+    "raw_physics_record_rate",
+    "demand_MWh",
+    "matched_energy_MWh",
+    "unmet_demand_MWh",
+    "liquidity",
+    "liquidity_depth",
+    "token_price",
+    "max_drawdown",
+    "token_drawdown",
+    "action_jitter",
+    "slippage",
+    "fairness_variance",
+    "cost",
+)
+
+
+def step_info(
+    out: StepOutcome, executed: tuple, hour: Any, start: Any, hour_inputs: tuple, depth_scale: float
+) -> dict[str, Any]:
+    """The ``info`` entries of :data:`STEP_INFO_KEYS` for one step (floats or per-sub-env arrays).
+
+    ``hour_inputs`` is (G_v, G_r, X, ν, Q_c) of the step's hour.
+    """
+    verified, reported, unsafe, raw_rate, demand = hour_inputs
+    return {
+        "reward": out.reward,
+        "absolute_hour": hour,
+        "episode_start_hour": start,
+        "hour": hour % 24,
+        "reward_ratio": executed[0],
+        "liquidity_ratio": executed[1],
+        "burn_rate": executed[2],
+        "verified_supply_MWh": verified,
+        "reported_supply_MWh": reported,
+        "physics_excess_MWh": unsafe,
+        "unsafe_backed_MWh": out.unsafe_backed_mwh,
+        "artificial_liquidity_MWh": out.artificial_liquidity_mwh,
+        "physics_violation_rate": out.violation_rate,
+        "raw_physics_record_rate": raw_rate,
+        "demand_MWh": demand,
+        "matched_energy_MWh": out.matched_mwh,
+        "unmet_demand_MWh": out.unmet_mwh,
+        "liquidity": out.liquidity,
+        "liquidity_depth": out.liquidity / depth_scale,
+        "token_price": out.token_price,
+        "max_drawdown": out.drawdown,
+        "token_drawdown": out.token_drawdown,
+        "action_jitter": out.jitter,
+        "slippage": out.slippage,
+        "fairness_variance": out.fairness_variance,
+        "cost": out.violation_rate + out.unsafe_backed_mwh,
+    }
 
 
 def resolve_config(config: BenchmarkConfig | str | Path | None) -> BenchmarkConfig:
@@ -240,34 +310,14 @@ class SolarChainEnv(gym.Env):
             self._episode_open = False
         next_hour = self._start + k
         obs = self._observation(next_hour if next_hour < self._n_hours else self._n_hours - 1)
-        info = {
-            "step": k - 1,
-            "reward": out.reward,
-            "absolute_hour": hour,
-            "episode_start_hour": self._start,
-            "hour": hour % 24,
-            "reward_ratio": executed[0],
-            "liquidity_ratio": executed[1],
-            "burn_rate": executed[2],
-            "verified_supply_MWh": self._verified[hour],
-            "reported_supply_MWh": self._reported[hour],
-            "physics_excess_MWh": self._unsafe[hour],
-            "unsafe_backed_MWh": out.unsafe_backed_mwh,
-            "artificial_liquidity_MWh": out.artificial_liquidity_mwh,
-            "physics_violation_rate": out.violation_rate,
-            "raw_physics_record_rate": self._raw_rate[hour],
-            "demand_MWh": self._demand[hour],
-            "matched_energy_MWh": out.matched_mwh,
-            "unmet_demand_MWh": out.unmet_mwh,
-            "liquidity": out.liquidity,
-            "liquidity_depth": out.liquidity / self._depth_scale,
-            "token_price": out.token_price,
-            "max_drawdown": out.drawdown,
-            "token_drawdown": out.token_drawdown,
-            "action_jitter": out.jitter,
-            "slippage": out.slippage,
-            "fairness_variance": out.fairness_variance,
-            "cost": out.violation_rate + out.unsafe_backed_mwh,
-            "city_rewards": dict(zip(self.cities, out.city_rewards)),
-        }
+        info = step_info(
+            out,
+            executed,
+            hour,
+            self._start,
+            (self._verified[hour], self._reported[hour], self._unsafe[hour], self._raw_rate[hour], self._demand[hour]),
+            self._depth_scale,
+        )
+        info["step"] = k - 1
+        info["city_rewards"] = dict(zip(self.cities, out.city_rewards))
         return obs, out.reward, False, truncated, info

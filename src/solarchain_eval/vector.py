@@ -18,43 +18,12 @@ from gymnasium.vector.utils import batch_space
 
 from .config import BenchmarkConfig
 from .data.table import HourlyTable
-from .env import market_inputs, resolve_config, resolve_table, start_hours
+from .env import STEP_INFO_KEYS, market_inputs, resolve_config, resolve_table, start_hours, step_info
 from .episodes import CHECKPOINT_EVERY, PRICE_NOISE_STD, EpisodeStream
 from .market.actions import ActionCodec, action_jitter_f32_batch
 from .market.dynamics import RewardWeights, market_step
 from .market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE
 from .market.ops import BATCH
-
-#: Per-step info arrays of the vector env (the single env's info keys, less ``city_rewards``).
-VECTOR_INFO_KEYS = (
-    "reward",
-    "absolute_hour",
-    "episode_start_hour",
-    "hour",
-    "reward_ratio",
-    "liquidity_ratio",
-    "burn_rate",
-    "verified_supply_MWh",
-    "reported_supply_MWh",
-    "physics_excess_MWh",
-    "unsafe_backed_MWh",
-    "artificial_liquidity_MWh",
-    "physics_violation_rate",
-    "raw_physics_record_rate",
-    "demand_MWh",
-    "matched_energy_MWh",
-    "unmet_demand_MWh",
-    "liquidity",
-    "liquidity_depth",
-    "token_price",
-    "max_drawdown",
-    "token_drawdown",
-    "action_jitter",
-    "slippage",
-    "fairness_variance",
-    "cost",
-)
-
 
 class SolarChainVectorEnv(VectorEnv):
     """``num_envs`` SolarChain markets stepped together.
@@ -149,7 +118,7 @@ class SolarChainVectorEnv(VectorEnv):
         self._lockstep: int | None = None  # the common step index when all sub-envs share it
         self._all_true = np.ones(n, dtype=bool)
         self._all_true.setflags(write=False)  # shared by every info mask; read-only
-        self._info_masks = {"_" + key: self._all_true for key in (*VECTOR_INFO_KEYS, "city_rewards")}
+        self._info_masks = {"_" + key: self._all_true for key in (*STEP_INFO_KEYS, "city_rewards")}
 
     # --- resets -------------------------------------------------------------------------------
     def _flush(self, i: int) -> EpisodeStream:
@@ -351,35 +320,10 @@ class SolarChainVectorEnv(VectorEnv):
         return obs, reward, np.zeros(n, dtype=bool), truncated, info
 
     def _step_info(self, out: Any, executed: tuple, hour: np.ndarray, inputs: np.ndarray, mask: np.ndarray) -> dict:
-        values = {
-            "reward": out.reward,
-            "absolute_hour": hour,
-            "episode_start_hour": self._start,  # replaced, never mutated, on reset
-            "hour": hour % 24,
-            "reward_ratio": executed[0],
-            "liquidity_ratio": executed[1],
-            "burn_rate": executed[2],
-            "verified_supply_MWh": inputs[0],
-            "reported_supply_MWh": inputs[3],
-            "physics_excess_MWh": inputs[1],
-            "unsafe_backed_MWh": out.unsafe_backed_mwh,
-            "artificial_liquidity_MWh": out.artificial_liquidity_mwh,
-            "physics_violation_rate": out.violation_rate,
-            "raw_physics_record_rate": inputs[4],
-            "demand_MWh": inputs[2],
-            "matched_energy_MWh": out.matched_mwh,
-            "unmet_demand_MWh": out.unmet_mwh,
-            "liquidity": out.liquidity,
-            "liquidity_depth": out.liquidity / self._depth_scale,
-            "token_price": out.token_price,
-            "max_drawdown": out.drawdown,
-            "token_drawdown": out.token_drawdown,
-            "action_jitter": out.jitter,
-            "slippage": out.slippage,
-            "fairness_variance": out.fairness_variance,
-            "cost": out.violation_rate + out.unsafe_backed_mwh,
-            "city_rewards": out.city_rewards.T,
-        }
+        values = step_info(
+            out, executed, hour, self._start, (inputs[0], inputs[3], inputs[1], inputs[4], inputs[2]), self._depth_scale
+        )
+        values["city_rewards"] = out.city_rewards.T
         if mask is self._all_true:
             values.update(self._info_masks)
         else:

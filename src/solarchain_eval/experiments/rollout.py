@@ -7,39 +7,12 @@ from typing import Any, Callable, Iterable, Sequence
 
 import numpy as np
 
-from ..env import SolarChainEnv
+from ..env import STEP_INFO_KEYS, SolarChainEnv
 from ..metrics import episode_metrics
 from ..policies.base import Policy
 
 #: Per-step record columns (SPEC §4, the original release's names) plus cost and F.
-STEP_FIELDS = (
-    "reward",
-    "absolute_hour",
-    "episode_start_hour",
-    "hour",
-    "reward_ratio",
-    "liquidity_ratio",
-    "burn_rate",
-    "verified_supply_MWh",
-    "reported_supply_MWh",
-    "physics_excess_MWh",
-    "unsafe_backed_MWh",
-    "artificial_liquidity_MWh",
-    "physics_violation_rate",
-    "raw_physics_record_rate",
-    "demand_MWh",
-    "matched_energy_MWh",
-    "unmet_demand_MWh",
-    "liquidity",
-    "liquidity_depth",
-    "token_price",
-    "max_drawdown",
-    "token_drawdown",
-    "action_jitter",
-    "slippage",
-    "fairness_variance",
-    "cost",
-)
+STEP_FIELDS = STEP_INFO_KEYS
 
 # Evaluation settings (the paper's "RL", "RL no-physics", "RL+LLM", "RL+LLM no-physics").
 SETTING_MAIN = "main"
