@@ -21,6 +21,8 @@ app = typer.Typer(
 from . import bench as _bench  # noqa: E402  (command modules register themselves on `app`)
 from . import data as _data  # noqa: E402
 from . import evaluate as _evaluate  # noqa: E402
+from . import paper as _paper  # noqa: E402
+from . import train as _train  # noqa: E402
 
 
 def main() -> None:
