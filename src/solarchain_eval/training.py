@@ -268,7 +268,7 @@ def train(
             raise TrainingError("--tensorboard needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'") from None
 
     set_torch_threads(spec.torch_threads)
-    from .training_monitor import CheckpointStore, EpisodeLog, TrainingMonitor
+    from .training_monitor import CheckpointStore, EpisodeLog, TrainingMonitor, load_replay_buffer
 
     started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
     atomic_write_json(
@@ -288,7 +288,7 @@ def train(
     else:
         model = cls.load(checkpoint.model, env=env, device=spec.device, tensorboard_log=tb_dir)
         if checkpoint.replay_buffer is not None:
-            model.load_replay_buffer(checkpoint.replay_buffer)
+            load_replay_buffer(model.replay_buffer, checkpoint.replay_buffer)
         model.set_random_seed(_resume_seed(spec.seed, checkpoint.steps))
         wall_before = checkpoint.wall_s
         log = EpisodeLog(env.num_envs, EpisodeLog.read(checkpoint.log), wall_offset_s=wall_before)

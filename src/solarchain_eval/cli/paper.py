@@ -15,6 +15,7 @@ from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
 from ..experiments.records import SUMMARY_FILE
 from ..experiments.units import UnitResult
+from ..policies.registry import parse_policy_list
 from . import app
 from .common import (
     CliError,
@@ -68,6 +69,9 @@ def paper(
     settings: Optional[str] = typer.Option(
         None, "--settings", help="Comma-separated settings (default: every registered one: main, no_physics, ...)."
     ),
+    policies: Optional[str] = typer.Option(
+        None, "--policies", help="Comma-separated subset of the policies to run (default: all; train units follow)."
+    ),
     workers: int = typer.Option(1, "--workers", min=1, help="Local worker processes (one torch thread each)."),
     ray_address: Optional[str] = typer.Option(
         None, "--ray-address", help="Run units as Ray tasks: auto, ray://host:port, or local (needs solarchain-eval\\[ray])."
@@ -97,6 +101,7 @@ def paper(
             episodes=episodes,
             seeds=tuple(parse_int_list(seeds, "seeds")) if seeds else None,
             settings=_settings(settings),
+            policies=tuple(parse_policy_list(policies)) if policies else None,
             episode_seed_protocol=episode_seeds.value,
             data_dir=data,
             config=cfg,

@@ -144,6 +144,11 @@ class GridSpec:
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY
     preset: str | None = None
+    policies: tuple[str, ...] | None = None  # None: every policy of each setting
+
+    def setting_policies(self, setting: str) -> tuple[str, ...]:
+        listed = SETTING_REGISTRY[setting].policies
+        return listed if self.policies is None else tuple(p for p in listed if p in self.policies)
 
     @classmethod
     def from_preset(cls, name: str, **overrides: Any) -> "GridSpec":
@@ -164,6 +169,11 @@ class GridSpec:
         unknown = [s for s in self.settings if s not in SETTING_REGISTRY]
         if unknown:
             raise ValueError(f"unknown setting(s) {', '.join(unknown)} (registered: {', '.join(SETTING_REGISTRY)})")
+        if self.policies is not None:
+            offered = {p for s in self.settings for p in SETTING_REGISTRY[s].policies}
+            unknown = [p for p in self.policies if p not in offered]
+            if unknown or not self.policies:
+                raise ValueError(f"unknown or no policies {', '.join(unknown)} (the settings offer {', '.join(sorted(offered))})")
         if self.episode_seed_protocol not in EPISODE_SEED_PROTOCOLS:
             raise ValueError(
                 f"unknown episode-seed protocol '{self.episode_seed_protocol}' (choose from {', '.join(EPISODE_SEED_PROTOCOLS)})"
@@ -208,7 +218,7 @@ def plan_units(spec: GridSpec) -> list[Unit]:
     needed: set[tuple[str, str, int]] = set()
     for setting_name in spec.settings:
         setting = SETTING_REGISTRY[setting_name]
-        for policy in setting.policies:
+        for policy in spec.setting_policies(setting_name):
             for seed in spec.seeds:
                 deps: tuple[str, ...] = ()
                 if policy in ALGOS:

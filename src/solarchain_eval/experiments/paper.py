@@ -225,7 +225,7 @@ def _metadata(spec: GridSpec, identity: dict, dataset: dict, data_dir: Path, com
             "timesteps": spec.timesteps,
             "episodes": spec.episodes,
             "seeds": list(spec.seeds),
-            "settings": {s: list(SETTING_REGISTRY[s].policies) for s in spec.settings},
+            "settings": {s: list(spec.setting_policies(s)) for s in spec.settings},
             "algorithms": list(ALGOS),
             "episode_seed_protocol": spec.episode_seed_protocol,
             "episode_seed_derivation": (
