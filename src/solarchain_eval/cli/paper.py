@@ -128,7 +128,7 @@ def paper(
             if result.ok:
                 err_console.print(f"[green]done[/green] {result.unit} ({result.wall_s:.1f} s)", highlight=False)
             else:
-                err_console.print(f"[bold red]FAILED[/bold red] {result.unit}: {result.error}\n  log: {result.log}", highlight=False)
+                err_console.print(f"[bold red]FAILED[/bold red] {result.unit}: {result.error}\n  log: {result.log}", highlight=False, soft_wrap=True)
 
         try:
             outcome = run_paper(
@@ -149,6 +149,6 @@ def paper(
             extra = f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. Re-run to resume, or add --keep-going."
         elif report.blocked:
             extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
-        err_console.print(f"[bold red]{len(report.failed)} unit(s) failed:[/bold red]\n" + "\n".join(lines) + extra, highlight=False)
+        err_console.print(f"[bold red]{len(report.failed)} unit(s) failed:[/bold red]\n" + "\n".join(lines) + extra, highlight=False, soft_wrap=True)
         raise typer.Exit(1)
 
