@@ -228,3 +228,17 @@ def test_smoke_preset_through_a_local_ray_instance(smoke_root, tiny_dataset, tmp
             assert _digest(root / "combined" / setting / name) == _digest(smoke_root / "combined" / setting / name), name
     for unit in ("train/ppo-main-20260511", "eval/ppo-main-20260511"):
         assert (root / "units" / unit / "DONE").is_file() and (root / "units" / unit / "unit.log").is_file()
+
+
+def test_independent_episode_seeds_reach_the_evaluation(tiny_dataset, tmp_path):
+    spec = GridSpec.from_preset(
+        "smoke", episodes=3, seeds=(7, 8), settings=("main",), policies=("static",), episode_seed_protocol="independent",
+        data_dir=tiny_dataset,
+    )
+    outcome = run_paper(spec, tmp_path / "root")
+    assert outcome.complete and [u.name for u in outcome.units] == ["eval/static-main-7", "eval/static-main-8"]
+    metrics = pd.read_csv(tmp_path / "root" / "combined" / "main" / "metrics.csv")
+    assert list(metrics["episode_seed"]) == independent_episode_seeds(7, 3) + independent_episode_seeds(8, 3)
+    meta = json.loads((tmp_path / "root" / "paper_metadata.json").read_text())
+    assert meta["grid"]["episode_seed_protocol"] == "independent"
+    assert "SeedSequence(entropy=s, spawn_key=(0x45504953,))" in meta["grid"]["episode_seed_derivation"]
