@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import os
 import signal
 import subprocess
 import sys
@@ -49,7 +48,7 @@ def test_independent_episode_seeds_are_documented_prefix_stable_and_disjoint():
     assert independent_episode_seeds(20260511, 5) == seeds[20260511][:5]
     pooled = [e for v in seeds.values() for e in v]
     assert len(set(pooled)) == 90 and all(0 <= e < 2**63 for e in pooled)
-    # the paper protocol shares 28 of 30 episode seeds between consecutive run seeds
+    # the paper protocol shares 29 of 30 episode seeds between consecutive run seeds
     paper = {s: set(range(s, s + 30)) for s in seeds}
     assert len(paper[20260511] & paper[20260512]) == 29
 

@@ -262,10 +262,10 @@ def train(
             )
         _clear_training_dir(out_dir)
     if spec.tensorboard_dir is not None:
-        try:
-            import tensorboard  # noqa: F401
-        except ImportError:
-            raise TrainingError("--tensorboard needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'") from None
+        import importlib.util
+
+        if importlib.util.find_spec("tensorboard") is None:
+            raise TrainingError("--tensorboard needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'")
 
     set_torch_threads(spec.torch_threads)
     from .training_monitor import CheckpointStore, EpisodeLog, TrainingMonitor, load_replay_buffer

@@ -5,7 +5,8 @@ units resume from their last checkpoint). A root remembers what it was made with
 (``paper_metadata.json`` → ``identity``: budgets, episode-seed protocol, dataset hashes, config);
 running a different grid into it is an error, while adding seeds or settings extends it. An eval
 unit of a learned policy records the sha256 of the model it used and is redone if that model
-changed. One run at a time may use a root (a lock file).
+changed. One run at a time may use a root (a lock file). After a complete grid, the hooks in
+:data:`REPORT_HOOKS` (the report stage's ``write_paper_report(root)``) run if installed.
 """
 
 from __future__ import annotations
@@ -17,8 +18,8 @@ import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Callable, Iterator
 from contextlib import contextmanager
+from typing import Any, Callable, Iterator
 
 from ..data.default import default_dataset_dir
 from ..data.table import load_table
@@ -27,7 +28,7 @@ from ..training import ALGOS, MODEL_FILE, differences
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
 from .evaluate import dataset_provenance
-from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, load_setting_plugins, plan_units, train_unit
+from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, load_setting_plugins, plan_units
 from .layout import PAPER_METADATA_FILE, UNITS_DIR
 from .scheduler import Executor, InlineExecutor, LocalPool, RunReport, run_units
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
@@ -264,14 +265,19 @@ def _unit_table(root: Path, units: list[Unit], report: RunReport) -> dict[str, d
 
 
 def _run_report_hooks(root: Path) -> None:
-    from .grid import resolve_callable
+    import importlib
 
     for hook in REPORT_HOOKS:
+        module, _, name = hook.partition(":")
         try:
-            function = resolve_callable(hook)
-        except (ModuleNotFoundError, AttributeError):
-            continue
-        function(root)
+            loaded = importlib.import_module(module)
+        except ModuleNotFoundError as error:
+            if error.name is not None and module.startswith(error.name):
+                continue  # the report stage is not installed
+            raise
+        function = getattr(loaded, name, None)
+        if function is not None:
+            function(root)
 
 
-__all__ = ["GridError", "PaperOutcome", "grid_identity", "run_paper", "train_unit"]
+__all__ = ["GridError", "PaperOutcome", "REPORT_HOOKS", "grid_identity", "run_paper"]
