@@ -107,6 +107,7 @@ def paper(
             config=cfg,
             checkpoint_every=checkpoint_every,
         )
+        spec.validate()
     except ValueError as error:
         raise CliError(str(error)) from None
     where = f"Ray ({ray_address})" if ray_address else f"{workers} worker(s)"
