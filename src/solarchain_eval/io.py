@@ -37,6 +37,12 @@ def _atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
     return path
 
 
+def atomic_write_with(path: Path | str, write: Callable[[Path], None]) -> Path:
+    """Atomically create ``path`` from ``write(tmp_path)`` (for writers that want a path,
+    e.g. a library's ``save``): the file appears complete or not at all."""
+    return _atomic_write(Path(path), write)
+
+
 def atomic_write_text(path: Path | str, text: str) -> Path:
     return _atomic_write(Path(path), lambda tmp: tmp.write_text(text, encoding="utf-8"))
 

@@ -18,10 +18,14 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,
 )
 
-from . import bench as _bench  # noqa: E402  (command modules register themselves on `app`)
+# Command modules register themselves on `app`, in the order of the pipeline.
 from . import data as _data  # noqa: E402
 from . import evaluate as _evaluate  # noqa: E402
+from . import train as _train  # noqa: E402
+from . import paper as _paper  # noqa: E402
 from . import report as _report  # noqa: E402
+from . import bench as _bench  # noqa: E402
+from . import bench_train as _bench_train  # noqa: E402
 
 
 def main() -> None:

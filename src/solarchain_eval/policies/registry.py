@@ -8,10 +8,12 @@ from typing import Callable
 from ..config import BenchmarkConfig
 from .base import Policy
 from .baselines import BASELINES, make_baseline
+from .sb3 import register_learned_policies
 
 #: Factories for policies that need more than the config (e.g. trained models), by name.
 #: Each takes (config, models) and returns a Policy; extra modules register themselves here.
 EXTRA_POLICIES: dict[str, Callable[[BenchmarkConfig, dict[str, Path]], Policy]] = {}
+register_learned_policies(EXTRA_POLICIES)  # "ppo", "sac", "dqn" (SB3 is imported only to load a model)
 
 
 def known_policies() -> tuple[str, ...]:

@@ -1,0 +1,87 @@
+"""``solarchain-eval bench-train``: SB3 training steps/s per algorithm and the paper preset's wall time."""
+
+from __future__ import annotations
+
+from pathlib import Path
+from typing import Optional
+
+import typer
+from rich.table import Table
+
+from . import app
+from .common import CliError, console, err_console, reports_errors
+
+#: Targets on the 2-core reference machine with one torch thread (steps/s).
+TARGETS = {"ppo": 800, "dqn": 800, "sac": 85}
+PAPER_TARGET_H = 3.5
+
+
+@app.command("bench-train")
+@reports_errors
+def bench_train(
+    data: Optional[Path] = typer.Option(None, "--data", help="Dataset directory (default: the embedded default dataset)."),
+    algos: str = typer.Option("ppo,sac,dqn", "--algos", help="Comma-separated algorithms to measure."),
+    repeats: int = typer.Option(3, "--repeats", min=1, help="Repeats per figure (median and best are reported)."),
+    ceiling: bool = typer.Option(True, "--ceiling/--no-ceiling", help="Also measure SB3 on a trivial env (its own ceiling)."),
+    workers: int = typer.Option(2, "--workers", min=1, help="Workers for the paper-preset wall-time estimate."),
+    from_root: Optional[Path] = typer.Option(
+        None, "--from-root", help="Estimate from the per-unit times of a finished grid run instead of measuring."
+    ),
+) -> None:
+    """Measure steady-state SB3 training speed (one torch thread) per algorithm on this env and on
+    a trivial env with the same spaces, then estimate the paper preset's wall time (300,000 steps,
+    18 models, 36 evaluations) on --workers workers by simulating the grid scheduler.
+
+    Targets (2 cores): PPO >= 800, DQN >= 800, SAC >= 85 steps/s; paper preset <= 3.5 h with 2 workers.
+    """
+    from .. import bench_train as measure
+    from ..bench import Throughput
+    from ..data.default import default_dataset_dir
+    from ..training import check_algo
+
+    if from_root is not None:
+        try:
+            times = measure.unit_times_from_root(from_root)
+        except (OSError, ValueError, KeyError) as error:
+            raise CliError(f"cannot read unit times from {from_root}: {error}") from None
+    else:
+        data_dir = data or default_dataset_dir()
+        names = [check_algo(a) for a in algos.split(",") if a.strip()]
+        table = Table(title="SB3 training throughput, one torch thread (steps/s)", title_justify="left")
+        for column in ("algorithm", "median", "best", "trivial env median", "env share", "target"):
+            table.add_column(column, justify="left" if column == "algorithm" else "right")
+        rates: dict[str, float] = {}
+        for algo in names:
+            steps = measure.DEFAULT_STEPS[algo]
+            err_console.print(f"measuring {algo.upper()} ({repeats} × {steps:,} steps)...")
+            result = measure.training_steps_per_s(algo, measure.solarchain_env(algo, data_dir), steps, repeats)
+            rates[algo] = result.median
+            trivial: Throughput | None = None
+            if ceiling:
+                mode = "discrete" if algo == "dqn" else "continuous"
+                trivial = measure.training_steps_per_s(algo, measure.TrivialEnv(mode), steps, repeats)
+            table.add_row(
+                algo.upper(),
+                f"{result.median:,.0f}",
+                f"{result.best:,.0f}",
+                f"{trivial.median:,.0f}" if trivial else "-",
+                f"{max(1 - result.median / trivial.median, 0):.1%}" if trivial else "-",
+                f">= {TARGETS[algo]}",
+            )
+        console.print(table)
+        err_console.print("timing the evaluation units...")
+        times = measure.measured_unit_times(data_dir, rates)
+    missing = [a for a in ("ppo", "sac", "dqn") if a not in times.steps_per_s]
+    if missing:
+        raise CliError(f"the estimate needs all three algorithms; missing {', '.join(missing)}")
+    estimate = measure.estimate_paper_wall_time(times, workers)
+    console.print(f"paper preset on {workers} worker(s), from {times.source}:")
+    console.print(
+        "  steps/s used: " + ", ".join(f"{a.upper()} {r:,.0f}" for a, r in sorted(times.steps_per_s.items()))
+        + f"; train-unit overhead {times.train_overhead_s:.1f} s; eval units "
+        + ", ".join(f"{p} {s:.1f} s" for p, s in sorted(times.eval_s.items()))
+    )
+    console.print(
+        f"  estimated wall time {estimate['wall_s'] / 3600:.2f} h (target <= {PAPER_TARGET_H} h); total CPU "
+        f"{estimate['cpu_s'] / 3600:.2f} h, of which SAC training {estimate['train_sac_cpu_s'] / 3600:.2f} h"
+    )

@@ -1,0 +1,155 @@
+"""``solarchain-eval paper``: the full experiment grid (train -> evaluate -> combined files)."""
+
+from __future__ import annotations
+
+import json
+from enum import Enum
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from ..config import BenchmarkConfig, load_config
+from ..experiments.grid import SETTING_REGISTRY, GridSpec, Unit, load_setting_plugins, plan_units
+from ..experiments.layout import combined_dir
+from ..experiments.paper import GridError, run_paper
+from ..experiments.records import SUMMARY_FILE
+from ..experiments.units import UnitResult
+from ..policies.registry import parse_policy_list
+from . import app
+from .common import (
+    CliError,
+    console,
+    err_console,
+    invoked_command,
+    parse_int_list,
+    progress_bar,
+    register_user_error,
+    reports_errors,
+    results_table,
+)
+
+register_user_error(GridError)
+
+
+class Preset(str, Enum):
+    paper = "paper"
+    smoke = "smoke"
+
+
+class EpisodeSeeds(str, Enum):
+    paper = "paper"
+    independent = "independent"
+
+
+def _settings(text: Optional[str]) -> tuple[str, ...]:
+    load_setting_plugins()
+    if not text:
+        return tuple(SETTING_REGISTRY)
+    names = tuple(part.strip() for part in text.split(",") if part.strip())
+    unknown = [n for n in names if n not in SETTING_REGISTRY]
+    if unknown:
+        raise CliError(f"unknown setting(s) {', '.join(unknown)} (available: {', '.join(SETTING_REGISTRY)})")
+    return names
+
+
+@app.command("paper")
+@reports_errors
+def paper(
+    out: Path = typer.Option(..., "--out", help="The paper root (created; re-run the same command to resume)."),
+    data: Optional[Path] = typer.Option(
+        None, "--data", help="Dataset directory (default: the embedded default dataset; the paper's numbers need the published one)."
+    ),
+    preset: Preset = typer.Option(
+        Preset.paper, "--preset", help="paper: 300,000 steps, 30 episodes, seeds 20260511-13. smoke: tiny budgets."
+    ),
+    timesteps: Optional[int] = typer.Option(None, "--timesteps", min=1, help="Training steps per model (overrides the preset)."),
+    episodes: Optional[int] = typer.Option(None, "--episodes", min=1, help="Evaluation episodes per run seed (overrides the preset)."),
+    seeds: Optional[str] = typer.Option(None, "--seeds", help="Comma-separated run seeds (overrides the preset)."),
+    settings: Optional[str] = typer.Option(
+        None, "--settings", help="Comma-separated settings (default: every registered one: main, no_physics, ...)."
+    ),
+    policies: Optional[str] = typer.Option(
+        None, "--policies", help="Comma-separated subset of the policies to run (default: all; train units follow)."
+    ),
+    workers: int = typer.Option(1, "--workers", min=1, help="Local worker processes (one torch thread each)."),
+    ray_address: Optional[str] = typer.Option(
+        None, "--ray-address", help="Run units as Ray tasks: auto, ray://host:port, or local (needs solarchain-eval\\[ray])."
+    ),
+    episode_seeds: EpisodeSeeds = typer.Option(
+        EpisodeSeeds.paper, "--episode-seeds",
+        help="paper: episode e of seed s uses s + e (seeds share episodes). independent: non-overlapping seeds from a SeedSequence.",
+    ),
+    keep_going: bool = typer.Option(False, "--keep-going", help="Record failing units and carry on with the others."),
+    checkpoint_every: Optional[int] = typer.Option(
+        None, "--checkpoint-every", min=0, help="Training steps between checkpoints (default 25,000; 0: none)."
+    ),
+    config: Optional[Path] = typer.Option(None, "--config", help="YAML config in the paper's layout."),
+) -> None:
+    """Train PPO, SAC and DQN per seed and setting, evaluate static, random, myopic, ppo, sac and
+    dqn per seed and setting, and write ROOT/combined/<setting>/ files and ROOT/paper_metadata.json.
+
+    Every unit (a trained model, or one policy × setting × seed evaluation) is a directory under
+    ROOT/units with a DONE marker written last: re-running the same command skips finished units
+    and redoes the ones that were in flight (training resumes from its last checkpoint).
+    """
+    cfg = load_config(config) if config else BenchmarkConfig()
+    try:
+        spec = GridSpec.from_preset(
+            preset.value,
+            timesteps=timesteps,
+            episodes=episodes,
+            seeds=tuple(parse_int_list(seeds, "seeds")) if seeds else None,
+            settings=_settings(settings),
+            policies=tuple(parse_policy_list(policies)) if policies else None,
+            episode_seed_protocol=episode_seeds.value,
+            data_dir=data,
+            config=cfg,
+            checkpoint_every=checkpoint_every,
+        )
+        spec.validate()
+    except ValueError as error:
+        raise CliError(str(error)) from None
+    where = f"Ray ({ray_address})" if ray_address else f"{workers} worker(s)"
+    err_console.print(
+        f"grid: {spec.timesteps:,} training steps, {spec.episodes} episodes × {len(spec.seeds)} seed(s), "
+        f"settings {', '.join(spec.settings)}, on {where} -> {out}"
+    )
+    from ..experiments.ray_executor import RayUnavailableError
+
+    with progress_bar("units", len(plan_units(spec))) as advance:
+
+        def on_plan(units: list[Unit], already: list[str]) -> None:
+            if already:
+                err_console.print(f"{len(already)} of {len(units)} units already done: skipped")
+                advance(len(already))
+
+        def on_result(result: UnitResult) -> None:
+            advance(1)
+            if result.ok:
+                err_console.print(f"[green]done[/green] {result.unit} ({result.wall_s:.1f} s)", highlight=False)
+            else:
+                err_console.print(f"[bold red]FAILED[/bold red] {result.unit}: {result.error}\n  log: {result.log}", highlight=False, soft_wrap=True)
+
+        try:
+            outcome = run_paper(
+                spec, out, workers=workers, ray_address=ray_address, keep_going=keep_going,
+                on_plan=on_plan, on_result=on_result, command=invoked_command(),
+            )
+        except RayUnavailableError as error:
+            raise CliError(str(error)) from None
+    report = outcome.report
+    for setting in outcome.combined:
+        summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
+        console.print(results_table(summary, f"setting {setting}"))
+    console.print(f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)")
+    if report.failed:
+        lines = [f"  {r.unit}: {r.error} (log: {r.log})" for r in report.failed]
+        extra = ""
+        if report.stopped:
+            extra = f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. Re-run to resume, or add --keep-going."
+        elif report.blocked:
+            extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
+        err_console.print(f"[bold red]{len(report.failed)} unit(s) failed:[/bold red]\n" + "\n".join(lines) + extra, highlight=False, soft_wrap=True)
+        raise typer.Exit(1)
+

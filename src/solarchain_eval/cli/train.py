@@ -1,0 +1,83 @@
+"""``solarchain-eval train``: one PPO, SAC or DQN model (Stable-Baselines3), resumable."""
+
+from __future__ import annotations
+
+from datetime import datetime
+from pathlib import Path
+from typing import Optional
+
+import typer
+
+from ..config import BenchmarkConfig, load_config
+from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY, TRAIN_LOG_FILE, TrainingError, TrainSpec, check_algo, train
+from . import app
+from .common import console, err_console, invoked_command, progress_bar, register_user_error, reports_errors
+
+register_user_error(TrainingError)
+
+
+@app.command("train")
+@reports_errors
+def train_command(
+    algo: str = typer.Option(..., "--algo", help=f"Algorithm: {', '.join(ALGOS)} (DQN acts on the 125-point grid)."),
+    seed: Optional[int] = typer.Option(None, "--seed", help="Training seed (default: the config seed, 20260511)."),
+    timesteps: Optional[int] = typer.Option(
+        None, "--timesteps", min=1, help="Environment steps (default: the config's training.timesteps; the paper: 300000)."
+    ),
+    no_physics_penalty: bool = typer.Option(
+        False, "--no-physics-penalty", help="Train on the ablation reward without λp (V + A)."
+    ),
+    data: Optional[Path] = typer.Option(
+        None, "--data", help="Dataset directory (default: the config's data_dir, else the embedded default dataset)."
+    ),
+    out: Optional[Path] = typer.Option(None, "--out", help="Training directory (default: <output_dir>/<time>_train_<algo>)."),
+    tensorboard: Optional[Path] = typer.Option(
+        None, "--tensorboard", help="TensorBoard log directory (SB3 scalars + per-episode violation and artificial liquidity)."
+    ),
+    checkpoint_every: int = typer.Option(
+        DEFAULT_CHECKPOINT_EVERY, "--checkpoint-every", min=0, help="Timesteps between checkpoints (0: none)."
+    ),
+    torch_threads: int = typer.Option(1, "--torch-threads", min=1, help="torch threads (1 is fastest for these MLPs)."),
+    config: Optional[Path] = typer.Option(None, "--config", help="YAML config in the paper's layout."),
+    overwrite: bool = typer.Option(False, "--overwrite", help="Replace a finished or different training in --out."),
+) -> None:
+    """Train one model with Stable-Baselines3 (MlpPolicy; learning rate, batch size and gamma from
+    the config: 3e-4, 64, 0.98; SB3 defaults otherwise) and write model.zip, train_config.json,
+    training_log.csv and train_metadata.json to --out.
+
+    A killed run resumes from its last checkpoint when the same command is run again.
+    Evaluate the model with: solarchain-eval evaluate --policies ALGO --models OUT
+    """
+    cfg = load_config(config) if config else BenchmarkConfig()
+    key = check_algo(algo)
+    steps = timesteps or cfg.training.timesteps
+    out_dir = out or Path(cfg.output_dir) / f"{datetime.now().strftime('%Y%m%d-%H%M%S')}_train_{key}"
+    spec = TrainSpec(
+        algo=key,
+        seed=cfg.seed if seed is None else seed,
+        timesteps=steps,
+        no_physics_penalty=no_physics_penalty,
+        data_dir=data,
+        config=cfg,
+        checkpoint_every=checkpoint_every,
+        tensorboard_dir=tensorboard,
+        torch_threads=torch_threads,
+    )
+    err_console.print(f"training {key.upper()} for {steps:,} steps (seed {spec.seed}) into {out_dir}")
+    with progress_bar(f"training {key}", steps) as advance:
+        done = [0]
+
+        def report(now: int) -> None:
+            advance(now - done[0])
+            done[0] = now
+
+        outcome = train(spec, out_dir, on_progress=report, overwrite=overwrite, command=invoked_command())
+    if outcome.already_complete:
+        console.print(f"{out_dir} already holds this finished training (pass --overwrite to train again)")
+    elif outcome.resumed_from:
+        console.print(f"resumed from the checkpoint(s) at step {', '.join(map(str, outcome.resumed_from))}")
+    console.print(
+        f"{key.upper()}: {outcome.timesteps_done:,} steps in {outcome.wall_s:.1f} s "
+        f"({outcome.steps_per_s:,.0f} steps/s in this session); model: {outcome.model_path}"
+    )
+    console.print(f"training log: {out_dir / TRAIN_LOG_FILE}")

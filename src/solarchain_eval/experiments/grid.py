@@ -1,0 +1,233 @@
+"""The experiment grid of ``solarchain-eval paper``: settings, presets, episode seeds, units.
+
+A grid is a list of *units*, each one directory under ``ROOT/units`` (see :mod:`.layout`):
+
+- train units ``train/<algo>-<setting>-<seed>``: one SB3 model per algorithm × training
+  setting × seed (``main`` trains with the physics penalty, ``no_physics`` without);
+- eval units ``eval/<policy>-<setting>-<seed>``: one policy evaluated in one setting for one
+  run seed over the grid's episodes. An eval unit of a learned policy depends on the train unit
+  of the same algorithm, seed and the setting's ``model_setting``.
+
+Settings are a registry. ``main`` and ``no_physics`` are built in; another module adds one
+with :func:`register_setting` — e.g. the agentic layer registers ``llm`` (models from
+``main``) and ``llm_no_physics`` (models from ``no_physics``) with a ``runner``, the import
+path ``"module:function"`` of ``function(task: UnitTask) -> None`` that writes one eval unit's
+run directory (the standard files plus ``agentic_logs.jsonl``) into ``task.unit_dir``. The
+modules named in :data:`SETTING_PLUGINS` are imported (when installed) by
+:func:`load_setting_plugins` before a grid is planned.
+"""
+
+from __future__ import annotations
+
+import importlib
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from ..config import BenchmarkConfig
+from ..policies.baselines import BASELINES
+from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY
+from .evaluate import PAPER_EPISODES, PAPER_SEEDS
+from .layout import eval_unit_dir, train_unit_dir
+from .rollout import SETTING_MAIN, SETTING_NO_PHYSICS, paper_episode_seeds
+
+#: Modules imported by :func:`load_setting_plugins` if they exist (they call :func:`register_setting`).
+SETTING_PLUGINS = ("solarchain_eval.agentic.grid",)
+#: ``spawn_key`` of the SeedSequence behind ``--episode-seeds independent``.
+EPISODE_SEED_SPAWN_KEY = 0x45504953  # "EPIS"
+
+
+def independent_episode_seeds(run_seed: int, episodes: int) -> list[int]:
+    """Episode seeds that do not overlap across episodes or run seeds.
+
+    Episode ``e`` of run seed ``s`` is reset with word ``e`` of
+    ``numpy.random.SeedSequence(entropy=s, spawn_key=(0x45504953,)).generate_state(E, uint64)``
+    shifted right by one bit (so it fits a signed 64-bit column). The words are a hash of
+    ``(s, spawn key, e)``: the seeds of episodes 0..E-1 do not depend on E (more episodes extend
+    the list), and two of them coincide with probability about n² / 2⁶⁴ for n seeds in a grid,
+    which :meth:`GridSpec.validate` checks anyway.
+    """
+    words = np.random.SeedSequence(entropy=int(run_seed), spawn_key=(EPISODE_SEED_SPAWN_KEY,)).generate_state(
+        episodes, dtype=np.uint64
+    )
+    return [int(w >> np.uint64(1)) for w in words]
+
+
+EPISODE_SEED_PROTOCOLS: dict[str, Callable[[int, int], list[int]]] = {
+    "paper": paper_episode_seeds,
+    "independent": independent_episode_seeds,
+}
+
+
+@dataclass(frozen=True)
+class GridSetting:
+    """One evaluation setting of the grid.
+
+    Attributes
+    ----------
+    name : str
+        The ``setting`` column value (e.g. "main").
+    no_physics_penalty : bool
+        Whether the setting's reward drops λp (V + A).
+    policies : tuple of str
+        Policies evaluated in it (learned ones need their train units).
+    model_setting : str
+        The training setting whose models the learned policies use ("main" or "no_physics").
+    runner : str, optional
+        ``"module:function"`` evaluating one unit; None runs the standard evaluation.
+    """
+
+    name: str
+    no_physics_penalty: bool
+    policies: tuple[str, ...]
+    model_setting: str
+    runner: str | None = None
+
+
+_POLICIES = (*BASELINES, *ALGOS)
+SETTING_REGISTRY: dict[str, GridSetting] = {
+    SETTING_MAIN: GridSetting(SETTING_MAIN, False, _POLICIES, SETTING_MAIN),
+    SETTING_NO_PHYSICS: GridSetting(SETTING_NO_PHYSICS, True, _POLICIES, SETTING_NO_PHYSICS),
+}
+TRAIN_SETTINGS = (SETTING_MAIN, SETTING_NO_PHYSICS)
+
+
+def register_setting(setting: GridSetting) -> None:
+    """Add (or replace) an evaluation setting; its ``model_setting`` must be a training setting."""
+    if setting.model_setting not in TRAIN_SETTINGS:
+        raise ValueError(f"setting '{setting.name}': model_setting must be one of {', '.join(TRAIN_SETTINGS)}")
+    SETTING_REGISTRY[setting.name] = setting
+
+
+def load_setting_plugins() -> None:
+    for module in SETTING_PLUGINS:
+        try:
+            importlib.import_module(module)
+        except ModuleNotFoundError as error:
+            if error.name is None or not module.startswith(error.name):
+                raise  # the plugin exists but one of its own imports is missing
+
+
+def resolve_callable(path: str) -> Callable[..., Any]:
+    """Import ``"package.module:function"``."""
+    module, _, name = path.partition(":")
+    return getattr(importlib.import_module(module), name)
+
+
+@dataclass(frozen=True)
+class Preset:
+    timesteps: int
+    episodes: int
+    seeds: tuple[int, ...]
+    checkpoint_every: int
+
+
+PRESETS = {
+    "paper": Preset(300_000, PAPER_EPISODES, PAPER_SEEDS, DEFAULT_CHECKPOINT_EVERY),
+    # Tiny budgets that exercise every stage (PPO still collects one 2,048-step rollout).
+    "smoke": Preset(300, 2, PAPER_SEEDS[:1], DEFAULT_CHECKPOINT_EVERY),
+}
+
+
+@dataclass(frozen=True)
+class GridSpec:
+    """What ``paper`` runs: budgets, seeds, settings, policies and the dataset."""
+
+    timesteps: int
+    episodes: int
+    seeds: tuple[int, ...]
+    settings: tuple[str, ...] = (SETTING_MAIN, SETTING_NO_PHYSICS)
+    episode_seed_protocol: str = "paper"
+    data_dir: Path | None = None
+    config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY
+    preset: str | None = None
+    policies: tuple[str, ...] | None = None  # None: every policy of each setting
+
+    def setting_policies(self, setting: str) -> tuple[str, ...]:
+        listed = SETTING_REGISTRY[setting].policies
+        return listed if self.policies is None else tuple(p for p in listed if p in self.policies)
+
+    @classmethod
+    def from_preset(cls, name: str, **overrides: Any) -> "GridSpec":
+        if name not in PRESETS:
+            raise ValueError(f"unknown preset '{name}' (choose from {', '.join(PRESETS)})")
+        p = PRESETS[name]
+        values: dict[str, Any] = {
+            "timesteps": p.timesteps, "episodes": p.episodes, "seeds": p.seeds, "checkpoint_every": p.checkpoint_every,
+        }
+        values.update({k: v for k, v in overrides.items() if v is not None})
+        return cls(preset=name, **values)
+
+    def validate(self) -> None:
+        if self.timesteps < 1 or self.episodes < 1 or not self.seeds:
+            raise ValueError("timesteps and episodes must be at least 1, and at least one seed is needed")
+        if len(set(self.seeds)) != len(self.seeds):
+            raise ValueError(f"a seed is listed twice: {list(self.seeds)}")
+        unknown = [s for s in self.settings if s not in SETTING_REGISTRY]
+        if unknown:
+            raise ValueError(f"unknown setting(s) {', '.join(unknown)} (registered: {', '.join(SETTING_REGISTRY)})")
+        if self.policies is not None:
+            offered = {p for s in self.settings for p in SETTING_REGISTRY[s].policies}
+            unknown = [p for p in self.policies if p not in offered]
+            if unknown or not self.policies:
+                raise ValueError(f"unknown or no policies {', '.join(unknown)} (the settings offer {', '.join(sorted(offered))})")
+        if self.episode_seed_protocol not in EPISODE_SEED_PROTOCOLS:
+            raise ValueError(
+                f"unknown episode-seed protocol '{self.episode_seed_protocol}' (choose from {', '.join(EPISODE_SEED_PROTOCOLS)})"
+            )
+        if self.episode_seed_protocol == "independent":
+            seeds = [e for s in self.seeds for e in independent_episode_seeds(s, self.episodes)]
+            if len(set(seeds)) != len(seeds):
+                raise ValueError("the independent episode seeds of these run seeds collide; pick other run seeds")
+
+    def episode_seeds(self) -> Callable[[int, int], list[int]]:
+        return EPISODE_SEED_PROTOCOLS[self.episode_seed_protocol]
+
+
+@dataclass(frozen=True)
+class Unit:
+    """One unit of work; ``name`` is its path under ``ROOT/units`` (``train/...`` or ``eval/...``)."""
+
+    kind: str
+    policy: str
+    setting: str
+    seed: int
+    depends_on: tuple[str, ...] = ()
+
+    @property
+    def name(self) -> str:
+        return f"{self.kind}/{self.policy}-{self.setting}-{self.seed}"
+
+    def directory(self, root: Path) -> Path:
+        if self.kind == "train":
+            return train_unit_dir(root, self.policy, self.setting, self.seed)
+        return eval_unit_dir(root, self.policy, self.setting, self.seed)
+
+
+def train_unit(algo: str, setting: str, seed: int) -> Unit:
+    return Unit("train", algo, setting, seed)
+
+
+def plan_units(spec: GridSpec) -> list[Unit]:
+    """Every unit of the grid in a fixed order: train units (SAC first: the longest), then eval
+    units by setting, policy and seed. Train units are planned only where an eval unit needs them."""
+    evals: list[Unit] = []
+    needed: set[tuple[str, str, int]] = set()
+    for setting_name in spec.settings:
+        setting = SETTING_REGISTRY[setting_name]
+        for policy in spec.setting_policies(setting_name):
+            for seed in spec.seeds:
+                deps: tuple[str, ...] = ()
+                if policy in ALGOS:
+                    needed.add((policy, setting.model_setting, seed))
+                    deps = (train_unit(policy, setting.model_setting, seed).name,)
+                evals.append(Unit("eval", policy, setting_name, seed, deps))
+    order = {algo: i for i, algo in enumerate(("sac", "ppo", "dqn"))}
+    trains = [
+        train_unit(algo, setting, seed)
+        for algo, setting, seed in sorted(needed, key=lambda k: (order.get(k[0], 9), TRAIN_SETTINGS.index(k[1]), k[2]))
+    ]
+    return trains + evals

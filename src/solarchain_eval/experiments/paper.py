@@ -1,0 +1,283 @@
+"""The ``paper`` stage: run a grid into a paper root, resumably, then combine per setting.
+
+Re-running the same command skips every unit with a ``DONE`` marker and redoes the rest (train
+units resume from their last checkpoint). A root remembers what it was made with
+(``paper_metadata.json`` → ``identity``: budgets, episode-seed protocol, dataset hashes, config);
+running a different grid into it is an error, while adding seeds or settings extends it. An eval
+unit of a learned policy records the sha256 of the model it used and is redone if that model
+changed. One run at a time may use a root (a lock file). After a complete grid, the hooks in
+:data:`REPORT_HOOKS` (the report stage's ``write_paper_report(root)``) run if installed.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from contextlib import contextmanager
+from typing import Any, Callable, Iterator
+
+from ..data.default import default_dataset_dir
+from ..data.table import load_table
+from ..io import atomic_write_json
+from ..training import ALGOS, MODEL_FILE, differences
+from ..versions import git_commit, package_versions
+from .combine import combine_setting
+from .evaluate import dataset_provenance
+from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, load_setting_plugins, plan_units
+from .layout import PAPER_METADATA_FILE, UNITS_DIR
+from .scheduler import Executor, InlineExecutor, LocalPool, RunReport, run_units
+from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
+
+#: Called as ``hook(root)`` after a complete grid if the module exists (the report stage).
+REPORT_HOOKS = ("solarchain_eval.report.paper:write_paper_report",)
+
+
+class GridError(ValueError):
+    """The grid cannot run as asked (a different grid in ROOT, a busy ROOT, bad arguments)."""
+
+
+@dataclass
+class PaperOutcome:
+    root: Path
+    units: list[Unit]
+    already_done: list[str]
+    report: RunReport
+    combined: dict[str, dict[str, int]] = field(default_factory=dict)
+    complete: bool = False
+    wall_s: float = 0.0
+
+
+def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
+    """What every unit's result depends on; a root accepts only grids with the same identity."""
+    return {
+        "timesteps": int(spec.timesteps),
+        "episodes": int(spec.episodes),
+        "episode_seed_protocol": spec.episode_seed_protocol,
+        "dataset_sha256": dataset.get("files", {}),
+        "config": spec.config.model_dump(mode="json"),
+    }
+
+
+@contextmanager
+def _locked(root: Path) -> Iterator[None]:
+    handle = open(root / ".lock", "a+")
+    try:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        handle.close()
+        raise GridError(f"another 'paper' run is using {root} (it holds {root / '.lock'})") from None
+    try:
+        yield
+    finally:
+        fcntl.flock(handle, fcntl.LOCK_UN)
+        handle.close()
+
+
+def _read_metadata(root: Path) -> dict[str, Any] | None:
+    import json
+
+    path = root / PAPER_METADATA_FILE
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except ValueError as error:
+        raise GridError(f"{path} is not valid JSON ({error})") from None
+
+
+def _stale_eval(root: Path, unit: Unit) -> bool:
+    """A done eval unit whose model changed since it was evaluated."""
+    if unit.policy not in ALGOS or not unit.depends_on:
+        return False
+    import json
+
+    try:
+        recorded = json.loads((unit.directory(root) / UNIT_FILE).read_text(encoding="utf-8")).get("model_sha256")
+    except (OSError, ValueError):
+        return True
+    model = root / UNITS_DIR / unit.depends_on[0] / MODEL_FILE
+    return not model.is_file() or recorded != model_digest({unit.policy: model})
+
+
+def run_paper(
+    spec: GridSpec,
+    root: Path,
+    *,
+    workers: int = 1,
+    ray_address: str | None = None,
+    keep_going: bool = False,
+    on_start: Callable[[Unit], None] | None = None,
+    on_result: Callable[[UnitResult], None] | None = None,
+    on_plan: Callable[[list[Unit], list[str]], None] | None = None,
+    command: list[str] | None = None,
+    ray_transfer: str = "auto",
+) -> PaperOutcome:
+    """Run (or resume) the grid ``spec`` into ``root``; see the module docstring.
+
+    Raises
+    ------
+    GridError
+        Bad arguments, a different grid already in ``root``, or ``root`` busy.
+    """
+    started = time.perf_counter()
+    load_setting_plugins()
+    try:
+        spec.validate()
+    except ValueError as error:
+        raise GridError(str(error)) from None
+    if workers < 1:
+        raise GridError(f"--workers must be at least 1, got {workers}")
+    root = Path(root).resolve()
+    root.mkdir(parents=True, exist_ok=True)
+    cfg = spec.config
+    data_dir = Path(spec.data_dir or cfg.data_dir or default_dataset_dir()).resolve()
+    table = load_table(data_dir)  # validates the dataset before any work
+    dataset = dataset_provenance(table)
+    identity = grid_identity(spec, dataset)
+    with _locked(root):
+        previous = _read_metadata(root)
+        if previous is not None and previous.get("identity") != identity:
+            diffs = differences(previous.get("identity") or {}, identity)
+            raise GridError(f"{root} holds a different grid ({'; '.join(diffs[:5])}); use another --out")
+        units = plan_units(spec)
+        done = set()
+        for unit in units:
+            if read_done(unit.directory(root)) is None:
+                continue
+            if unit.kind == "eval" and _stale_eval(root, unit):
+                undo(unit.directory(root))
+            else:
+                done.add(unit.name)
+        already = [u.name for u in units if u.name in done]
+        meta = _metadata(spec, identity, dataset, data_dir, command, workers, ray_address)
+        atomic_write_json(root / PAPER_METADATA_FILE, {**meta, "status": "running", "complete": False})
+        if on_plan is not None:
+            on_plan(units, already)
+
+        def make_task(unit: Unit) -> UnitTask:
+            return _task(spec, root, data_dir, identity, unit, command)
+
+        executor: Executor
+        if ray_address:
+            from .ray_executor import RayExecutor
+
+            executor = RayExecutor(ray_address, root, data_dir, transfer=ray_transfer, workers=workers)
+        elif workers > 1:
+            executor = LocalPool(workers)
+        else:
+            executor = InlineExecutor()
+        report = run_units(units, done, make_task, executor, keep_going=keep_going, on_result=on_result, on_start=on_start)
+
+        outcome = PaperOutcome(root, units, already, report)
+        for setting in spec.settings:
+            evals = [u for u in units if u.kind == "eval" and u.setting == setting]
+            if all(u.name in done for u in evals):
+                outcome.combined[setting] = combine_setting(root, setting, [u.directory(root) for u in evals])
+        outcome.complete = all(u.name in done for u in units)
+        outcome.wall_s = time.perf_counter() - started
+        status = "complete" if outcome.complete else ("stopped" if report.stopped else "incomplete")
+        atomic_write_json(
+            root / PAPER_METADATA_FILE,
+            {**meta, "status": status, "complete": outcome.complete, "wall_s": round(outcome.wall_s, 3),
+             "units": _unit_table(root, units, report), "combined": outcome.combined,
+             "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed]},
+        )
+    if outcome.complete:
+        _run_report_hooks(root)
+    return outcome
+
+
+def _task(spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit, command: list[str] | None) -> UnitTask:
+    setting = SETTING_REGISTRY.get(unit.setting)
+    no_physics = setting.no_physics_penalty if setting is not None else unit.setting == "no_physics"
+    models: dict[str, Path] = {}
+    unit_identity: dict[str, Any] = {"grid": identity, "setting": unit.setting, "policy": unit.policy, "seed": unit.seed}
+    if unit.kind == "eval" and unit.depends_on:
+        models = {unit.policy: root / UNITS_DIR / unit.depends_on[0] / MODEL_FILE}
+        unit_identity["model_sha256"] = model_digest(models)
+    return UnitTask(
+        unit=unit,
+        unit_dir=unit.directory(root),
+        data_dir=data_dir,
+        config=spec.config,
+        timesteps=spec.timesteps,
+        episodes=spec.episodes,
+        episode_seed_protocol=spec.episode_seed_protocol,
+        checkpoint_every=spec.checkpoint_every,
+        no_physics_penalty=no_physics,
+        model_paths=models,
+        runner=setting.runner if (setting is not None and unit.kind == "eval") else None,
+        identity=unit_identity,
+        command=tuple(command or sys.argv),
+    )
+
+
+def _metadata(spec: GridSpec, identity: dict, dataset: dict, data_dir: Path, command: list[str] | None,
+              workers: int, ray_address: str | None) -> dict[str, Any]:
+    return {
+        "identity": identity,
+        "grid": {
+            "preset": spec.preset,
+            "timesteps": spec.timesteps,
+            "episodes": spec.episodes,
+            "seeds": list(spec.seeds),
+            "settings": {s: list(spec.setting_policies(s)) for s in spec.settings},
+            "algorithms": list(ALGOS),
+            "episode_seed_protocol": spec.episode_seed_protocol,
+            "episode_seed_derivation": (
+                "episode e of run seed s is reset with seed s + e"
+                if spec.episode_seed_protocol == "paper"
+                else (independent_episode_seeds.__doc__ or "").split("\n\n")[1].strip()
+            ),
+            "checkpoint_every": spec.checkpoint_every,
+        },
+        "data_dir": str(data_dir),
+        "dataset": dataset,
+        "execution": {"workers": workers, "ray_address": ray_address, "pid": os.getpid()},
+        "command": list(command or sys.argv),
+        "updated_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "git_commit": git_commit(),
+        "package_versions": package_versions(),
+    }
+
+
+def _unit_table(root: Path, units: list[Unit], report: RunReport) -> dict[str, dict[str, Any]]:
+    failed = {r.unit: r for r in report.failed}
+    table: dict[str, dict[str, Any]] = {}
+    for unit in units:
+        marker = read_done(unit.directory(root))
+        if marker is not None:
+            table[unit.name] = {"status": "done", "wall_s": marker.get("wall_s")}
+        elif unit.name in failed:
+            table[unit.name] = {"status": "failed", "error": failed[unit.name].error, "log": failed[unit.name].log}
+        elif unit.name in report.blocked:
+            table[unit.name] = {"status": "blocked"}
+        elif unit.name in report.interrupted:
+            table[unit.name] = {"status": "interrupted"}
+        else:
+            table[unit.name] = {"status": "pending"}
+    return table
+
+
+def _run_report_hooks(root: Path) -> None:
+    import importlib
+
+    for hook in REPORT_HOOKS:
+        module, _, name = hook.partition(":")
+        try:
+            loaded = importlib.import_module(module)
+        except ModuleNotFoundError as error:
+            if error.name is not None and module.startswith(error.name):
+                continue  # the report stage is not installed
+            raise
+        function = getattr(loaded, name, None)
+        if function is not None:
+            function(root)
+
+
+__all__ = ["GridError", "PaperOutcome", "REPORT_HOOKS", "grid_identity", "run_paper"]

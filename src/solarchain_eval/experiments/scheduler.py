@@ -1,0 +1,228 @@
+"""Dispatching grid units to executors in dependency order.
+
+Executors: :class:`InlineExecutor` (this process, ``--workers 1``), :class:`LocalPool` (``K``
+spawned worker processes) and :class:`~.ray_executor.RayExecutor` (Ray tasks). Each runs
+:func:`~.units.execute_unit`; the driver loop :func:`run_units` submits a unit once every unit it
+depends on is done, and on a failure either stops (in-flight units are interrupted and redone
+by the next run) or, with ``keep_going``, records it and skips the units that depend on it.
+
+Local workers are started with the ``spawn`` method, use one torch thread, ignore Ctrl-C (the
+driver stops them) and, on Linux, are killed by the kernel when the driver dies
+(``PR_SET_PDEATHSIG``), so a killed run never leaves workers writing into the grid.
+"""
+
+from __future__ import annotations
+
+import multiprocessing as mp
+import os
+import signal
+import sys
+from dataclasses import dataclass, field
+from multiprocessing.connection import Connection, wait
+from typing import Callable, Protocol, Sequence
+
+from .grid import Unit
+from .units import UnitResult, UnitTask, execute_unit
+
+
+class Executor(Protocol):
+    capacity: int
+
+    def submit(self, task: UnitTask) -> None: ...
+
+    def wait(self) -> list[UnitResult]: ...
+
+    def abort(self) -> list[str]: ...
+
+    def close(self) -> None: ...
+
+
+class InlineExecutor:
+    """Runs units one at a time in this process."""
+
+    capacity = 1
+
+    def __init__(self) -> None:
+        self._queue: list[UnitTask] = []
+
+    def submit(self, task: UnitTask) -> None:
+        self._queue.append(task)
+
+    def wait(self) -> list[UnitResult]:
+        return [execute_unit(self._queue.pop(0))]
+
+    def abort(self) -> list[str]:
+        names = [t.unit.name for t in self._queue]
+        self._queue.clear()
+        return names
+
+    def close(self) -> None:
+        return None
+
+
+def _die_with_parent(parent_pid: int) -> None:
+    if sys.platform.startswith("linux"):
+        import ctypes
+
+        libc = ctypes.CDLL(None, use_errno=True)
+        libc.prctl(1, signal.SIGKILL)  # PR_SET_PDEATHSIG: the kernel kills us when the parent dies
+    if os.getppid() != parent_pid:  # the parent died before prctl took effect
+        os._exit(1)
+
+
+def _worker_main(conn: Connection, parent_pid: int) -> None:
+    _die_with_parent(parent_pid)
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ[name] = "1"
+    while True:
+        try:
+            task = conn.recv()
+        except EOFError:
+            return
+        if task is None:
+            return
+        conn.send(execute_unit(task))
+
+
+@dataclass
+class _Worker:
+    process: mp.process.BaseProcess
+    conn: Connection
+    task: UnitTask | None = None
+
+
+@dataclass
+class LocalPool:
+    """``workers`` long-lived worker processes, one unit at a time each."""
+
+    workers: int
+    context: str = "spawn"
+    _pool: list[_Worker] = field(default_factory=list)
+
+    def __post_init__(self) -> None:
+        self.capacity = self.workers
+        self._ctx = mp.get_context(self.context)
+        self._pool = [self._start() for _ in range(self.workers)]
+
+    def _start(self) -> _Worker:
+        parent, child = self._ctx.Pipe()
+        process = self._ctx.Process(target=_worker_main, args=(child, os.getpid()), daemon=True, name="solarchain-unit")
+        process.start()
+        child.close()
+        return _Worker(process, parent)
+
+    def submit(self, task: UnitTask) -> None:
+        worker = next(w for w in self._pool if w.task is None)
+        worker.conn.send(task)
+        worker.task = task
+
+    def wait(self) -> list[UnitResult]:
+        busy = [w for w in self._pool if w.task is not None]
+        ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy])
+        results = []
+        for worker in busy:
+            task = worker.task
+            assert task is not None
+            if worker.conn in ready or worker.process.sentinel in ready:
+                if worker.conn.poll():
+                    try:
+                        results.append(worker.conn.recv())
+                        worker.task = None
+                        continue
+                    except EOFError:
+                        pass
+                worker.process.join(timeout=5)
+                code = worker.process.exitcode
+                results.append(UnitResult(task.unit.name, False, 0.0, f"worker process died (exit code {code})", None))
+                self._pool[self._pool.index(worker)] = self._start()
+        return results
+
+    def abort(self) -> list[str]:
+        names = [w.task.unit.name for w in self._pool if w.task is not None]
+        self.close()
+        return names
+
+    def close(self) -> None:
+        for worker in self._pool:
+            if worker.process.is_alive():
+                if worker.task is None:
+                    try:
+                        worker.conn.send(None)
+                    except (BrokenPipeError, OSError):
+                        pass
+                    worker.process.join(timeout=2)
+                if worker.process.is_alive():
+                    worker.process.kill()
+            worker.process.join(timeout=5)
+            worker.conn.close()
+        self._pool = []
+
+
+@dataclass
+class RunReport:
+    """What :func:`run_units` did."""
+
+    finished: list[UnitResult] = field(default_factory=list)
+    failed: list[UnitResult] = field(default_factory=list)
+    blocked: list[str] = field(default_factory=list)
+    interrupted: list[str] = field(default_factory=list)
+    stopped: bool = False
+
+
+def run_units(
+    units: Sequence[Unit],
+    done: set[str],
+    make_task: Callable[[Unit], UnitTask],
+    executor: Executor,
+    *,
+    keep_going: bool = False,
+    on_result: Callable[[UnitResult], None] | None = None,
+    on_start: Callable[[Unit], None] | None = None,
+) -> RunReport:
+    """Run every unit not in ``done`` once its dependencies are done.
+
+    ``done`` is updated in place. Without ``keep_going`` the first failure stops the run and the
+    units in flight are interrupted (listed in ``RunReport.interrupted``).
+    """
+    report = RunReport()
+    pending = [u for u in units if u.name not in done]
+    bad: set[str] = set()
+    in_flight: dict[str, Unit] = {}
+    try:
+        while pending or in_flight:
+            for unit in list(pending):
+                if any(dep in bad for dep in unit.depends_on):
+                    pending.remove(unit)
+                    bad.add(unit.name)
+                    report.blocked.append(unit.name)
+                elif len(in_flight) < executor.capacity and all(dep in done for dep in unit.depends_on):
+                    pending.remove(unit)
+                    task = make_task(unit)
+                    if on_start is not None:
+                        on_start(unit)
+                    executor.submit(task)
+                    in_flight[unit.name] = unit
+            if not in_flight:
+                report.blocked.extend(u.name for u in pending)  # unreachable dependencies
+                break
+            for result in executor.wait():
+                in_flight.pop(result.unit, None)
+                if result.ok:
+                    done.add(result.unit)
+                    report.finished.append(result)
+                else:
+                    bad.add(result.unit)
+                    report.failed.append(result)
+                if on_result is not None:
+                    on_result(result)
+                if not result.ok and not keep_going:
+                    report.stopped = True
+                    report.interrupted = executor.abort()
+                    return report
+    except BaseException:
+        report.interrupted = executor.abort()
+        raise
+    finally:
+        executor.close()
+    return report

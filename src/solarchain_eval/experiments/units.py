@@ -1,0 +1,207 @@
+"""Running one grid unit (in whatever process the executor chose) and its on-disk markers.
+
+A unit directory is written in this order: ``unit.json`` (what the unit is), the outputs
+(each file atomically), then the done-marker ``DONE`` (a small JSON with the unit's wall time).
+``unit.log`` is an append-only, human-readable log (start, progress, result, traceback) that no
+later stage reads. Redoing a unit first removes the outputs of an earlier, unfinished attempt;
+a train unit keeps its files, so training resumes from its checkpoint.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import shutil
+import time
+import traceback
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any
+
+from ..config import BenchmarkConfig
+from ..io import atomic_write_json, sha256_file
+from ..training import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
+from .grid import EPISODE_SEED_PROTOCOLS, Unit, resolve_callable
+from .layout import DONE_MARKER
+
+UNIT_FILE = "unit.json"
+UNIT_LOG = "unit.log"
+
+
+@dataclass(frozen=True)
+class UnitTask:
+    """Everything a worker needs to run one unit (picklable; paths are the worker's)."""
+
+    unit: Unit
+    unit_dir: Path
+    data_dir: Path
+    config: BenchmarkConfig
+    timesteps: int
+    episodes: int
+    episode_seed_protocol: str
+    checkpoint_every: int
+    no_physics_penalty: bool
+    model_paths: dict[str, Path] = field(default_factory=dict)
+    runner: str | None = None
+    identity: dict[str, Any] = field(default_factory=dict)
+    command: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class UnitResult:
+    unit: str
+    ok: bool
+    wall_s: float
+    error: str | None = None
+    log: str | None = None
+
+
+def read_done(unit_dir: Path) -> dict[str, Any] | None:
+    """The done-marker's content, or None if the unit is not done."""
+    path = Path(unit_dir) / DONE_MARKER
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except ValueError:
+        return {}
+
+
+def write_done(unit_dir: Path, unit: str, wall_s: float) -> Path:
+    finished = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    return atomic_write_json(Path(unit_dir) / DONE_MARKER, {"unit": unit, "wall_s": round(wall_s, 3), "finished_at": finished})
+
+
+def undo(unit_dir: Path) -> None:
+    """Mark a unit as not done (its outputs are replaced when it is redone)."""
+    (Path(unit_dir) / DONE_MARKER).unlink(missing_ok=True)
+
+
+def clear_for_redo(unit: Unit, unit_dir: Path) -> None:
+    """Remove the outputs of an unfinished earlier attempt.
+
+    A train unit keeps everything: :func:`~solarchain_eval.training.train` resumes from the
+    checkpoint (or finds the training finished) and replaces its outputs itself.
+    """
+    if not unit_dir.is_dir() or unit.kind == "train":
+        return
+    for path in unit_dir.iterdir():
+        if path.name == UNIT_LOG:
+            continue
+        if path.is_dir() and not path.is_symlink():
+            shutil.rmtree(path)
+        else:
+            path.unlink(missing_ok=True)
+
+
+def model_digest(paths: dict[str, Path]) -> dict[str, str]:
+    return {name: sha256_file(path) for name, path in sorted(paths.items())}
+
+
+class _UnitLog:
+    def __init__(self, path: Path) -> None:
+        self.path = path
+        self._handle = open(path, "a", encoding="utf-8")
+
+    def write(self, message: str) -> None:
+        stamp = datetime.now().isoformat(timespec="seconds")
+        self._handle.write(f"{stamp} {message}\n")
+        self._handle.flush()
+
+    def close(self) -> None:
+        self._handle.close()
+
+
+def execute_unit(task: UnitTask, *, mark_done: bool = True) -> UnitResult:
+    """Run one unit into ``task.unit_dir``; never raises for a failing unit.
+
+    Parameters
+    ----------
+    task : UnitTask
+    mark_done : bool
+        Write ``DONE`` at the end (False when the caller moves the files elsewhere first).
+
+    Returns
+    -------
+    UnitResult
+        ``ok`` False with the error's last line; the traceback is in ``unit.log``.
+    """
+    unit, unit_dir = task.unit, Path(task.unit_dir)
+    unit_dir.mkdir(parents=True, exist_ok=True)
+    clear_for_redo(unit, unit_dir)
+    log = _UnitLog(unit_dir / UNIT_LOG)
+    log.write(f"start {unit.name} (pid {os.getpid()})")
+    started = time.perf_counter()
+    try:
+        set_torch_threads(1)
+        atomic_write_json(unit_dir / UNIT_FILE, {"unit": unit.name, **task.identity})
+        if unit.kind == "train":
+            _train_unit(task, log)
+        elif task.runner is not None:
+            resolve_callable(task.runner)(task)
+        else:
+            _evaluate_unit(task)
+        wall_s = time.perf_counter() - started
+        if mark_done:
+            write_done(unit_dir, unit.name, wall_s)
+        log.write(f"done in {wall_s:.1f} s")
+        return UnitResult(unit.name, True, wall_s, log=str(unit_dir / UNIT_LOG))
+    except Exception as error:  # a failing unit is reported, not raised: the grid decides
+        log.write(f"FAILED: {type(error).__name__}: {error}\n{traceback.format_exc()}")
+        message = f"{type(error).__name__}: {error}".strip().splitlines()[-1]
+        return UnitResult(unit.name, False, time.perf_counter() - started, message, str(unit_dir / UNIT_LOG))
+    finally:
+        log.close()
+
+
+def _train_unit(task: UnitTask, log: _UnitLog) -> None:
+    unit = task.unit
+    spec = TrainSpec(
+        algo=unit.policy,
+        seed=unit.seed,
+        timesteps=task.timesteps,
+        no_physics_penalty=task.no_physics_penalty,
+        data_dir=task.data_dir,
+        config=task.config,
+        checkpoint_every=task.checkpoint_every,
+    )
+    tenth = max(task.timesteps // 10, 1)
+    reported = [0]
+
+    def progress(steps: int) -> None:
+        if steps - reported[0] >= tenth:
+            log.write(f"trained {steps:,} / {task.timesteps:,} steps")
+            reported[0] = steps
+
+    outcome = train(spec, task.unit_dir, on_progress=progress, command=list(task.command))
+    if outcome.resumed_from:
+        log.write(f"resumed from checkpoint(s) at step {outcome.resumed_from}")
+    log.write(f"{outcome.timesteps_done:,} steps at {outcome.steps_per_s:,.0f} steps/s")
+
+
+def _evaluate_unit(task: UnitTask) -> None:
+    from .evaluate import EvaluationSpec, run_evaluation
+
+    unit = task.unit
+    spec = EvaluationSpec(
+        policies=[unit.policy],
+        run_seeds=[unit.seed],
+        episodes=task.episodes,
+        data_dir=task.data_dir,
+        no_physics_penalty=task.no_physics_penalty,
+        config=task.config,
+        models=dict(task.model_paths),
+        episode_seeds=EPISODE_SEED_PROTOCOLS[task.episode_seed_protocol],
+    )
+    run_evaluation(spec, task.unit_dir, command=list(task.command))
+
+
+def collect_files(unit_dir: Path) -> dict[str, bytes]:
+    """The unit's output files (relative path -> bytes), for shipping them to another machine."""
+    files: dict[str, bytes] = {}
+    for path in sorted(Path(unit_dir).rglob("*")):
+        rel = path.relative_to(unit_dir)
+        if path.is_file() and rel.parts[0] != CHECKPOINT_DIR and not path.name.endswith(".partial"):
+            files[rel.as_posix()] = path.read_bytes()
+    return files

@@ -1,0 +1,349 @@
+"""Train PPO, SAC or DQN (Stable-Baselines3) on SolarChain-Eval, resumably.
+
+The paper's settings: ``MlpPolicy``, learning rate 3e-4, batch size 64, gamma 0.98 (the config's
+``training`` section) and SB3's defaults for everything else; PPO and SAC act on the continuous
+``Box(0, 1, (3,))`` env, DQN on the 125-point discrete grid with
+``learning_starts = min(100, max(1, timesteps // 10))``. Models run on the CPU with one torch
+thread by default (small MLPs gain nothing from more threads or a GPU, and parallel runs must
+not oversubscribe the cores).
+
+A training directory holds::
+
+    model.zip             the trained model (plain ``PPO.load`` / ``SAC.load`` / ``DQN.load``)
+    train_config.json     the resolved configuration and hyperparameters (written first)
+    training_log.csv      one row per training episode (return, volume, violation, art. liquidity)
+    train_metadata.json   wall time, steps/s, versions, resumes ("complete": true; written last)
+    checkpoints/          the latest checkpoint while training runs (removed when it finishes)
+
+Stable-Baselines3 and torch are imported only when a model is trained or loaded.
+"""
+
+from __future__ import annotations
+
+import os
+import sys
+import time
+from dataclasses import dataclass, field
+from datetime import datetime, timezone
+from pathlib import Path
+from typing import Any, Callable
+
+import numpy as np
+
+from .config import BenchmarkConfig
+from .io import atomic_write_csv, atomic_write_json, atomic_write_with
+from .versions import git_commit, package_versions
+
+ALGOS = ("ppo", "sac", "dqn")
+ACTION_MODES = {"ppo": "continuous", "sac": "continuous", "dqn": "discrete"}
+MODEL_FILE = "model.zip"
+TRAIN_CONFIG_FILE = "train_config.json"
+TRAIN_LOG_FILE = "training_log.csv"
+TRAIN_METADATA_FILE = "train_metadata.json"
+CHECKPOINT_DIR = "checkpoints"
+DEFAULT_CHECKPOINT_EVERY = 25_000
+
+
+class TrainingError(ValueError):
+    """A training request that cannot be carried out as given (reported without a traceback)."""
+
+
+def check_algo(algo: str) -> str:
+    key = algo.strip().lower()
+    if key not in ALGOS:
+        raise TrainingError(f"unknown algorithm '{algo}' (choose from {', '.join(ALGOS)})")
+    return key
+
+
+def dqn_learning_starts(timesteps: int) -> int:
+    """The original release's DQN warm-up: ``min(100, max(1, timesteps // 10))`` steps."""
+    return min(100, max(1, timesteps // 10))
+
+
+def hyperparameters(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str, Any]:
+    """Keyword arguments given to the SB3 constructor on top of its defaults."""
+    t = config.training
+    params: dict[str, Any] = {"learning_rate": t.learning_rate, "batch_size": t.batch_size, "gamma": t.gamma}
+    if check_algo(algo) == "dqn":
+        params["learning_starts"] = dqn_learning_starts(timesteps)
+    return params
+
+
+def algorithm_class(algo: str) -> type:
+    from stable_baselines3 import DQN, PPO, SAC
+
+    return {"ppo": PPO, "sac": SAC, "dqn": DQN}[check_algo(algo)]
+
+
+def set_torch_threads(threads: int) -> None:
+    """Limit torch (and the BLAS libraries it loads later) to ``threads`` threads."""
+    for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
+        os.environ.setdefault(name, str(threads))
+    import torch
+
+    torch.set_num_threads(threads)
+
+
+@dataclass(frozen=True)
+class TrainSpec:
+    """One training run.
+
+    Parameters
+    ----------
+    algo : {"ppo", "sac", "dqn"}
+    seed : int
+        Seeds SB3 (torch, numpy, the action space) and the training env's first reset.
+    timesteps : int
+        Environment steps to train for (PPO rounds up to whole 2,048-step rollouts).
+    no_physics_penalty : bool
+        Train on the ablation reward (no λp (V + A) term).
+    data_dir : path, optional
+        Dataset directory (default: the config's, else the embedded default dataset).
+    config : BenchmarkConfig
+    checkpoint_every : int
+        Timesteps between checkpoints; 0 disables them.
+    tensorboard_dir : path, optional
+        Write SB3's scalars plus per-episode return, physics violation and artificial liquidity.
+    torch_threads : int
+    device : str
+        Torch device for the networks ("cpu" unless you know a GPU helps these small MLPs).
+    """
+
+    algo: str
+    seed: int
+    timesteps: int
+    no_physics_penalty: bool = False
+    data_dir: Path | None = None
+    config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY
+    tensorboard_dir: Path | None = None
+    torch_threads: int = 1
+    device: str = "cpu"
+
+    def resolved_config(self) -> BenchmarkConfig:
+        cfg = self.config.with_updates(
+            action_mode=ACTION_MODES[check_algo(self.algo)], no_physics_penalty=self.no_physics_penalty
+        )
+        payload = cfg.model_dump()
+        payload["training"]["timesteps"] = int(self.timesteps)
+        return BenchmarkConfig.model_validate(payload)
+
+
+@dataclass
+class TrainOutcome:
+    out_dir: Path
+    model_path: Path
+    timesteps_done: int
+    wall_s: float
+    steps_per_s: float
+    resumed_from: list[int]
+    already_complete: bool = False
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    import json
+
+    if not path.is_file():
+        return None
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except ValueError as error:
+        raise TrainingError(f"{path} is not valid JSON ({error}); remove the directory to retrain") from None
+
+
+def _identity(spec: TrainSpec, dataset: dict[str, Any]) -> dict[str, Any]:
+    """Everything that decides the trained model; a resume must match it exactly."""
+    cfg = spec.resolved_config()
+    return {
+        "algo": check_algo(spec.algo),
+        "seed": int(spec.seed),
+        "timesteps": int(spec.timesteps),
+        "no_physics_penalty": bool(spec.no_physics_penalty),
+        "action_mode": cfg.action_mode,
+        "policy": "MlpPolicy",
+        "hyperparameters": hyperparameters(spec.algo, cfg, spec.timesteps),
+        "device": spec.device,
+        "dataset_sha256": dataset.get("files", {}),
+        "config": cfg.model_dump(mode="json"),
+    }
+
+
+def differences(old: dict[str, Any], new: dict[str, Any], prefix: str = "") -> list[str]:
+    """Human-readable ``key: old -> new`` lines for nested dicts (used in resume errors)."""
+    diffs = []
+    for key in sorted(set(old) | set(new)):
+        a, b = old.get(key), new.get(key)
+        if isinstance(a, dict) and isinstance(b, dict):
+            diffs.extend(differences(a, b, f"{prefix}{key}."))
+        elif a != b:
+            diffs.append(f"{prefix}{key}: {a!r} -> {b!r}")
+    return diffs
+
+
+def _make_vec_env(cfg: BenchmarkConfig, table: Any, n_envs: int) -> Any:
+    from stable_baselines3.common.monitor import Monitor
+    from stable_baselines3.common.vec_env import DummyVecEnv
+
+    from .env import SolarChainEnv
+
+    return DummyVecEnv([lambda: Monitor(SolarChainEnv(config=cfg, table=table))] * n_envs)
+
+
+def _resume_seed(seed: int, steps: int) -> int:
+    # A resumed run must not replay the random streams of its first session: derive fresh ones.
+    return int(np.random.SeedSequence([seed, steps]).generate_state(1)[0])
+
+
+def train(
+    spec: TrainSpec,
+    out_dir: Path,
+    *,
+    on_progress: Callable[[int], None] | None = None,
+    overwrite: bool = False,
+    command: list[str] | None = None,
+) -> TrainOutcome:
+    """Train one model into ``out_dir``, resuming from its last checkpoint if there is one.
+
+    Parameters
+    ----------
+    spec : TrainSpec
+    out_dir : path
+        The training directory (see the module docstring).
+    on_progress : callable, optional
+        Called with the timesteps done so far.
+    overwrite : bool
+        Discard a finished or differently configured training in ``out_dir`` instead of failing.
+    command : list of str, optional
+        The command line recorded in the metadata.
+
+    Returns
+    -------
+    TrainOutcome
+        ``already_complete`` is true when ``out_dir`` held this exact finished training.
+
+    Raises
+    ------
+    TrainingError
+        ``out_dir`` holds a different training (the message lists what differs), or
+        TensorBoard logging was asked for without the tensorboard package.
+    """
+    from .data.default import default_dataset_dir
+    from .data.table import load_table
+    from .experiments.evaluate import dataset_provenance
+
+    algo = check_algo(spec.algo)
+    if spec.timesteps < 1:
+        raise TrainingError(f"timesteps must be at least 1, got {spec.timesteps}")
+    cfg = spec.resolved_config()
+    data_dir = spec.data_dir or (Path(cfg.data_dir) if cfg.data_dir else default_dataset_dir())
+    table = load_table(data_dir)
+    dataset = dataset_provenance(table)
+    identity = _identity(spec, dataset)
+    out_dir = Path(out_dir)
+    config_path, metadata_path = out_dir / TRAIN_CONFIG_FILE, out_dir / TRAIN_METADATA_FILE
+
+    previous = _read_json(config_path)
+    if previous is not None and previous.get("identity") != identity:
+        if not overwrite:
+            diffs = differences(previous.get("identity") or {}, identity)
+            raise TrainingError(
+                f"{out_dir} holds a different training ({'; '.join(diffs[:6])}); "
+                "choose another output directory or pass --overwrite"
+            )
+        _clear_training_dir(out_dir)
+        previous = None
+    metadata = _read_json(metadata_path)
+    if previous is not None and metadata and metadata.get("complete") and (out_dir / MODEL_FILE).is_file():
+        if not overwrite:
+            _remove_tree(out_dir / CHECKPOINT_DIR)  # left over if a kill came right after the metadata
+            return TrainOutcome(
+                out_dir, out_dir / MODEL_FILE, int(metadata["timesteps_done"]), float(metadata["wall_s"]),
+                float(metadata["steps_per_s"]), list(metadata.get("resumed_from", [])), already_complete=True,
+            )
+        _clear_training_dir(out_dir)
+    if spec.tensorboard_dir is not None:
+        import importlib.util
+
+        if importlib.util.find_spec("tensorboard") is None:
+            raise TrainingError("--tensorboard needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'")
+
+    set_torch_threads(spec.torch_threads)
+    from .training_monitor import CheckpointStore, EpisodeLog, TrainingMonitor, load_replay_buffer
+
+    started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    atomic_write_json(
+        config_path,
+        {"identity": identity, "data_dir": str(Path(data_dir).resolve()), "dataset": dataset, "written_at": started_at},
+    )
+    cls = algorithm_class(algo)
+    env = _make_vec_env(cfg, table, cfg.training.n_envs)
+    store = CheckpointStore(out_dir / CHECKPOINT_DIR)
+    checkpoint = store.latest()
+    tb_dir = str(spec.tensorboard_dir) if spec.tensorboard_dir is not None else None
+    resumed_from = list((metadata or {}).get("resumed_from", []))
+    if checkpoint is None:
+        model = cls("MlpPolicy", env, seed=spec.seed, verbose=0, tensorboard_log=tb_dir, device=spec.device,
+                    **identity["hyperparameters"])
+        log, wall_before = EpisodeLog(env.num_envs), 0.0
+    else:
+        model = cls.load(checkpoint.model, env=env, device=spec.device, tensorboard_log=tb_dir)
+        if checkpoint.replay_buffer is not None:
+            load_replay_buffer(model.replay_buffer, checkpoint.replay_buffer)
+        model.set_random_seed(_resume_seed(spec.seed, checkpoint.steps))
+        wall_before = checkpoint.wall_s
+        log = EpisodeLog(env.num_envs, EpisodeLog.read(checkpoint.log), wall_offset_s=wall_before)
+        resumed_from.append(checkpoint.steps)
+        # Record the resume now: a run killed again must still say it was resumed.
+        atomic_write_json(metadata_path, {"complete": False, "resumed_from": resumed_from})
+    steps_before = int(model.num_timesteps)
+    monitor = TrainingMonitor(
+        log, on_progress=on_progress, checkpoints=store, checkpoint_every=spec.checkpoint_every, wall_offset_s=wall_before
+    )
+    learn_started = time.perf_counter()
+    model.learn(
+        total_timesteps=max(spec.timesteps - steps_before, 0),
+        callback=monitor,
+        reset_num_timesteps=checkpoint is None,
+        tb_log_name=f"{algo}-{'no_physics' if spec.no_physics_penalty else 'main'}-{spec.seed}",
+    )
+    learn_s = time.perf_counter() - learn_started
+    env.close()
+
+    model_path = atomic_write_with(out_dir / MODEL_FILE, lambda tmp: model.save(tmp))
+    atomic_write_csv(out_dir / TRAIN_LOG_FILE, log.frame())
+    steps_done = int(model.num_timesteps)
+    wall_s = wall_before + learn_s
+    steps_per_s = (steps_done - steps_before) / learn_s if learn_s > 0 else 0.0
+    atomic_write_json(
+        metadata_path,
+        {
+            "complete": True,
+            "algo": algo,
+            "seed": int(spec.seed),
+            "timesteps_requested": int(spec.timesteps),
+            "timesteps_done": steps_done,
+            "episodes": len(log.rows),
+            "wall_s": round(wall_s, 3),
+            "steps_per_s": round(steps_per_s, 2),
+            "torch_threads": spec.torch_threads,
+            "resumed_from": resumed_from,
+            "started_at": started_at,
+            "command": list(command if command is not None else sys.argv),
+            "git_commit": git_commit(),
+            "package_versions": package_versions(),
+        },
+    )
+    _remove_tree(out_dir / CHECKPOINT_DIR)
+    return TrainOutcome(out_dir, model_path, steps_done, wall_s, steps_per_s, resumed_from)
+
+
+def _remove_tree(path: Path) -> None:
+    import shutil
+
+    shutil.rmtree(path, ignore_errors=True)
+
+
+def _clear_training_dir(out_dir: Path) -> None:
+    for name in (MODEL_FILE, TRAIN_LOG_FILE, TRAIN_METADATA_FILE, TRAIN_CONFIG_FILE):
+        (out_dir / name).unlink(missing_ok=True)
+    _remove_tree(out_dir / CHECKPOINT_DIR)
