@@ -211,3 +211,10 @@ def test_hourly_table_and_observation_against_the_csvs(published_dir):
         table.static_slippage[hour], 0.245, 0.735,
     ]
     assert obs == pytest.approx(np.array(expected, dtype=F32), rel=1e-6)
+
+
+@pytest.mark.parametrize("cities", [1, 3, 5, 7, 8, 9, 12])
+def test_batch_city_variance_equals_numpy_var_per_sub_env(cities):
+    values = np.random.default_rng(cities).normal(size=(cities, 257)) * 10.0 ** np.random.default_rng(1).uniform(-5, 5, (cities, 257))
+    expected = np.array([np.var(values[:, i]) for i in range(values.shape[1])])
+    assert np.array_equal(BATCH.city_variance(values), expected)

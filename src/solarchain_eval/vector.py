@@ -129,17 +129,19 @@ class SolarChainVectorEnv(VectorEnv):
             self._pending[i] = 0
         return stream
 
-    def _reset_many(self, mask: np.ndarray, seeds: Sequence[int | None], start_hours: Sequence[int | None]) -> None:
+    def _reset_many(
+        self, mask: np.ndarray, seeds: Sequence[int | None] | None = None, start_hours: Sequence[int | None] | None = None
+    ) -> None:
+        """Reset the sub-envs in ``mask``; ``seeds``/``start_hours`` None means none for any."""
         idx = np.flatnonzero(mask)
         if idx.size == 0:
             return
+        everyone = idx.size == self.num_envs
         max_start = max(self._n_hours - self.episode_steps, 0)
-        can_draw = self._n_hours > self.episode_steps
-        n_starts = len(self._starts) if can_draw else 0
+        n_starts = len(self._starts) if self._n_hours > self.episode_steps else 0
         starts = self._start.copy()  # fresh arrays: the previous step's info may reference the old ones
-        rows = self._noise_rows
-        plain = not self._open[idx].any() and all(seeds[i] is None and start_hours[i] is None for i in idx)
-        if plain:
+        rows, indices = self._noise_rows, idx.tolist()
+        if seeds is None and start_hours is None and not self._open[idx].any():
             # The autoreset path: every sub-env draws a start and a full episode of shocks.
             # Draws go straight to the generators; the streams' logs are updated in bulk.
             for i in idx[self._since_checkpoint[idx] >= CHECKPOINT_EVERY].tolist():
@@ -147,19 +149,20 @@ class SolarChainVectorEnv(VectorEnv):
                 self._since_checkpoint[i] = 0
             ints, normals, int32 = self._draw_int, self._draw_normal, np.int32
             if n_starts:
-                drawn = [(ints[i](0, n_starts, dtype=int32), normals[i](out=rows[i])) for i in idx.tolist()]
-                starts[idx] = self._starts[[d[0] for d in drawn]]
+                drawn = [int(ints[i](0, n_starts, dtype=int32)) for i in indices]
+                starts[idx] = self._starts[drawn]
             else:
-                for i in idx.tolist():
-                    normals[i](out=rows[i])
                 starts[idx] = 0
+            for i in indices:
+                normals[i](out=rows[i])
             self._pending[idx] += 1
             self._since_checkpoint[idx] += 1
         else:
             k, is_open = self._k, self._open
-            for i in idx.tolist():
+            for i in indices:
                 stream = self._flush(i)
-                seed, fixed = seeds[i], start_hours[i]
+                seed = None if seeds is None else seeds[i]
+                fixed = None if start_hours is None else start_hours[i]
                 if seed is not None:
                     stream = self._streams[i] = EpisodeStream(np.random.default_rng(seed))
                     self._draw_int[i], self._draw_normal[i] = stream.rng.integers, stream.rng.standard_normal
@@ -172,8 +175,20 @@ class SolarChainVectorEnv(VectorEnv):
                     index = stream.begin(n_starts, rows[i])
                     starts[i] = self._starts[index] if n_starts else 0
                 self._since_checkpoint[i] = stream.episodes
-        self._noise[idx] *= PRICE_NOISE_STD
         self._start = starts
+        n = self.num_envs
+        if everyone:  # plain assignments instead of masked selections
+            self._noise *= PRICE_NOISE_STD
+            self._k = np.zeros(n, dtype=np.int64)
+            self._open = np.ones(n, dtype=bool)
+            self._needs_reset = np.zeros(n, dtype=bool)
+            self._liquidity, self._peak_liquidity = np.full(n, self._initial[0]), np.full(n, self._initial[0])
+            self._price, self._peak_price = np.full(n, self._initial[1]), np.full(n, self._initial[1])
+            self._prev = np.repeat(self._initial_action, n, axis=1)
+            self._city_totals = np.zeros_like(self._city_totals)
+            self._lockstep = 0
+            return
+        self._noise[idx] *= PRICE_NOISE_STD
         self._k = np.where(mask, 0, self._k)
         self._open = self._open | mask
         self._needs_reset = self._needs_reset & ~mask
@@ -184,8 +199,8 @@ class SolarChainVectorEnv(VectorEnv):
         self._prev = np.where(mask, self._initial_action, self._prev)
         self._city_totals = np.where(mask, 0.0, self._city_totals)
         # Lockstep: every sub-env at the same step of an open episode (scalar indexing applies).
-        everyone = bool(mask.all()) or (bool((self._open & (self._k == 0)).all()) and not self._needs_reset.any())
-        self._lockstep = 0 if everyone else None
+        lockstep = bool((self._open & (self._k == 0)).all()) and not self._needs_reset.any()
+        self._lockstep = 0 if lockstep else None
 
     def _observations(self) -> np.ndarray:
         hour = np.minimum(self._start + self._k, self._n_hours - 1)
@@ -211,8 +226,8 @@ class SolarChainVectorEnv(VectorEnv):
         if mask.shape != (n,):
             raise ValueError(f"reset_mask must have shape ({n},)")
         start = options.get("start_hour")
-        starts = [None] * n if start is None else list(np.broadcast_to(np.asarray(start), (n,)).tolist())
-        self._reset_many(mask, seeds, starts)
+        starts = None if start is None else list(np.broadcast_to(np.asarray(start), (n,)).tolist())
+        self._reset_many(mask, None if seed is None else seeds, starts)
         info = {"episode_start_hour": self._start.copy(), "_episode_start_hour": mask.copy()}
         return self._observations(), info
 
@@ -234,7 +249,7 @@ class SolarChainVectorEnv(VectorEnv):
         n = self.num_envs
         resetting = self._needs_reset
         if resetting.all():  # NEXT_STEP autoreset of every sub-env
-            self._reset_many(resetting, [None] * n, [None] * n)
+            self._reset_many(resetting)
             zeros, falses = np.zeros(n), np.zeros(n, dtype=bool)
             return self._observations(), zeros, falses, falses.copy(), {}
         if self._lockstep is not None:
@@ -261,7 +276,7 @@ class SolarChainVectorEnv(VectorEnv):
         info = self._step_info(out, executed, hour, inputs, stepping if partial else self._all_true)
         obs = self._observations()
         if partial:
-            self._reset_many(resetting, [None] * n, [None] * n)
+            self._reset_many(resetting)
             obs[resetting] = self._observations()[resetting]
         return self._finish(obs, reward, truncated, info)
 
@@ -311,10 +326,14 @@ class SolarChainVectorEnv(VectorEnv):
         self._open = self._open & ~truncated
         if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP:
             if truncated.any():
-                info["final_obs"] = obs.copy()
+                info["final_obs"] = obs
                 info["_final_obs"] = truncated.copy()
-                self._reset_many(truncated, [None] * n, [None] * n)
-                obs[truncated] = self._observations()[truncated]
+                self._reset_many(truncated)
+                if truncated.all():
+                    obs = self._observations()
+                else:
+                    obs = obs.copy()
+                    obs[truncated] = self._observations()[truncated]
         else:
             self._needs_reset = truncated
         return obs, reward, np.zeros(n, dtype=bool), truncated, info
