@@ -53,25 +53,27 @@ def test_independent_episode_seeds_are_documented_prefix_stable_and_disjoint():
     assert len(paper[20260511] & paper[20260512]) == 29
 
 
-def test_plan_of_the_paper_preset_and_an_agentic_setting_hook(monkeypatch):
+def test_plan_of_the_paper_preset_with_its_agentic_settings(monkeypatch):
     spec = GridSpec.from_preset("paper")
     units = plan_units(spec)
     trains = [u for u in units if u.kind == "train"]
     evals = [u for u in units if u.kind == "eval"]
-    assert (len(trains), len(evals)) == (18, 36)
+    # 3 algorithms × 2 training settings × 3 seeds; 6 policies × 3 seeds in main and no_physics,
+    # 3 learned policies × 3 seeds in llm and llm_no_physics (which reuse those models).
+    assert (len(trains), len(evals)) == (18, 54)
+    assert [u.depends_on for u in evals if u.name == "eval/dqn-llm_no_physics-20260513"] == [("train/dqn-no_physics-20260513",)]
+    assert [u.depends_on for u in evals if u.name == "eval/sac-llm-20260511"] == [("train/sac-main-20260511",)]
     assert [u.policy for u in trains[:6]] == ["sac"] * 6  # the longest units first
     ppo_eval = next(u for u in evals if u.name == "eval/ppo-no_physics-20260512")
     assert ppo_eval.depends_on == ("train/ppo-no_physics-20260512",)
     assert all(not u.depends_on for u in evals if u.policy in ("static", "random", "myopic"))
-    # another module (the agentic layer) registers a setting that reuses the main models
-    monkeypatch.setitem(
-        grid_module.SETTING_REGISTRY, "llm", GridSetting("llm", False, ("ppo", "sac", "dqn"), "main", "some.module:run")
-    )
-    spec = GridSpec.from_preset("paper", settings=("main", "no_physics", "llm"))
+    # a registered setting that reuses the main models plans its units the same way
+    monkeypatch.setitem(grid_module.SETTING_REGISTRY, "extra", GridSetting("extra", False, ("ppo",), "main"))
+    spec = GridSpec.from_preset("paper", settings=("main", "extra"))
     units = plan_units(spec)
-    assert len([u for u in units if u.kind == "train"]) == 18
-    llm = [u for u in units if u.setting == "llm"]
-    assert len(llm) == 9 and llm[0].depends_on == ("train/ppo-main-20260511",)
+    assert len([u for u in units if u.kind == "train"]) == 9
+    extra = [u for u in units if u.setting == "extra"]
+    assert len(extra) == 3 and extra[0].depends_on == ("train/ppo-main-20260511",)
     with pytest.raises(ValueError, match="model_setting"):
         grid_module.register_setting(GridSetting("odd", False, ("ppo",), "llm"))
 
@@ -89,7 +91,7 @@ def smoke_root(tmp_path_factory, tiny_dataset) -> Path:
 
 def test_smoke_preset_end_to_end_with_two_workers(smoke_root):
     units = _done_units(smoke_root)
-    assert len(units) == 18
+    assert len(units) == 24
     meta = json.loads((smoke_root / "paper_metadata.json").read_text())
     assert meta["complete"] and meta["status"] == "complete" and meta["execution"]["workers"] == 2
     assert all(entry["status"] == "done" and entry["wall_s"] > 0 for entry in meta["units"].values())
@@ -110,12 +112,25 @@ def test_smoke_preset_end_to_end_with_two_workers(smoke_root):
     main = pd.read_csv(smoke_root / "combined" / "main" / "metrics.csv")
     no_phys = pd.read_csv(smoke_root / "combined" / "no_physics" / "metrics.csv")
     assert (no_phys["cumulative_reward"][:2] > main["cumulative_reward"][:2]).all()
+    # the agentic settings: the learned policies behind the rule Planner/Auditor, with their logs
+    for setting in ("llm", "llm_no_physics"):
+        combined = smoke_root / "combined" / setting
+        metrics = pd.read_csv(combined / "metrics.csv")
+        assert list(metrics["policy"].unique()) == ["ppo", "sac", "dqn"] and (metrics["setting"] == setting).all()
+        assert (metrics["planner"] == "rule").all() and (metrics["audit_rate"] > 0).all()
+        logs = [json.loads(line) for line in (combined / "agentic_logs.jsonl").read_text().splitlines()]
+        assert len(logs) == len(metrics) * 24 and {row["setting"] for row in logs} == {setting}
+    assert meta["combined"]["llm"]["agentic_logs.jsonl"] == 144
+    unit = json.loads((smoke_root / "units" / "eval" / "dqn-llm_no_physics-20260511" / "unit.json").read_text())
+    assert unit["model_sha256"] == {"dqn": _digest(smoke_root / "units" / "train" / "dqn-no_physics-20260511" / "model.zip")}
+    # a complete grid gets its report
+    assert (smoke_root / "report" / "index.html").is_file() and (smoke_root / "report" / "tables").is_dir()
 
 
 def test_rerun_skips_done_units_and_a_different_grid_is_refused(smoke_root, tiny_dataset):
     stamps = {p: p.stat().st_mtime_ns for p in smoke_root.glob("units/*/*/*") if p.is_file()}
     done = subprocess.run(_paper_cmd(smoke_root, tiny_dataset, "--workers", "2"), capture_output=True, text=True, timeout=300)
-    assert done.returncode == 0 and "18 of 18 units already done: skipped" in done.stderr
+    assert done.returncode == 0 and "24 of 24 units already done: skipped" in done.stderr
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
     with pytest.raises(GridError, match=r"holds a different grid \(episodes: 2 -> 3\)"):
         run_paper(GridSpec.from_preset("smoke", episodes=3, data_dir=tiny_dataset), smoke_root)
@@ -155,7 +170,7 @@ def test_sigkill_loses_no_finished_unit_and_rerun_gives_the_same_results(smoke_r
     assert workers and not any(_alive(w) for w in workers), "worker processes outlived the killed driver"
 
     finished = _done_units(root)
-    assert 3 <= len(finished) < 18
+    assert 3 <= len(finished) < 24
     snapshot = {}
     for unit in finished:  # every finished unit is whole: files parse and nothing is half-written
         assert not list(unit.rglob("*.partial"))
@@ -169,9 +184,9 @@ def test_sigkill_loses_no_finished_unit_and_rerun_gives_the_same_results(smoke_r
 
     done = subprocess.run(_paper_cmd(root, tiny_dataset, "--workers", "2"), capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
-    assert f"{len(finished)} of 18 units already done: skipped" in done.stderr
+    assert f"{len(finished)} of 24 units already done: skipped" in done.stderr
     assert {p: _digest(p) for p in snapshot} == snapshot  # finished units were not redone
-    for setting in ("main", "no_physics"):  # and the results equal an uninterrupted run's, byte for byte
+    for setting in ("main", "no_physics", "llm", "llm_no_physics"):  # equal to an uninterrupted run, byte for byte
         for name in TABLES:
             assert _digest(root / "combined" / setting / name) == _digest(smoke_root / "combined" / setting / name), name
 
@@ -201,13 +216,14 @@ def test_failing_unit_stops_the_run_or_is_recorded_with_keep_going(tiny_dataset,
     assert meta["units"]["train/sac-main-20260511"]["status"] == "failed"
     assert meta["units"]["train/sac-main-20260511"]["log"] == str(unit / "unit.log")
     assert meta["units"]["eval/sac-main-20260511"]["status"] == "blocked"
-    assert sum(v["status"] == "done" for v in meta["units"].values()) == 16
-    assert list(meta["combined"]) == ["no_physics"] and not (root / "combined" / "main").exists()
+    assert meta["units"]["eval/sac-llm-20260511"]["status"] == "blocked"  # it needs the same model
+    assert sum(v["status"] == "done" for v in meta["units"].values()) == 21
+    assert list(meta["combined"]) == ["no_physics", "llm_no_physics"] and not (root / "combined" / "main").exists()
 
     (unit / "train_config.json").unlink()  # repair, re-run: only the two missing units run
     fixed = subprocess.run(_paper_cmd(root, tiny_dataset), capture_output=True, text=True, timeout=600)
     assert fixed.returncode == 0, fixed.stderr
-    assert "16 of 18 units already done" in fixed.stderr
+    assert "21 of 24 units already done" in fixed.stderr
     assert json.loads((root / "paper_metadata.json").read_text())["complete"]
 
 
@@ -220,9 +236,9 @@ def test_smoke_preset_through_a_local_ray_instance(smoke_root, tiny_dataset, tmp
         outcome = run_paper(GridSpec.from_preset("smoke", data_dir=tiny_dataset), root, ray_address="auto", ray_transfer="always")
     finally:
         ray.shutdown()
-    assert outcome.complete and len(outcome.report.finished) == 18
+    assert outcome.complete and len(outcome.report.finished) == 24
     assert not (root / ".grid-token").exists()
-    for setting in ("main", "no_physics"):
+    for setting in ("main", "no_physics", "llm", "llm_no_physics"):
         for name in TABLES:
             assert _digest(root / "combined" / setting / name) == _digest(smoke_root / "combined" / setting / name), name
     for unit in ("train/ppo-main-20260511", "eval/ppo-main-20260511"):

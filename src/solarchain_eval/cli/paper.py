@@ -10,12 +10,13 @@ from typing import Optional
 import typer
 
 from ..config import BenchmarkConfig, load_config
-from ..experiments.grid import SETTING_REGISTRY, GridSpec, Unit, load_setting_plugins, plan_units
+from ..experiments.grid import SETTING_REGISTRY, GridSpec, Unit, plan_units
 from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
 from ..experiments.records import SUMMARY_FILE
 from ..experiments.units import UnitResult
 from ..policies.registry import parse_policy_list
+from . import agentic as agentic_cli
 from . import app
 from .common import (
     CliError,
@@ -43,7 +44,6 @@ class EpisodeSeeds(str, Enum):
 
 
 def _settings(text: Optional[str]) -> tuple[str, ...]:
-    load_setting_plugins()
     if not text:
         return tuple(SETTING_REGISTRY)
     names = tuple(part.strip() for part in text.split(",") if part.strip())
@@ -85,15 +85,48 @@ def paper(
         None, "--checkpoint-every", min=0, help="Training steps between checkpoints (default 25,000; 0: none)."
     ),
     config: Optional[Path] = typer.Option(None, "--config", help="YAML config in the paper's layout."),
+    write_report: bool = typer.Option(
+        True, "--report/--no-report", help="Write ROOT/report (tables, figures, index.html) after a complete grid."
+    ),
+    planner: Optional[str] = agentic_cli.PLANNER,
+    auditor: Optional[str] = agentic_cli.AUDITOR,
+    llm_api: Optional[str] = agentic_cli.LLM_API,
+    llm_model: Optional[str] = agentic_cli.LLM_MODEL,
+    llm_base_url: Optional[str] = agentic_cli.LLM_BASE_URL,
+    llm_temperature: Optional[float] = agentic_cli.LLM_TEMPERATURE,
+    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
+    llm_max_retries: int = agentic_cli.LLM_MAX_RETRIES,
+    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
+    llm_cache: Optional[Path] = agentic_cli.LLM_CACHE,
+    llm_cache_mode: Optional[str] = agentic_cli.LLM_CACHE_MODE,
 ) -> None:
-    """Train PPO, SAC and DQN per seed and setting, evaluate static, random, myopic, ppo, sac and
-    dqn per seed and setting, and write ROOT/combined/<setting>/ files and ROOT/paper_metadata.json.
+    """The paper's experiment matrix: train, evaluate, combine, report.
+
+    Trains PPO, SAC and DQN per seed with and without the physics penalty; evaluates static,
+    random, myopic, ppo, sac and dqn per seed in the settings main and no_physics, and the learned
+    policies behind the Planner/Auditor layer in llm and llm_no_physics (rule planner and auditor
+    unless --planner/--auditor say otherwise); writes ROOT/combined/<setting>/ files,
+    ROOT/paper_metadata.json and, after a complete grid, the report in ROOT/report.
 
     Every unit (a trained model, or one policy × setting × seed evaluation) is a directory under
     ROOT/units with a DONE marker written last: re-running the same command skips finished units
     and redoes the ones that were in flight (training resumes from its last checkpoint).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
+    governance = agentic_cli.agentic_options(
+        agentic="planner_auditor",
+        planner=planner,
+        auditor=auditor,
+        llm_api=llm_api,
+        llm_model=llm_model,
+        llm_base_url=llm_base_url,
+        llm_temperature=llm_temperature,
+        llm_timeout=llm_timeout,
+        llm_max_retries=llm_max_retries,
+        llm_max_output_tokens=llm_max_output_tokens,
+        llm_cache=llm_cache,
+        llm_cache_mode=llm_cache_mode,
+    )
     try:
         spec = GridSpec.from_preset(
             preset.value,
@@ -106,6 +139,7 @@ def paper(
             data_dir=data,
             config=cfg,
             checkpoint_every=checkpoint_every,
+            agentic=governance,
         )
         spec.validate()
     except ValueError as error:
@@ -152,4 +186,8 @@ def paper(
             extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
         err_console.print(f"[bold red]{len(report.failed)} unit(s) failed:[/bold red]\n" + "\n".join(lines) + extra, highlight=False, soft_wrap=True)
         raise typer.Exit(1)
+    if outcome.complete and write_report:
+        from ..report import build_report
 
+        written = build_report(outcome.root)
+        console.print(f"report: {written.out_dir / 'index.html'}")

@@ -63,6 +63,10 @@ def concat_lines(sources: Sequence[Path], target: Path) -> int:
     return count[0]
 
 
+# pandas 3 parses floats exactly by default (and deprecates the option); pandas 2 needs asking.
+_ROUND_TRIP = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
+
+
 def combine_setting(root: Path, setting: str, unit_dirs: Sequence[Path]) -> dict[str, int]:
     """Write the combined files of one setting from its eval units; returns rows per file."""
     out = combined_dir(root, setting)
@@ -78,6 +82,6 @@ def combine_setting(root: Path, setting: str, unit_dirs: Sequence[Path]) -> dict
         rows[AGENTIC_LOG_FILE] = concat_lines(logs, out / AGENTIC_LOG_FILE)
     else:
         (out / AGENTIC_LOG_FILE).unlink(missing_ok=True)
-    metrics = pd.read_csv(out / METRICS_FILE, float_precision="round_trip")
+    metrics = pd.read_csv(out / METRICS_FILE, **_ROUND_TRIP)
     atomic_write_json(out / SUMMARY_FILE, summarize(metrics))
     return rows

@@ -8,33 +8,29 @@ A grid is a list of *units*, each one directory under ``ROOT/units`` (see :mod:`
   run seed over the grid's episodes. An eval unit of a learned policy depends on the train unit
   of the same algorithm, seed and the setting's ``model_setting``.
 
-Settings are a registry. ``main`` and ``no_physics`` are built in; another module adds one
-with :func:`register_setting` — e.g. the agentic layer registers ``llm`` (models from
-``main``) and ``llm_no_physics`` (models from ``no_physics``) with a ``runner``, the import
-path ``"module:function"`` of ``function(task: UnitTask) -> None`` that writes one eval unit's
-run directory (the standard files plus ``agentic_logs.jsonl``) into ``task.unit_dir``. The
-modules named in :data:`SETTING_PLUGINS` are imported (when installed) by
-:func:`load_setting_plugins` before a grid is planned.
+Settings are a registry: ``main`` and ``no_physics`` evaluate every policy; the agentic
+settings ``llm`` (models trained in ``main``) and ``llm_no_physics`` (models from
+``no_physics``) evaluate the learned policies behind the Planner/Auditor layer, whose planner and
+auditor kinds are the grid's :class:`~solarchain_eval.agentic.AgenticOptions` (rule by default).
+:func:`register_setting` adds more.
 """
 
 from __future__ import annotations
 
-import importlib
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable
 
 import numpy as np
 
+from ..agentic.build import AgenticOptions
 from ..config import BenchmarkConfig
 from ..policies.baselines import BASELINES
 from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS
 from .layout import eval_unit_dir, train_unit_dir
-from .rollout import SETTING_MAIN, SETTING_NO_PHYSICS, paper_episode_seeds
+from .rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS, SETTING_MAIN, SETTING_NO_PHYSICS, paper_episode_seeds
 
-#: Modules imported by :func:`load_setting_plugins` if they exist (they call :func:`register_setting`).
-SETTING_PLUGINS = ("solarchain_eval.agentic.grid",)
 #: ``spawn_key`` of the SeedSequence behind ``--episode-seeds independent``.
 EPISODE_SEED_SPAWN_KEY = 0x45504953  # "EPIS"
 
@@ -75,21 +71,23 @@ class GridSetting:
         Policies evaluated in it (learned ones need their train units).
     model_setting : str
         The training setting whose models the learned policies use ("main" or "no_physics").
-    runner : str, optional
-        ``"module:function"`` evaluating one unit; None runs the standard evaluation.
+    agentic : bool
+        Whether its policies run behind the Planner/Auditor layer.
     """
 
     name: str
     no_physics_penalty: bool
     policies: tuple[str, ...]
     model_setting: str
-    runner: str | None = None
+    agentic: bool = False
 
 
 _POLICIES = (*BASELINES, *ALGOS)
 SETTING_REGISTRY: dict[str, GridSetting] = {
     SETTING_MAIN: GridSetting(SETTING_MAIN, False, _POLICIES, SETTING_MAIN),
     SETTING_NO_PHYSICS: GridSetting(SETTING_NO_PHYSICS, True, _POLICIES, SETTING_NO_PHYSICS),
+    SETTING_AGENTIC: GridSetting(SETTING_AGENTIC, False, ALGOS, SETTING_MAIN, agentic=True),
+    SETTING_AGENTIC_NO_PHYSICS: GridSetting(SETTING_AGENTIC_NO_PHYSICS, True, ALGOS, SETTING_NO_PHYSICS, agentic=True),
 }
 TRAIN_SETTINGS = (SETTING_MAIN, SETTING_NO_PHYSICS)
 
@@ -99,21 +97,6 @@ def register_setting(setting: GridSetting) -> None:
     if setting.model_setting not in TRAIN_SETTINGS:
         raise ValueError(f"setting '{setting.name}': model_setting must be one of {', '.join(TRAIN_SETTINGS)}")
     SETTING_REGISTRY[setting.name] = setting
-
-
-def load_setting_plugins() -> None:
-    for module in SETTING_PLUGINS:
-        try:
-            importlib.import_module(module)
-        except ModuleNotFoundError as error:
-            if error.name is None or not module.startswith(error.name):
-                raise  # the plugin exists but one of its own imports is missing
-
-
-def resolve_callable(path: str) -> Callable[..., Any]:
-    """Import ``"package.module:function"``."""
-    module, _, name = path.partition(":")
-    return getattr(importlib.import_module(module), name)
 
 
 @dataclass(frozen=True)
@@ -138,13 +121,18 @@ class GridSpec:
     timesteps: int
     episodes: int
     seeds: tuple[int, ...]
-    settings: tuple[str, ...] = (SETTING_MAIN, SETTING_NO_PHYSICS)
+    settings: tuple[str, ...] = (SETTING_MAIN, SETTING_NO_PHYSICS, SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS)
     episode_seed_protocol: str = "paper"
     data_dir: Path | None = None
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY
     preset: str | None = None
     policies: tuple[str, ...] | None = None  # None: every policy of each setting
+    agentic: AgenticOptions = field(default_factory=AgenticOptions)  # the agentic settings' layer
+
+    @property
+    def has_agentic(self) -> bool:
+        return any(SETTING_REGISTRY[s].agentic for s in self.settings)
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         listed = SETTING_REGISTRY[setting].policies

@@ -5,8 +5,8 @@ units resume from their last checkpoint). A root remembers what it was made with
 (``paper_metadata.json`` → ``identity``: budgets, episode-seed protocol, dataset hashes, config);
 running a different grid into it is an error, while adding seeds or settings extends it. An eval
 unit of a learned policy records the sha256 of the model it used and is redone if that model
-changed. One run at a time may use a root (a lock file). After a complete grid, the hooks in
-:data:`REPORT_HOOKS` (the report stage's ``write_paper_report(root)``) run if installed.
+changed. One run at a time may use a root (a lock file). The ``paper`` command writes the
+report after a complete grid.
 """
 
 from __future__ import annotations
@@ -28,14 +28,10 @@ from ..training import ALGOS, MODEL_FILE, differences
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
 from .evaluate import dataset_provenance
-from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, load_setting_plugins, plan_units
+from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, plan_units
 from .layout import PAPER_METADATA_FILE, UNITS_DIR
 from .scheduler import Executor, InlineExecutor, LocalPool, RunReport, run_units
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
-
-#: Called as ``hook(root)`` after a complete grid if the module exists (the report stage).
-REPORT_HOOKS = ("solarchain_eval.report.paper:write_paper_report",)
-
 
 class GridError(ValueError):
     """The grid cannot run as asked (a different grid in ROOT, a busy ROOT, bad arguments)."""
@@ -60,7 +56,17 @@ def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
         "episode_seed_protocol": spec.episode_seed_protocol,
         "dataset_sha256": dataset.get("files", {}),
         "config": spec.config.model_dump(mode="json"),
+        "agentic": _agentic_identity(spec),
     }
+
+
+def _agentic_identity(spec: GridSpec) -> dict[str, Any]:
+    """The Planner/Auditor configuration behind the agentic settings (not how LLM calls are cached)."""
+    described = spec.agentic.describe()
+    llm = described.get("llm")
+    if llm:
+        llm = {k: v for k, v in llm.items() if k in ("api", "model", "base_url", "temperature", "max_output_tokens")}
+    return {"planner": described["planner"], "auditor": described["auditor"], "llm": llm}
 
 
 @contextmanager
@@ -125,7 +131,6 @@ def run_paper(
         Bad arguments, a different grid already in ``root``, or ``root`` busy.
     """
     started = time.perf_counter()
-    load_setting_plugins()
     try:
         spec.validate()
     except ValueError as error:
@@ -187,8 +192,6 @@ def run_paper(
              "units": _unit_table(root, units, report), "combined": outcome.combined,
              "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed]},
         )
-    if outcome.complete:
-        _run_report_hooks(root)
     return outcome
 
 
@@ -211,7 +214,7 @@ def _task(spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit
         checkpoint_every=spec.checkpoint_every,
         no_physics_penalty=no_physics,
         model_paths=models,
-        runner=setting.runner if (setting is not None and unit.kind == "eval") else None,
+        agentic=spec.agentic if (setting is not None and setting.agentic and unit.kind == "eval") else None,
         identity=unit_identity,
         command=tuple(command or sys.argv),
     )
@@ -264,20 +267,4 @@ def _unit_table(root: Path, units: list[Unit], report: RunReport) -> dict[str, d
     return table
 
 
-def _run_report_hooks(root: Path) -> None:
-    import importlib
-
-    for hook in REPORT_HOOKS:
-        module, _, name = hook.partition(":")
-        try:
-            loaded = importlib.import_module(module)
-        except ModuleNotFoundError as error:
-            if error.name is not None and module.startswith(error.name):
-                continue  # the report stage is not installed
-            raise
-        function = getattr(loaded, name, None)
-        if function is not None:
-            function(root)
-
-
-__all__ = ["GridError", "PaperOutcome", "REPORT_HOOKS", "grid_identity", "run_paper"]
+__all__ = ["GridError", "PaperOutcome", "grid_identity", "run_paper"]

@@ -19,10 +19,11 @@ from datetime import datetime, timezone
 from pathlib import Path
 from typing import Any
 
+from ..agentic.build import AgenticOptions
 from ..config import BenchmarkConfig
 from ..io import atomic_write_json, sha256_file
 from ..training import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
-from .grid import EPISODE_SEED_PROTOCOLS, Unit, resolve_callable
+from .grid import EPISODE_SEED_PROTOCOLS, Unit
 from .layout import DONE_MARKER
 
 UNIT_FILE = "unit.json"
@@ -43,7 +44,7 @@ class UnitTask:
     checkpoint_every: int
     no_physics_penalty: bool
     model_paths: dict[str, Path] = field(default_factory=dict)
-    runner: str | None = None
+    agentic: AgenticOptions | None = None  # set for units of an agentic setting
     identity: dict[str, Any] = field(default_factory=dict)
     command: tuple[str, ...] = ()
 
@@ -138,8 +139,6 @@ def execute_unit(task: UnitTask, *, mark_done: bool = True) -> UnitResult:
         atomic_write_json(unit_dir / UNIT_FILE, {"unit": unit.name, **task.identity})
         if unit.kind == "train":
             _train_unit(task, log)
-        elif task.runner is not None:
-            resolve_callable(task.runner)(task)
         else:
             _evaluate_unit(task)
         wall_s = time.perf_counter() - started
@@ -193,7 +192,10 @@ def _evaluate_unit(task: UnitTask) -> None:
         config=task.config,
         models=dict(task.model_paths),
         episode_seeds=EPISODE_SEED_PROTOCOLS[task.episode_seed_protocol],
+        agentic=task.agentic,  # the Planner/Auditor layer in the agentic settings
     )
+    if spec.setting != unit.setting:
+        raise ValueError(f"unit {unit.name}: the task evaluates setting {spec.setting!r}")
     run_evaluation(spec, task.unit_dir, command=list(task.command))
 
 
