@@ -295,6 +295,12 @@ def train(
         resumed_from.append(checkpoint.steps)
         # Record the resume now: a run killed again must still say it was resumed.
         atomic_write_json(metadata_path, {"complete": False, "resumed_from": resumed_from})
+    if tb_dir is None:
+        # Without TensorBoard, SB3's default logger set-up would create an empty /tmp/SB3-<time>
+        # directory on every learn(); an explicit logger with no outputs avoids that.
+        from stable_baselines3.common.logger import Logger
+
+        model.set_logger(Logger(folder=None, output_formats=[]))
     steps_before = int(model.num_timesteps)
     monitor = TrainingMonitor(
         log, on_progress=on_progress, checkpoints=store, checkpoint_every=spec.checkpoint_every, wall_offset_s=wall_before
