@@ -42,6 +42,8 @@ def paper_weather() -> Path:
 def isolated_cache(tmp_path_factory: pytest.TempPathFactory) -> Path:
     cache = tmp_path_factory.mktemp("solarchain-cache")
     os.environ["SOLARCHAIN_CACHE_DIR"] = str(cache)
+    # Raw Stable-Baselines3 calls in tests log here instead of a new /tmp/SB3-<time> directory.
+    os.environ["SB3_LOGDIR"] = str(cache / "sb3-logs")
     return cache
 
 
