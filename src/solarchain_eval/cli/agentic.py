@@ -134,6 +134,27 @@ def agentic_options(
         raise CliError(str(error)) from None
 
 
+#: The command parameters :func:`agentic_options` takes besides ``agentic``.
+OPTION_NAMES = (
+    "planner",
+    "auditor",
+    "llm_api",
+    "llm_model",
+    "llm_base_url",
+    "llm_temperature",
+    "llm_timeout",
+    "llm_max_retries",
+    "llm_max_output_tokens",
+    "llm_cache",
+    "llm_cache_mode",
+)
+
+
+def options_from(params: dict[str, Any], agentic: str) -> AgenticOptions | None:
+    """:func:`agentic_options` from a command's parameters (its ``locals()``)."""
+    return agentic_options(agentic=agentic, **{name: params[name] for name in OPTION_NAMES})
+
+
 def agentic_table(summary: list[dict[str, Any]], title: str) -> Table:
     """Mean agentic metrics per policy and setting (rows without them are skipped)."""
     table = Table(title=title, title_justify="left")

@@ -105,20 +105,7 @@ def evaluate(
         names = parse_policy_list(policies)
     except ValueError as error:
         raise CliError(str(error)) from None
-    governance = agentic_cli.agentic_options(
-        agentic=agentic,
-        planner=planner,
-        auditor=auditor,
-        llm_api=llm_api,
-        llm_model=llm_model,
-        llm_base_url=llm_base_url,
-        llm_temperature=llm_temperature,
-        llm_timeout=llm_timeout,
-        llm_max_retries=llm_max_retries,
-        llm_max_output_tokens=llm_max_output_tokens,
-        llm_cache=llm_cache,
-        llm_cache_mode=llm_cache_mode,
-    )
+    governance = agentic_cli.options_from(locals(), agentic)
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_int_list(seeds, "seeds"),

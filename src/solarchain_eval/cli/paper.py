@@ -113,20 +113,7 @@ def paper(
     and redoes the ones that were in flight (training resumes from its last checkpoint).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
-    governance = agentic_cli.agentic_options(
-        agentic="planner_auditor",
-        planner=planner,
-        auditor=auditor,
-        llm_api=llm_api,
-        llm_model=llm_model,
-        llm_base_url=llm_base_url,
-        llm_temperature=llm_temperature,
-        llm_timeout=llm_timeout,
-        llm_max_retries=llm_max_retries,
-        llm_max_output_tokens=llm_max_output_tokens,
-        llm_cache=llm_cache,
-        llm_cache_mode=llm_cache_mode,
-    )
+    governance = agentic_cli.options_from(locals(), "planner_auditor")
     try:
         spec = GridSpec.from_preset(
             preset.value,
