@@ -15,6 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from solarchain_eval.metrics import METRIC_NAMES
+
 SETTINGS = ("main", "no_physics", "llm", "llm_no_physics")
 BASELINES = ("static", "random", "myopic")
 LEARNED = ("ppo", "sac", "dqn")
@@ -22,19 +24,7 @@ RUN_SEEDS = (11, 12)
 EPISODES = 4
 STEPS = 24
 CITIES = ("Alpha", "Beta")
-METRICS = (
-    "cumulative_reward",
-    "episode_volume",
-    "physics_violation_rate",
-    "max_drawdown",
-    "max_token_drawdown",
-    "action_jitter",
-    "mean_slippage",
-    "spatial_fairness_index",
-    "artificial_liquidity_MWh",
-    "final_liquidity",
-    "final_token_price",
-)
+METRICS = METRIC_NAMES  # the episode metrics every metrics.csv carries
 REASONS = ("Violation rate exceeds audit threshold; tighten allocation.", "Supply gap is negative; raise liquidity.")
 
 
