@@ -1,7 +1,7 @@
-"""Rule planner + rule auditor around Myopic and Random: exact agreement with SPEC §6/§7.
+"""Rule planner + rule auditor around Myopic and Random: exact agreement with docs/planner_auditor.md.
 
-The reference below is a deliberately plain re-implementation of SPEC §6 (scheduler, rule
-planner, rule auditor) with §7's float32 details, written with numpy arrays and its own
+The reference below is a deliberately plain re-implementation of docs/planner_auditor.md (scheduler, rule
+planner, rule auditor) with the float32 details of docs/reproducing.md, written with numpy arrays and its own
 episode loop. It uses only the core API (env.reset/step, env.decode_action, env.codec.encode,
 the hourly table). Every step's triggers, audit decision, skip reason, proposed/bounded/final/
 executed actions, κ and action delta must be bit-identical to the agentic layer's log, and

@@ -1,4 +1,4 @@
-"""Output schemas: strict parsing, and the rule planner's two modes (SPEC §6)."""
+"""Output schemas: strict parsing, and the rule planner's two modes (docs/planner_auditor.md#rule-planner)."""
 
 from __future__ import annotations
 

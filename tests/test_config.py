@@ -60,7 +60,7 @@ def test_the_papers_yaml_loads_unchanged(tmp_path):
     path.write_text(PAPER_YAML)
     config = load_config(path)
     assert config.data_dir == "data/datasets_2026_04_month" and config.figures_dir == "figures"
-    # Every value equals the SPEC default except the paths.
+    # Every value equals the documented default (docs/environment.md#arguments) except the paths.
     assert config.model_dump(exclude={"data_dir"}) == BenchmarkConfig().model_dump(exclude={"data_dir"})
     assert config.training.learning_rate == 3e-4 and config.evaluation.policies == ["static", "random", "myopic"]
 

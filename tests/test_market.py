@@ -1,4 +1,4 @@
-"""SPEC §3–§4 formulas against hand-computed values."""
+"""Environment and metric formulas (docs/environment.md, docs/metrics.md) against hand-computed values."""
 
 from __future__ import annotations
 
@@ -28,7 +28,7 @@ WEIGHTS = RewardWeights.from_config(BenchmarkConfig())
 
 def test_decoding_the_corners_of_the_action_box():
     assert CODEC.decode(np.zeros(3, F32)) == (float(F32(0.05)), float(F32(0.2)), 0.0)
-    # u = 1: float32 decoding gives α = 0.65000004 (> 0.65, clipped in float64 to 0.65, SPEC §7)
+    # u = 1: float32 decoding gives α = 0.65000004 (> 0.65, clipped in float64, docs/reproducing.md)
     # and ℓ = 0.94999999; they sum to > 0.98, so both scale by 0.98 / (α + ℓ); float32 result.
     alpha, ell, burn = CODEC.decode(np.ones(3, F32))
     a32, l32 = float(F32(0.05) + F32(0.6)), float(F32(0.2) + F32(0.75))
@@ -185,7 +185,7 @@ def test_episode_metric_helpers_on_hand_computed_series():
 
 
 def test_hourly_table_and_observation_against_the_csvs(published_dir):
-    """SPEC §2 recomputed independently from the raw CSVs for a daytime hour."""
+    """The hourly table (docs/dataset.md#hourly-table) recomputed independently from the raw CSVs for a daytime hour."""
     gen = pd.read_csv(published_dir / "spatiotemporal_generation.csv")
     trades = pd.read_csv(published_dir / "p2p_trades.csv")
     market = pd.read_csv(published_dir / "market_liquidity.csv")

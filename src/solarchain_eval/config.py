@@ -1,7 +1,7 @@
 """Benchmark configuration: pydantic models that load the paper's YAML layout unchanged.
 
 Every section forbids unknown keys, so a typo in a config file is an error that names the key
-instead of a silently ignored setting. Defaults are the values of SPEC §3 and the paper's
+instead of a silently ignored setting. Defaults are those of docs/environment.md#arguments and the paper's
 ``configs/default.yaml``.
 """
 

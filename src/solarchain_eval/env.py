@@ -1,4 +1,4 @@
-"""The SolarChain-Eval Gymnasium environment (SPEC §3): one episode = 24 hourly decisions."""
+"""The SolarChain-Eval Gymnasium environment (docs/environment.md): one episode = 24 hourly decisions."""
 
 from __future__ import annotations
 
@@ -29,7 +29,7 @@ from .market.ops import SCALAR
 ActionMode = str  # "continuous" | "discrete"
 
 
-#: Per-step quantities in ``info`` (SPEC §4's record, the original release's names), plus
+#: Per-step quantities in ``info`` (docs/environment.md#info, the original release's names), plus
 #: ``fairness_variance`` (F) and ``cost`` = V + A. ``info`` also has ``step`` and ``city_rewards``.
 STEP_INFO_KEYS = (
     "reward",

@@ -1,4 +1,4 @@
-"""Episode metrics (SPEC §4), computed with numpy exactly as the original release does."""
+"""Episode metrics (docs/metrics.md), computed with numpy exactly as the original release does."""
 
 from __future__ import annotations
 
@@ -55,7 +55,7 @@ def episode_metrics(
     artificial_liquidity_mwh: np.ndarray,
     city_totals: np.ndarray,
 ) -> dict[str, float]:
-    """All SPEC §4 metrics of one episode from its per-step arrays.
+    """All episode metrics (docs/metrics.md) of one episode from its per-step arrays.
 
     ``actions`` is the (T, 3) array of executed float32 actions; ``city_totals`` the cities'
     accumulated rewards.

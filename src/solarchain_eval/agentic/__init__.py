@@ -1,4 +1,4 @@
-"""The LLM Planner/Auditor layer (evaluation only; SPEC §6).
+"""The LLM Planner/Auditor layer (evaluation only; see docs/planner_auditor.md).
 
 A :class:`~solarchain_eval.agentic.policy.GovernedPolicy` wraps any policy: once per episode a
 planner sets action bounds and an audit policy; each step the scheduler bounds the proposed

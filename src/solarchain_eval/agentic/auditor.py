@@ -1,6 +1,6 @@
 """Auditors: called for the steps the scheduler selects; they approve or revise ā.
 
-- ``rule``: SPEC §6 with §7's float32 arithmetic. If ν > τν: α × 0.85, ℓ × 0.90,
+- ``rule``: docs/planner_auditor.md#rule-auditor, in float32 arithmetic. If ν > τν: α × 0.85, ℓ × 0.90,
   b = max(b, 0.12); if gap < τΔ: ℓ = max(ℓ, 0.80), α × 0.90; if κ > τκ: a = 0.6 a_prev + 0.4 a;
   then sanitise; "revise" when the result moved by more than 1e-6 (L1), else "approve".
   The three conditions are exactly the step's triggers as the scheduler evaluated them.
@@ -113,7 +113,7 @@ def rule_revision(context: StepContext, codec: ActionCodec) -> tuple[Action, lis
 
 
 class RuleAuditor:
-    """SPEC §6's rule auditor (float32 arithmetic of SPEC §7)."""
+    """The rule auditor (docs/planner_auditor.md#rule-auditor), in float32 arithmetic."""
 
     kind = "rule"
 

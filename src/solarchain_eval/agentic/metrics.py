@@ -1,4 +1,4 @@
-"""Per-episode agentic metrics (SPEC §6) from an episode's step log rows.
+"""Per-episode agentic metrics (docs/metrics.md#agentic-metrics) from an episode's step log rows.
 
 The columns added to ``metrics.csv`` for the agentic settings, in this order:
 :data:`AGENTIC_METRIC_NAMES`. Trigger rates are the fraction of the episode's steps whose

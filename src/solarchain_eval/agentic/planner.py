@@ -1,8 +1,8 @@
 """Planners: called once per episode, they return the bounds and audit policy in force.
 
-- ``rule``: SPEC §6. "rule_conservative" when the episode's max ν > 0.01, min gap < -0.10 or
-  mean σ > 0.75 (statistics of the hourly table over the episode's 24 hours), else
-  "rule_balanced".
+- ``rule`` (docs/planner_auditor.md#rule-planner): "rule_conservative" when the episode's
+  max ν > 0.01, min gap < -0.10 or mean σ > 0.75 (statistics of the hourly table over the
+  episode's 24 hours), else "rule_balanced".
 - ``default``: the full action ranges and the balanced thresholds (isolates the Auditor).
 - ``llm``: the model's structured plan, validated and clipped (each clip logged).
 
@@ -25,7 +25,7 @@ from .schemas import ActionBounds, AuditPolicy, Bounds, Plan, PlannerOutput, val
 
 PLANNER_KINDS = ("rule", "llm", "default")
 
-# SPEC §6 rule-planner constants.
+# Rule-planner constants (docs/planner_auditor.md#rule-planner).
 RISK_MAX_VIOLATION = 0.01
 RISK_MIN_GAP = -0.10
 RISK_MEAN_SLIPPAGE = 0.75
@@ -138,7 +138,7 @@ def _bounds(low: float, high: float) -> Bounds:
 
 
 class RulePlanner:
-    """SPEC §6's rule planner."""
+    """The rule planner (docs/planner_auditor.md#rule-planner)."""
 
     kind = "rule"
 

@@ -45,7 +45,7 @@ EXTRA_LOG_KEY = "agentic_log"
 
 
 class GovernedPolicy:
-    """A base policy behind the Planner/Auditor scheduler of SPEC §6.
+    """A base policy behind the Planner/Auditor scheduler (docs/planner_auditor.md#scheduler).
 
     Parameters
     ----------

@@ -1,4 +1,4 @@
-"""The Planner/Auditor scheduler of SPEC §6, identical for every planner and auditor.
+"""The Planner/Auditor scheduler (docs/planner_auditor.md#scheduler), identical for every planner and auditor.
 
 Per step: the proposed action is clipped to the plan's bounds and sanitised (ā); the audit-side
 jitter κ = |ā - a_prev|_1 (float64); hard triggers H (violation, gap, slippage, read from the
@@ -43,12 +43,12 @@ def bound_action(proposed: Action, plan: Plan, codec: ActionCodec) -> Action:
 
 
 def kappa(bounded: Action, previous: Action) -> float:
-    """κ = |ā - a_prev|_1 in float64 on the float32 actions (SPEC §7)."""
+    """κ = |ā - a_prev|_1 in float64 on the float32 actions (docs/reproducing.md#floating-point-rules)."""
     return abs(bounded[0] - previous[0]) + abs(bounded[1] - previous[1]) + abs(bounded[2] - previous[2])
 
 
 def action_delta(final: Action, proposed: Action) -> float:
-    """|final - proposed|_1 in float32 (SPEC §7), returned as a Python float."""
+    """|final - proposed|_1 in float32 (docs/reproducing.md#floating-point-rules), returned as a Python float."""
     return float(action_jitter_f32(final, proposed))
 
 

@@ -1,4 +1,4 @@
-"""Structured outputs of the Planner and the Auditor, and their validation (SPEC §6).
+"""Structured outputs of the Planner and the Auditor, and their validation (docs/planner_auditor.md#schemas).
 
 The pydantic models below are what a model must return; the JSON schema sent to it is the
 one the OpenAI SDK derives from them in strict mode (see :func:`response_format`). Parsing is
@@ -24,7 +24,7 @@ from .errors import LLMConfigError
 GOVERNANCE_MODE_MAX_CHARS = 64
 TEXT_MAX_CHARS = 2000
 
-#: Audit-policy ranges of SPEC §6 (the two integer ranges end at the episode length).
+#: Audit-policy ranges (docs/planner_auditor.md#schemas; the two integer ranges end at the episode length).
 VIOLATION_THRESHOLD_RANGE = (0.0, 1.0)
 GAP_THRESHOLD_RANGE = (-1.0, 0.0)
 JITTER_THRESHOLD_RANGE = (0.0, 3.0)
@@ -194,7 +194,7 @@ def _cap_text(field: str, text: str, limit: int, events: list[ClipEvent]) -> str
 
 
 def validate_plan(output: PlannerOutput, codec: ActionCodec, episode_steps: int) -> tuple[Plan, list[ClipEvent]]:
-    """Clip a parsed plan to the benchmark's ranges (SPEC §6).
+    """Clip a parsed plan to the benchmark's ranges (docs/planner_auditor.md#schemas).
 
     Bounds are sorted (a swap is reported) and clipped to the action ranges; thresholds,
     budget, target rate and cooldown to the audit-policy ranges.

@@ -1,7 +1,7 @@
-"""Dataset build: nodes, hourly generation, false-data injection, market and trades (SPEC §1).
+"""Dataset build: nodes, hourly generation, false-data injection, market and trades (docs/dataset.md).
 
 One ``numpy.random.default_rng(seed)`` stream drives the whole build, consumed in the order
-SPEC §1 lists. With the paper's cached weather and seed 20260511 the four CSVs are
+docs/dataset.md lists. With the paper's cached weather and seed 20260511 the four CSVs are
 byte-identical to the published ones.
 """
 

@@ -1,4 +1,4 @@
-"""Cities, factories and the paper's defaults (SPEC §1)."""
+"""Cities, factories and the paper's defaults (docs/dataset.md)."""
 
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ class Factory:
     city: str
 
 
-#: The paper's five cities, in build order (SPEC §1).
+#: The paper's five cities, in build order (docs/dataset.md#nodes).
 PAPER_CITIES: tuple[City, ...] = (
     City("Beijing", 39.9042, 116.4074),
     City("Shanghai", 31.2304, 121.4737),
@@ -33,7 +33,7 @@ PAPER_CITIES: tuple[City, ...] = (
     City("Hangzhou", 30.2741, 120.1551),
 )
 
-#: The paper's six buying factories, in trade-slot order (SPEC §1.6).
+#: The paper's six buying factories, in trade-slot order (docs/dataset.md#p2p-trades).
 PAPER_FACTORIES: tuple[Factory, ...] = (
     Factory("FAC-BJ-01", "Beijing"),
     Factory("FAC-SH-01", "Shanghai"),

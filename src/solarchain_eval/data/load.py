@@ -1,4 +1,4 @@
-"""Load and validate a dataset directory (the four CSVs of SPEC §1).
+"""Load and validate a dataset directory (the four CSVs of docs/dataset.md).
 
 Every problem is reported as one :class:`DatasetError` naming the file, the column and the
 first offending row (1-based data row; the file line is one more, for the header).

@@ -1,4 +1,4 @@
-"""Photovoltaic physics: the irradiance cap and the per-node power upper bound (SPEC §1.2–1.3)."""
+"""Photovoltaic physics: the irradiance cap and the per-node power upper bound (docs/dataset.md)."""
 
 from __future__ import annotations
 

@@ -1,4 +1,4 @@
-"""The hourly benchmark table (SPEC §2): numpy arrays derived once from a dataset directory.
+"""The hourly benchmark table (docs/dataset.md#hourly-table): numpy arrays derived once from a dataset directory.
 
 Everything the environment reads per step lives here as plain arrays indexed by absolute
 hour (and city). The sums follow the original release's order of addition: per-(city, hour)

@@ -25,7 +25,7 @@ EPISODE_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "sta
 
 
 def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
-    """One row per episode: identifiers, SPEC §4 metrics, then any extra per-episode metrics."""
+    """One row per episode: identifiers, the episode metrics of docs/metrics.md, then any extra per-episode metrics."""
     rows = []
     for r in results:
         row = {k: getattr(r, k) for k in EPISODE_KEYS}

@@ -11,7 +11,7 @@ from ..env import STEP_INFO_KEYS, SolarChainEnv
 from ..metrics import episode_metrics
 from ..policies.base import Policy
 
-#: Per-step record columns (SPEC §4, the original release's names) plus cost and F.
+#: Per-step record columns (docs/metrics.md#per-step-record, the original release's names) plus cost and F.
 STEP_FIELDS = STEP_INFO_KEYS
 
 # Evaluation settings (the paper's "RL", "RL no-physics", "RL+LLM", "RL+LLM no-physics").

@@ -1,4 +1,4 @@
-"""Action decoding, sanitising and encoding (SPEC §3 "Action decoding", §5, §7).
+"""Action decoding, sanitising and encoding (docs/environment.md#action-space, docs/reproducing.md).
 
 Policies act in normalised space u ∈ [0, 1]^3. Decoding maps u to market units in float32
 (α = 0.05 + 0.60 u₁, ℓ = 0.20 + 0.75 u₂, b = 0.20 u₃), then sanitises in float64: clip each

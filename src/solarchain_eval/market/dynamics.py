@@ -1,4 +1,4 @@
-"""Market dynamics of one hourly step (SPEC §3 "Step"): a pure function over floats or arrays.
+"""Market dynamics of one hourly step (docs/environment.md#rewards): a pure function over floats or arrays.
 
 :func:`market_step` is the single implementation of the physics gate, market clearing, token
 price, city rewards and reward. The single env calls it with Python floats, the vector env
@@ -16,7 +16,7 @@ import numpy as np
 from ..config import BenchmarkConfig
 from ..data.table import HourlyTable
 
-# Market constants of SPEC §3 (not part of the paper's configuration).
+# Market constants (docs/environment.md#rewards; not part of the paper's configuration).
 MIN_DEMAND_FACTOR = 0.75  # token burning can cut effective demand by at most 25 %
 BURN_DEMAND_ELASTICITY = 0.80
 SLIPPAGE_DEPTH_OFFSET_MWH = 0.05

@@ -1,4 +1,4 @@
-"""Observation layout (SPEC §3 "Observation") and the per-hour template it is built from."""
+"""Observation layout (docs/environment.md#observation-space) and the per-hour template it is built from."""
 
 from __future__ import annotations
 

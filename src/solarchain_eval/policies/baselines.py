@@ -1,4 +1,4 @@
-"""Static, Random and Myopic baselines (SPEC §5)."""
+"""Static, Random and Myopic baselines (docs/environment.md#baseline-policies)."""
 
 from __future__ import annotations
 

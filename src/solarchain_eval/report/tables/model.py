@@ -175,7 +175,7 @@ def basis_sentence(sizes: Sequence[SampleSize], unit: str) -> str:
 # ----------------------------------------------------------------------------- writers
 
 
-_LATEX_SPECIAL = {"&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{", "}": r"\}"}
+_LATEX_ESCAPES = {"&": r"\&", "%": r"\%", "$": r"\$", "#": r"\#", "_": r"\_", "{": r"\{", "}": r"\}"}
 
 
 _LATEX_SYMBOLS = {
@@ -195,7 +195,7 @@ _LATEX_SYMBOLS = {
 
 def latex_escape(value: str) -> str:
     """Escape LaTeX specials and turn the symbols the report prints ("±", "–", "Δ", "×", ...) into LaTeX."""
-    return "".join(_LATEX_SPECIAL.get(ch) or _LATEX_SYMBOLS.get(ch, ch) for ch in value)
+    return "".join(_LATEX_ESCAPES.get(ch) or _LATEX_SYMBOLS.get(ch, ch) for ch in value)
 
 
 def to_markdown(table: ReportTable, *, heading: bool = True) -> str:
