@@ -134,7 +134,66 @@ def start_hours(n_hours: int, episode_steps: int) -> np.ndarray:
 
 
 class SolarChainEnv(gym.Env):
-    """Hourly governance of a decentralised solar-energy market.
+    """Hourly governance of a decentralised solar-energy market (``SolarChainEval-v0``).
+
+    The full card, with every formula, is docs/environment.md.
+
+    Description
+    -----------
+    Each hour the agent sets the reward ratio α, the liquidity ratio ℓ and the burn rate b of
+    a P2P solar market of five cities. Supply comes from PV reports, some of them physically
+    impossible or false-data injected; the more the agent allocates (α + ℓ), the more of that
+    invalid supply it backs, and the reward charges it. Energies are MWh per hour.
+
+    Action Space
+    ------------
+    ``Box(0, 1, (3,), float32)``: NaN → 0, ±inf → 1/0, clip to [0, 1], then in float32
+    α = 0.05 + 0.60 u1 ∈ [0.05, 0.65], ℓ = 0.20 + 0.75 u2 ∈ [0.20, 0.95], b = 0.20 u3 ∈ [0, 0.20];
+    sanitised: each clipped to its range, and both α, ℓ scaled by 0.98 / (α + ℓ) when
+    α + ℓ > 0.98. ``action_mode="discrete"``: ``Discrete(125)``, the grid {0, .25, .5, .75, 1}^3
+    in ``itertools.product`` order, decoded the same way.
+
+    Observation Space
+    -----------------
+    ``Box(-10, 10, (12,), float32)``, each feature clipped to [-10, 10]: sin and cos of the
+    hour of day; verified G_v, reported G_r and physical-maximum P_max supply (MWh); supply gap
+    (G_v - Q) / max(Q, 1e-6) with the trade demand Q; liquidity L (MWh); token price p; raw
+    violation rate ν; static slippage σ; previous α; previous ℓ (``observation_names``).
+
+    Rewards
+    -------
+    R = M - λd D - λj J - λu U - λf F - λp (V + A): matched volume M, liquidity drawdown D,
+    action jitter J = |a - a_prev|_1, unmet demand U, fairness variance F, physics violation
+    rate V and unsafe backed supply A. Defaults λd 1.50, λj 0.25, λu 0.40, λf 0.20, λp 2.00.
+    The no-physics ablation drops λp (V + A) and still records V and A.
+
+    Starting State
+    --------------
+    A start midnight drawn from {0, 24, ..., hours - 24} (or ``options["start_hour"]``);
+    L = 1 MWh, p = 1, previous action float32(0.25, 0.75, 0.02).
+
+    Episode End
+    -----------
+    Truncated after ``episode_steps`` (24) steps; never terminated.
+
+    Arguments
+    ---------
+    See Parameters below; the config supplies the ranges, λ weights and seed.
+
+    Vectorized environment
+    ----------------------
+    ``gym.make_vec(..., vectorization_mode="vector_entry_point")``: a native batched env;
+    sub-env i equals this env reset with seed s + i.
+
+    Info
+    ----
+    Every per-step quantity under the original release's names (:data:`STEP_INFO_KEYS`, units
+    in docs/environment.md#info), plus ``step`` and ``city_rewards``; ``cost`` = V + A for
+    safe-RL algorithms.
+
+    Version History
+    ---------------
+    v0: first release, bit-for-bit with the original release's per-step records.
 
     Parameters
     ----------
@@ -142,6 +201,7 @@ class SolarChainEnv(gym.Env):
         Dataset directory (four CSVs). Defaults to the config's ``data_dir``, then the
         embedded default dataset (built once into the user cache).
     config : BenchmarkConfig or path to a YAML file, optional
+        Configuration; defaults to ``BenchmarkConfig()``.
     no_physics_penalty : bool, optional
         Drop λp (V + A) from the reward (V and A are still recorded). Overrides the config.
     action_mode : {"continuous", "discrete"}, optional
@@ -150,12 +210,6 @@ class SolarChainEnv(gym.Env):
         Seed of the env's generator until ``reset(seed=...)``; defaults to the config seed.
     table : HourlyTable, optional
         A preloaded hourly table (skips loading ``data_dir``).
-
-    Notes
-    -----
-    ``info`` holds every per-step quantity of SPEC §3/§4 under the original release's names,
-    plus ``cost`` = V + A (for safe-RL algorithms), ``fairness_variance`` (F) and
-    ``city_rewards``. Episodes truncate after ``episode_steps``; they never terminate.
     """
 
     metadata = {"render_modes": []}
