@@ -187,7 +187,7 @@ class SolarChainEnv(gym.Env):
 
     Info
     ----
-    Every per-step quantity under the original release's names (:data:`STEP_INFO_KEYS`, units
+    Every per-step quantity under the original release's names (``STEP_INFO_KEYS``, units
     in docs/environment.md#info), plus ``step`` and ``city_rewards``; ``cost`` = V + A for
     safe-RL algorithms.
 
