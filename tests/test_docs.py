@@ -78,7 +78,8 @@ def test_environment_card_has_gymnasium_headings_in_page_and_docstring():
         "Info",
         "Version History",
     ]
-    page = {line.lstrip("#").strip() for line in (DOCS / "environment.md").read_text().splitlines() if line.startswith("## ")}
+    lines = (DOCS / "environment.md").read_text(encoding="utf-8").splitlines()
+    page = {line.lstrip("#").strip() for line in lines if line.startswith("## ")}
     assert [h for h in headings if h not in page] == []
     doc = SolarChainEnv.__doc__ or ""
     assert [h for h in headings if f"\n    {h}\n    {'-' * len(h)}\n" not in doc] == []

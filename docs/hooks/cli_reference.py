@@ -57,7 +57,8 @@ def _command_section(command: Any, path: list[str], parent: Any) -> list[str]:
     lines += ["```text", command.get_usage(ctx).strip(), "```", ""]
     rows = [row for row in (_option_row(p, ctx) for p in command.params) if row is not None]
     if rows:
-        lines += ["| argument / option | description |", "|---|---|", *rows, "| `--help` | Show this message and exit. |", ""]
+        header = ["| argument / option | description |", "|---|---|"]
+        lines += [*header, *rows, "| `--help` | Show this message and exit. |", ""]
     if hasattr(command, "list_commands"):
         for name in command.list_commands(ctx):
             sub = command.get_command(ctx, name)
