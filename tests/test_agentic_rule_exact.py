@@ -119,13 +119,16 @@ def ref_episode(env, policy, seed: int, fixed_plan: dict | None = None) -> tuple
     for t in range(24):
         proposed = np.array(env.decode_action(policy.act(obs)), dtype=F32)
         bounded = ref_sanitize(np.clip(proposed, plan["lo"], plan["hi"]).astype(F32))
-        kappa = float(np.sum(np.abs(bounded.astype(np.float64) - prev.astype(np.float64))))
-        # Observation fields are float32; compare at float32 precision (numpy 2 semantics of
-        # the original's float32 arrays against Python-float thresholds).
+        kappa32 = np.sum(np.abs(bounded - prev), dtype=F32)  # float32 L1 norm
+        kappa = float(kappa32)
+        # Triggers: the float32 signals against float32 thresholds (numpy 2 semantics of the
+        # original's float32 arrays against Python-float thresholds).
         nu, gap, sigma = obs[8], obs[5], obs[9]
-        physics, short = nu > F32(plan["tv"]), gap < F32(plan["tg"])
-        reasons = [name for name, hit in (("violation", physics), ("gap", short), ("slippage", sigma > F32(plan["ts"]))) if hit]
-        hard, soft = bool(reasons), kappa > plan["tj"]
+        hits = (("violation", nu > F32(plan["tv"])), ("gap", gap < F32(plan["tg"])), ("slippage", sigma > F32(plan["ts"])))
+        reasons = [name for name, hit in hits if hit]
+        hard, soft = bool(reasons), bool(kappa32 > F32(plan["tj"]))
+        # The rule auditor's risks: the same signals widened to float64 against float64 thresholds.
+        physics, short, jittery = float(nu) > plan["tv"], float(gap) < plan["tg"], kappa > plan["tj"]
         audited, skip = False, None
         if hard or soft:
             if hard or (used < budget and (cooldown == 0 or t - last > cooldown)):
@@ -143,7 +146,7 @@ def ref_episode(env, policy, seed: int, fixed_plan: dict | None = None) -> tuple
             if short:
                 a[1] = max(a[1], F32(0.80))
                 a[0] *= F32(0.90)
-            if kappa > plan["tj"]:
+            if jittery:
                 a = F32(0.6) * prev + F32(0.4) * a
             revised = ref_sanitize(a)
             if float(np.sum(np.abs(revised - bounded))) > 1e-6:

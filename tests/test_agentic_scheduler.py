@@ -15,6 +15,7 @@ from solarchain_eval.agentic.scheduler import (
     bound_action,
     hard_reasons,
     kappa,
+    soft_trigger,
 )
 from solarchain_eval.agentic.schemas import Plan
 from solarchain_eval.config import MarketConfig
@@ -122,9 +123,20 @@ def test_bound_action_clips_in_float32_then_scales_to_the_allocation_cap():
     assert bounded == (float(np.float32(alpha * scale)), float(np.float32(ell * scale)), float(np.float32(0.02)))
 
 
-def test_kappa_is_float64_l1():
-    a, b = (0.30000001192092896, 0.5, 0.1), (0.25, 0.75, 0.019999999552965164)
-    assert kappa(a, b) == abs(a[0] - b[0]) + abs(a[1] - b[1]) + abs(a[2] - b[2])
+def test_kappa_is_the_float32_l1_norm():
+    f32 = np.float32
+    a = tuple(float(f32(v)) for v in (0.3, 0.5, 0.1))
+    b = tuple(float(f32(v)) for v in (0.25, 0.75, 0.02))
+    expected = (abs(f32(a[0]) - f32(b[0])) + abs(f32(a[1]) - f32(b[1]))) + abs(f32(a[2]) - f32(b[2]))
+    assert kappa(a, b) == float(expected)
+    # The float64 sum of the same differences is a different number here.
+    assert kappa(a, b) != abs(a[0] - b[0]) + abs(a[1] - b[1]) + abs(a[2] - b[2])
+
+
+def test_soft_trigger_compares_at_float32_precision():
+    k = float(np.float32(0.14))  # 0.14000000059604645 > 0.14 in float64
+    assert not soft_trigger(k, _plan(jitter_threshold=0.14))
+    assert soft_trigger(float(np.nextafter(np.float32(0.14), np.float32(1))), _plan(jitter_threshold=0.14))
 
 
 def test_hard_reasons_compare_at_float32_precision():

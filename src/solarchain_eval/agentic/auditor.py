@@ -3,7 +3,10 @@
 - ``rule``: docs/planner_auditor.md#rule-auditor, in float32 arithmetic. If ν > τν: α × 0.85, ℓ × 0.90,
   b = max(b, 0.12); if gap < τΔ: ℓ = max(ℓ, 0.80), α × 0.90; if κ > τκ: a = 0.6 a_prev + 0.4 a;
   then sanitise; "revise" when the result moved by more than 1e-6 (L1), else "approve".
-  The three conditions are exactly the step's triggers as the scheduler evaluated them.
+  The three conditions are re-tested from the step context in float64 (the float32 signals
+  widened, the thresholds as given), not taken from the scheduler's float32 triggers: on a tie
+  such as ν = float32(0.14) against τν = 0.14 no hard trigger fires, yet an audit called by
+  the soft trigger still applies the physics revision, as the original release did.
 - ``approve-only``: always approves (isolates the effect of the Planner's bounds).
 - ``llm``: the model's structured verdict; a revised action is sanitised (each clip logged).
 
@@ -91,21 +94,34 @@ class Auditor(Protocol):
     def audit(self, context: StepContext, site: CallSite) -> AuditOutcome: ...
 
 
+def rule_risks(context: StepContext) -> tuple[bool, bool, bool]:
+    """(ν > τν, gap < τΔ, κ > τκ) in float64: float32 signals widened, float64 thresholds.
+
+    Deliberately not the scheduler's float32 comparisons; the two differ on ties.
+    """
+    plan = context.plan
+    return (
+        float(context.violation_rate) > float(plan.violation_threshold),
+        float(context.supply_gap) < float(plan.gap_threshold),
+        float(context.kappa) > float(plan.jitter_threshold),
+    )
+
+
 def rule_revision(context: StepContext, codec: ActionCodec) -> tuple[Action, list[str]]:
     """The rule auditor's revised action (sanitised float32) and the risks that drove it."""
-    # The risk conditions are the step's triggers (same comparisons as the scheduler's).
+    physics, liquidity, jitter = rule_risks(context)
     a = np.array(context.bounded_action, dtype=_F32)
     risks = []
-    if "violation" in context.hard_reasons:
+    if physics:
         risks.append("physics")
         a[0] = a[0] * _F32(0.85)
         a[1] = a[1] * _F32(0.90)
         a[2] = max(a[2], _F32(min(0.12, codec.hi[2])))
-    if "gap" in context.hard_reasons:
+    if liquidity:
         risks.append("liquidity")
         a[1] = max(a[1], _F32(min(0.80, codec.hi[1])))
         a[0] = a[0] * _F32(0.90)
-    if context.soft_trigger:  # κ > τκ
+    if jitter:
         risks.append("jitter")
         previous = np.array(context.previous_action, dtype=_F32)
         a = _F32(0.6) * previous + _F32(0.4) * a  # float32 throughout

@@ -22,7 +22,7 @@ from .auditor import Auditor, StepContext
 from .errors import CallSite
 from .metrics import episode_agentic_metrics
 from .planner import Planner, episode_context
-from .scheduler import AuditScheduler, action_delta, audit_budget, bound_action, hard_reasons, kappa
+from .scheduler import AuditScheduler, action_delta, audit_budget, bound_action, hard_reasons, kappa, soft_trigger
 from .schemas import as_f32_list
 
 #: The previous step's outcome shown to the auditor (``info`` keys).
@@ -105,7 +105,7 @@ class GovernedPolicy:
         slippage = float(observation[OBS_SLIPPAGE])
         k = kappa(bounded, self._previous)
         reasons = hard_reasons(violation, gap, slippage, plan)
-        soft = k > plan.jitter_threshold
+        soft = soft_trigger(k, plan)
         decision = self._scheduler.step(step, bool(reasons), soft)
         final, verdict, reason, llm = bounded, None, None, None
         if decision.audited:

@@ -1,9 +1,9 @@
 """The Planner/Auditor scheduler (docs/planner_auditor.md#scheduler), identical for every planner and auditor.
 
 Per step: the proposed action is clipped to the plan's bounds and sanitised (ā); the audit-side
-jitter κ = |ā - a_prev|_1 (float64); hard triggers H (violation, gap, slippage, read from the
-float32 observation and compared at float32 precision) and the soft trigger S (κ above the
-jitter threshold, float64) decide whether the Auditor is called. Hard-triggered audits bypass the budget and the cooldown but still count as used;
+jitter κ = |ā - a_prev|_1 (float32); hard triggers H (violation, gap, slippage, read from the
+float32 observation) and the soft trigger S (κ above the jitter threshold), all compared at
+float32 precision, decide whether the Auditor is called. Hard-triggered audits bypass the budget and the cooldown but still count as used;
 soft ones need audits used < B and, when the cooldown c > 0, step - last audited step > c.
 """
 
@@ -43,8 +43,13 @@ def bound_action(proposed: Action, plan: Plan, codec: ActionCodec) -> Action:
 
 
 def kappa(bounded: Action, previous: Action) -> float:
-    """κ = |ā - a_prev|_1 in float64 on the float32 actions (docs/reproducing.md#floating-point-rules)."""
-    return abs(bounded[0] - previous[0]) + abs(bounded[1] - previous[1]) + abs(bounded[2] - previous[2])
+    """κ = |ā - a_prev|_1 of the float32 actions, summed in float32, returned widened."""
+    return float(action_jitter_f32(bounded, previous))
+
+
+def soft_trigger(kappa_l1: float, plan: Plan) -> bool:
+    """S = κ > τκ, compared at float32 precision like the hard triggers."""
+    return bool(np.float32(kappa_l1) > np.float32(plan.jitter_threshold))
 
 
 def action_delta(final: Action, proposed: Action) -> float:

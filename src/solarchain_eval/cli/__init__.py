@@ -4,17 +4,21 @@ from __future__ import annotations
 
 import typer
 
+from .help import HelpGroup
+
 app = typer.Typer(
     name="solarchain-eval",
     help=(
         "SolarChain-Eval: a physics-constrained benchmark for trustworthy economic agents in a "
         "decentralised solar-energy market.\n\n"
-        "Start with [bold]solarchain-eval run[/bold] (builds the embedded default dataset and "
-        "evaluates the baselines), or build the paper's dataset with [bold]data build[/bold]."
+        "Start with 'solarchain-eval run' (builds the embedded default dataset and "
+        "evaluates the baselines), or build the paper's dataset with 'data build'."
     ),
+    cls=HelpGroup,
     no_args_is_help=True,
     add_completion=False,
-    rich_markup_mode="rich",
+    # Plain click help: re-flowed paragraphs, no markup or emoji codes interpreted in help text.
+    rich_markup_mode=None,
     pretty_exceptions_show_locals=False,
 )
 

@@ -30,7 +30,7 @@ def bench_train(
 ) -> None:
     """Measure steady-state SB3 training speed (one torch thread) per algorithm on this env and on
     a trivial env with the same spaces, then estimate the paper preset's wall time (300,000 steps,
-    18 models, 36 evaluations) on --workers workers by simulating the grid scheduler.
+    18 models, 54 evaluation units in 4 settings) on --workers workers by simulating the grid scheduler.
 
     Targets (2 cores): PPO >= 800, DQN >= 800, SAC >= 85 steps/s; paper preset <= 3.5 h with 2 workers.
     """

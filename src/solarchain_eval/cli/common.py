@@ -12,14 +12,19 @@ import typer
 from rich.console import Console
 from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, TimeElapsedColumn, TimeRemainingColumn
 from rich.table import Table
+from rich.text import Text
 
 from ..config import ConfigError
 from ..data.errors import DatasetError
 from ..data.weather import WeatherError
 
+# Every text printed comes from users, files or servers somewhere (paths, city names, server
+# errors), so rich never interprets markup or emoji codes: "[/x]" cannot crash, "[bold]" and
+# "[redacted]" stay visible, "Foo:100:200" is not an emoji. Styling uses Text objects instead.
+_PLAIN = {"markup": False, "emoji": False, "highlight": False}
 # Tables stay readable when output goes to a file or CI log (rich would assume 80 columns).
-console = Console(width=None if Console().is_terminal else 140)
-err_console = Console(stderr=True)
+console = Console(width=None if Console().is_terminal else 140, **_PLAIN)
+err_console = Console(stderr=True, **_PLAIN)
 
 #: Errors caused by the user's input: reported in one line, exit status 2, no traceback.
 USER_ERRORS: tuple[type[BaseException], ...] = (DatasetError, WeatherError, ConfigError)
@@ -46,10 +51,10 @@ def reports_errors(func: F) -> F:
         try:
             return func(*args, **kwargs)
         except (CliError, *USER_ERRORS) as error:
-            err_console.print(f"[bold red]error:[/bold red] {error}", highlight=False, soft_wrap=True)
+            err_console.print(Text.assemble(("error:", "bold red"), f" {error}"), soft_wrap=True)
             raise typer.Exit(EXIT_USAGE) from None
         except KeyboardInterrupt:
-            err_console.print("[yellow]interrupted[/yellow]: no partial output file was left behind")
+            err_console.print(Text.assemble(("interrupted", "yellow"), ": no partial output file was left behind"))
             raise typer.Exit(130) from None
 
     return wrapper  # type: ignore[return-value]
@@ -62,7 +67,7 @@ def progress_bar(description: str, total: int, *, enabled: bool = True) -> Itera
         yield lambda n=1: None
         return
     progress = Progress(
-        TextColumn("[bold]{task.description}"),
+        TextColumn("{task.description}", style="bold", markup=False),
         BarColumn(),
         MofNCompleteColumn(),
         TimeElapsedColumn(),
@@ -119,10 +124,15 @@ def results_table(summary: list[dict], title: str) -> Table:
     return table
 
 
+def say(message: str, *, style: str | None = None, err: bool = True) -> None:
+    """Print one plain-text line (no markup); long paths are never broken by rich's wrapping."""
+    (err_console if err else console).print(Text(message, style=style or ""), soft_wrap=True)
+
+
 def show_files(files: dict[str, Path], heading: str = "files") -> None:
-    console.print(f"[bold]{heading}:[/bold]")
+    say(f"{heading}:", style="bold", err=False)
     for name, path in files.items():
-        console.print(f"  {name:<24} {path}", highlight=False)
+        say(f"  {name:<24} {path}", err=False)
 
 
 def invoked_command() -> list[str]:

@@ -27,9 +27,10 @@ from ..data.published import matches_published
 from ..data.weather import read_weather_cache, write_weather_cache
 from ..io import sha256_file
 from . import app
-from .common import CliError, console, err_console, progress_bar, reports_errors
+from .help import HelpGroup
+from .common import CliError, console, progress_bar, reports_errors, say
 
-data_app = typer.Typer(help="Build and validate datasets.", no_args_is_help=True, rich_markup_mode="rich")
+data_app = typer.Typer(help="Build and validate datasets.", cls=HelpGroup, no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(data_app, name="data")
 
 
@@ -59,7 +60,7 @@ def build(
     weather_cache: Optional[Path] = typer.Option(
         None,
         "--weather-cache",
-        help="A cached weather file in the paper's layout (e.g. ../shared/data/open_meteo_weather_2026-04-01_2026-05-01.json).",
+        help="A cached weather file in the paper's layout (e.g. the paper's cached Open-Meteo weather).",
     ),
     weather: WeatherSource = typer.Option(
         WeatherSource.synthetic,
@@ -72,7 +73,7 @@ def build(
     end: str = typer.Option(DEFAULT_END, help="Day after the last one (exclusive), YYYY-MM-DD."),
     nodes_per_city: int = typer.Option(DEFAULT_NODES_PER_CITY, min=1, help="PV nodes per city."),
     city: Optional[list[str]] = typer.Option(
-        None, "--city", help="A city as NAME:LAT:LON; repeat for several. Default: the paper's five cities."
+        None, "--city", metavar="NAME:LAT:LON", help="A city; repeat for several. Default: the paper's five cities."
     ),
     timezone: str = typer.Option(DEFAULT_TIMEZONE, help="IANA time zone of the dataset's hours."),
     open_meteo_url: Optional[str] = typer.Option(
@@ -84,8 +85,10 @@ def build(
 ) -> None:
     """Build a dataset: nodes, hourly PV generation, false-data injection, market, trades.
 
-    Writes the four CSVs and manifest.json (row counts, sha256, seed, weather source, versions). With [bold]--weather-cache ../shared/data/open_meteo_weather_2026-04-01_2026-05-01.json[/bold] and the
-    defaults, the four CSVs are byte-identical to the paper's published dataset.
+    Writes the four CSVs and manifest.json (row counts, sha256, seed, weather source,
+    versions). With --weather-cache pointing at the paper's cached weather
+    (open_meteo_weather_2026-04-01_2026-05-01.json) and the defaults, the four CSVs are
+    byte-identical to the paper's published dataset.
     """
     cities = _cities(city)
     if (out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES):
@@ -101,7 +104,7 @@ def build(
 
         cached = _open_meteo_cache_path(cities, start, end)
         if cached.is_file() and not refresh_weather:
-            err_console.print(f"using cached Open-Meteo weather {cached}")
+            say(f"using cached Open-Meteo weather {cached}")
             payload = read_weather_cache(cached, cities)
         else:
             url = open_meteo_url or archive_url()
@@ -110,7 +113,7 @@ def build(
                     cities, start, end, timezone, url=url, retries=retries, on_city=lambda _name: advance(1)
                 )
             write_weather_cache(cached, payload)
-            err_console.print(f"cached the Open-Meteo payload in {cached}")
+            say(f"cached the Open-Meteo payload in {cached}")
         source = SOURCE_NAME
         weather_sha = sha256_file(cached)
     else:
@@ -154,14 +157,14 @@ def build(
     for name, info in files.items():
         table.add_row(name, f"{info['rows']:,}", info["sha256"])
     console.print(table)
-    console.print(f"weather: {source}; seed {seed}; {result.manifest['hours']} hours; {len(cities)} cities")
+    say(f"weather: {source}; seed {seed}; {result.manifest['hours']} hours; {len(cities)} cities", err=False)
     if matches_published({name: info["sha256"] for name, info in files.items()}):
-        console.print("[bold green]byte-identical to the paper's published dataset[/bold green]")
+        say("byte-identical to the paper's published dataset", style="bold green", err=False)
 
 
 @data_app.command("check")
 @reports_errors
-def check(data_dir: Path = typer.Argument(..., help="Dataset directory to validate.")) -> None:
+def check(data_dir: Path = typer.Argument(..., metavar="DATA_DIR", help="Dataset directory to validate.")) -> None:
     """Validate a dataset directory.
 
     Checks files, columns, numbers (no NaN or negative power), duplicates, missing hours, statuses
@@ -187,4 +190,4 @@ def check(data_dir: Path = typer.Argument(..., help="Dataset directory to valida
     console.print(summary)
     hashes = {name: sha256_file(Path(data_dir) / name) for name in DATASET_FILES}
     if matches_published(hashes):
-        console.print("[bold green]byte-identical to the paper's published dataset[/bold green]")
+        say("byte-identical to the paper's published dataset", style="bold green", err=False)

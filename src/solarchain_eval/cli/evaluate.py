@@ -18,12 +18,12 @@ from . import agentic as agentic_cli
 from .common import (
     CliError,
     console,
-    err_console,
     invoked_command,
     parse_int_list,
     progress_bar,
     reports_errors,
     results_table,
+    say,
     show_files,
 )
 
@@ -74,7 +74,7 @@ def evaluate(
     ),
     config: Optional[Path] = typer.Option(None, "--config", help="YAML config in the paper's layout."),
     models: Optional[list[str]] = typer.Option(
-        None, "--models", help="Trained models: a directory, or NAME=PATH per learned policy (repeatable)."
+        None, "--models", metavar="DIR|NAME=PATH", help="Trained models: a directory, or NAME=PATH per learned policy (repeatable)."
     ),
     agentic: str = agentic_cli.AGENTIC,
     planner: Optional[str] = agentic_cli.PLANNER,
@@ -95,9 +95,9 @@ def evaluate(
     (one row per step and city), summary.json and run_metadata.json to the run directory, each
     file atomically. Episode e of run seed s is reset with seed s + e (the paper's protocol).
 
-    With [bold]--agentic planner_auditor[/bold] every policy runs behind the Planner/Auditor layer
-    (rule planner and rule auditor by default; [bold]--planner llm[/bold] / [bold]--auditor llm[/bold]
-    call an OpenAI-compatible endpoint, recordable and replayable with [bold]--llm-cache[/bold]),
+    With --agentic planner_auditor every policy runs behind the Planner/Auditor layer
+    (rule planner and rule auditor by default; --planner llm / --auditor llm
+    call an OpenAI-compatible endpoint, recordable and replayable with --llm-cache),
     and the run also writes agentic_logs.jsonl.
     """
     cfg = load_config(config) if config else BenchmarkConfig()
@@ -140,10 +140,7 @@ def run(
     into the user cache directory and reuses it afterwards; evaluates Static, Random and Myopic
     with the paper's protocol and prints the results table and the files written.
     """
-    dataset = default_dataset_dir(build=False)
-    if not dataset.joinpath("manifest.json").is_file():
-        err_console.print(f"building the embedded default dataset in {dataset} (once)...")
-    dataset = default_dataset_dir()
+    dataset = default_dataset_dir()  # logs a one-line notice when it builds
     cfg = BenchmarkConfig()
     spec = EvaluationSpec(
         policies=["static", "random", "myopic"],
@@ -152,5 +149,5 @@ def run(
         data_dir=dataset,
         config=cfg,
     )
-    console.print(f"dataset: {dataset} (synthetic weather, the paper's cities and month)")
+    say(f"dataset: {dataset} (synthetic weather, the paper's cities and month)", err=False)
     _evaluate(spec, out or _default_run_dir(cfg, "baselines"), "baselines on the embedded default dataset")

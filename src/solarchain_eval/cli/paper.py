@@ -8,6 +8,7 @@ from pathlib import Path
 from typing import Optional
 
 import typer
+from rich.text import Text
 
 from ..config import BenchmarkConfig, load_config
 from ..experiments.grid import SETTING_REGISTRY, GridSpec, Unit, plan_units
@@ -74,7 +75,7 @@ def paper(
     ),
     workers: int = typer.Option(1, "--workers", min=1, help="Local worker processes (one torch thread each)."),
     ray_address: Optional[str] = typer.Option(
-        None, "--ray-address", help="Run units as Ray tasks: auto, ray://host:port, or local (needs solarchain-eval\\[ray])."
+        None, "--ray-address", help="Run units as Ray tasks: auto, ray://host:port, or local (needs the ray extra: pip install solarchain-eval[ray])."
     ),
     episode_seeds: EpisodeSeeds = typer.Option(
         EpisodeSeeds.paper, "--episode-seeds",
@@ -101,6 +102,8 @@ def paper(
     llm_cache_mode: Optional[str] = agentic_cli.LLM_CACHE_MODE,
 ) -> None:
     """The paper's experiment matrix: train, evaluate, combine, report.
+
+    The paper preset is 18 models and 54 evaluation units in 4 settings.
 
     Trains PPO, SAC and DQN per seed with and without the physics penalty; evaluates static,
     random, myopic, ppo, sac and dqn per seed in the settings main and no_physics, and the learned
@@ -134,7 +137,8 @@ def paper(
     where = f"Ray ({ray_address})" if ray_address else f"{workers} worker(s)"
     err_console.print(
         f"grid: {spec.timesteps:,} training steps, {spec.episodes} episodes × {len(spec.seeds)} seed(s), "
-        f"settings {', '.join(spec.settings)}, on {where} -> {out}"
+        f"settings {', '.join(spec.settings)}, on {where} -> {out}",
+        soft_wrap=True,
     )
     from ..experiments.ray_executor import RayUnavailableError
 
@@ -148,9 +152,9 @@ def paper(
         def on_result(result: UnitResult) -> None:
             advance(1)
             if result.ok:
-                err_console.print(f"[green]done[/green] {result.unit} ({result.wall_s:.1f} s)", highlight=False)
+                err_console.print(Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True)
             else:
-                err_console.print(f"[bold red]FAILED[/bold red] {result.unit}: {result.error}\n  log: {result.log}", highlight=False, soft_wrap=True)
+                err_console.print(Text.assemble(("FAILED", "bold red"), f" {result.unit}: {result.error}\n  log: {result.log}"), soft_wrap=True)
 
         try:
             outcome = run_paper(
@@ -163,7 +167,7 @@ def paper(
     for setting in outcome.combined:
         summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
         console.print(results_table(summary, f"setting {setting}"))
-    console.print(f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)")
+    console.print(f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)", soft_wrap=True)
     if report.failed:
         lines = [f"  {r.unit}: {r.error} (log: {r.log})" for r in report.failed]
         extra = ""
@@ -171,10 +175,10 @@ def paper(
             extra = f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. Re-run to resume, or add --keep-going."
         elif report.blocked:
             extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
-        err_console.print(f"[bold red]{len(report.failed)} unit(s) failed:[/bold red]\n" + "\n".join(lines) + extra, highlight=False, soft_wrap=True)
+        err_console.print(Text.assemble((f"{len(report.failed)} unit(s) failed:", "bold red"), "\n" + "\n".join(lines) + extra), soft_wrap=True)
         raise typer.Exit(1)
     if outcome.complete and write_report:
         from ..report import build_report
 
         written = build_report(outcome.root)
-        console.print(f"report: {written.out_dir / 'index.html'}")
+        console.print(f"report: {written.out_dir / 'index.html'}", soft_wrap=True)

@@ -7,6 +7,7 @@ from typing import Optional
 
 import typer
 from rich.table import Table
+from rich.text import Text
 
 from ..report import FORMATS, ReportDataError, ReportOptions, build_report, parse_formats
 from ..report.figures import FigureFile
@@ -14,7 +15,7 @@ from ..report.options import CLUSTER_UNITS
 from ..report.statistics import DEFAULT_RESAMPLES, DEFAULT_SEED
 from ..report.tables import ReportTable
 from . import app
-from .common import CliError, console, err_console, register_user_error, reports_errors
+from .common import CliError, console, err_console, register_user_error, reports_errors, say
 
 register_user_error(ReportDataError)
 
@@ -29,7 +30,7 @@ def _case(text: str) -> tuple[str, str]:
 @app.command("report")
 @reports_errors
 def report(
-    root: Path = typer.Argument(..., help="A run directory (from `evaluate --out`) or a paper root (with combined/<setting>/)."),
+    root: Path = typer.Argument(..., metavar="ROOT", help="A run directory (from `evaluate --out`) or a paper root (with combined/<setting>/)."),
     out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default: ROOT/report)."),
     formats: str = typer.Option(",".join(FORMATS), "--format", help="Comma-separated: md, tex, csv (one file per table each), html (index.html)."),
     resamples: int = typer.Option(DEFAULT_RESAMPLES, "--resamples", min=100, help="Bootstrap resamples per confidence interval."),
@@ -70,10 +71,11 @@ def report(
     for item in [*outcome.tables, *outcome.figures]:
         kind = "table" if item in outcome.tables else "figure"
         made = isinstance(item, (ReportTable, FigureFile))
-        summary.add_row(kind, item.key, "[green]written[/green]" if made else f"[yellow]skipped[/yellow]: {item.reason}")
+        status = Text("written", style="green") if made else Text.assemble(("skipped", "yellow"), f": {item.reason}")
+        summary.add_row(kind, item.key, status)
     console.print(summary)
     for warning in outcome.warnings:
-        err_console.print(f"[yellow]warning:[/yellow] {warning}", highlight=False, soft_wrap=True)
-    console.print(f"wrote {len(outcome.files)} files to {outcome.out_dir}", highlight=False)
+        err_console.print(Text.assemble(("warning:", "yellow"), f" {warning}"), soft_wrap=True)
+    say(f"wrote {len(outcome.files)} files to {outcome.out_dir}", err=False)
     if "html" in chosen:
-        console.print(f"open {outcome.out_dir / 'index.html'}", highlight=False)
+        say(f"open {outcome.out_dir / 'index.html'}", err=False)

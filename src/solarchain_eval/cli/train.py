@@ -63,7 +63,7 @@ def train_command(
         tensorboard_dir=tensorboard,
         torch_threads=torch_threads,
     )
-    err_console.print(f"training {key.upper()} for {steps:,} steps (seed {spec.seed}) into {out_dir}")
+    err_console.print(f"training {key.upper()} for {steps:,} steps (seed {spec.seed}) into {out_dir}", soft_wrap=True)
     with progress_bar(f"training {key}", steps) as advance:
         done = [0]
 
@@ -73,11 +73,11 @@ def train_command(
 
         outcome = train(spec, out_dir, on_progress=report, overwrite=overwrite, command=invoked_command())
     if outcome.already_complete:
-        console.print(f"{out_dir} already holds this finished training (pass --overwrite to train again)")
+        console.print(f"{out_dir} already holds this finished training (pass --overwrite to train again)", soft_wrap=True)
     elif outcome.resumed_from:
         console.print(f"resumed from the checkpoint(s) at step {', '.join(map(str, outcome.resumed_from))}")
     console.print(
         f"{key.upper()}: {outcome.timesteps_done:,} steps in {outcome.wall_s:.1f} s "
         f"({outcome.steps_per_s:,.0f} steps/s in this session); model: {outcome.model_path}"
     )
-    console.print(f"training log: {out_dir / TRAIN_LOG_FILE}")
+    console.print(f"training log: {out_dir / TRAIN_LOG_FILE}", soft_wrap=True)

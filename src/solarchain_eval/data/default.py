@@ -7,6 +7,7 @@ processes) never see a half-built dataset.
 
 from __future__ import annotations
 
+import logging
 import os
 import shutil
 import tempfile
@@ -16,6 +17,8 @@ from .cities import DEFAULT_END, DEFAULT_NODES_PER_CITY, DEFAULT_SEED, DEFAULT_S
 from .files import MANIFEST_FILE
 
 DEFAULT_DATASET_NAME = f"default-synthetic-v1-{DEFAULT_SEED}"
+
+logger = logging.getLogger(__name__)
 
 
 def cache_dir() -> Path:
@@ -32,6 +35,8 @@ def default_dataset_dir(build: bool = True) -> Path:
     target = cache_dir() / "datasets" / DEFAULT_DATASET_NAME
     if (target / MANIFEST_FILE).is_file() or not build:
         return target
+    # A one-time ~10 s build: say so (WARNING so Python's last-resort handler shows it on stderr).
+    logger.warning("solarchain-eval: building the default dataset once into %s (about 10 s)...", target)
     target.parent.mkdir(parents=True, exist_ok=True)
     from .build import build_dataset  # pvlib is only needed when building
     from .synthetic import SYNTHETIC_SOURCE, synthesize_weather

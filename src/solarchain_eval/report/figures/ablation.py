@@ -12,7 +12,7 @@ from ..naming import ABLATION_PAIRS, GOVERNANCE_LABELS, GOVERNANCE_ORDER, learne
 from ..options import ReportOptions
 from ..statistics import paired_deltas
 from ..tables.model import Skipped
-from .main import trajectory
+from .main import band_phrase, trajectory
 from .style import SETTING_COLOURS, FigureFile, label_categories, new_figure, policy_colour, save_figure
 
 METRIC = "artificial_liquidity_MWh"
@@ -89,21 +89,23 @@ def liquidity_trajectories(data: ReportData, options: ReportOptions, out_dir: Pa
     learned = data.metrics[data.metrics["policy"].isin(learned_order(data.metrics["policy"]))]
     if learned.empty:
         return Skipped(key, title, "the run has no learned policies")
+    seeds = learned["run_seed"].nunique()
     with new_figure() as (figure, axes):
         ax = axes[0, 0]
+        drawn = False
         for setting in GOVERNANCE_ORDER:
             frame = learned[learned["setting"] == setting]
             if frame.empty:
                 continue
             # One value per (run seed, episode): the mean over the learned policies.
             per_seed = frame.groupby(["run_seed", "episode"], as_index=False)[METRIC].mean()
-            trajectory(ax, per_seed, METRIC, SETTING_COLOURS[setting], GOVERNANCE_LABELS[setting], options.confidence)
+            drawn |= trajectory(ax, per_seed, METRIC, SETTING_COLOURS[setting], GOVERNANCE_LABELS[setting], options.confidence)
         ax.set_xlabel("Episode index within a run seed")
         ax.set_ylabel("Artificial liquidity (MWh)")
         ax.set_title(title)
         ax.legend(loc="best")
         caption = (
             "Episode-wise artificial-liquidity trajectories for the learned-agent settings: mean over learned "
-            f"policies and run seeds, with {options.confidence:.0%} Student-t bands across run seeds."
+            f"policies and run seeds, with {band_phrase(drawn, options.confidence, seeds)}."
         )
         return save_figure(figure, out_dir, key, title, caption)

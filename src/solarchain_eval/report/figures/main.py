@@ -78,8 +78,11 @@ def utility_safety_frontier(data: ReportData, options: ReportOptions, out_dir: P
         return save_figure(figure, out_dir, key, title, caption)
 
 
-def trajectory(ax: Axes, frame: pd.DataFrame, value: str, colour: str, label: str, confidence: float) -> None:
-    """Mean over run seeds per episode index with a Student-t band across seeds."""
+def trajectory(ax: Axes, frame: pd.DataFrame, value: str, colour: str, label: str, confidence: float) -> bool:
+    """Mean over run seeds per episode index with a Student-t band across seeds.
+
+    Returns whether a band was drawn (none with a single run seed), so captions can say so.
+    """
     per_episode = frame.groupby("episode", sort=True)[value]
     episodes = np.array(sorted(per_episode.groups))
     intervals = [t_interval(per_episode.get_group(e).to_numpy(float), confidence) for e in episodes]
@@ -89,10 +92,19 @@ def trajectory(ax: Axes, frame: pd.DataFrame, value: str, colour: str, label: st
     low, high = np.array([i.low for i in intervals]), np.array([i.high for i in intervals])
     if np.isfinite(low).any():
         ax.fill_between(episodes, low, high, color=colour, alpha=0.15, linewidth=0)
+        return True
+    return False
+
+
+def band_phrase(drawn: bool, confidence: float, seeds: int) -> str:
+    """What the trajectory figure's shading shows, in words (only what was drawn)."""
+    if drawn:
+        return f"{confidence:.0%} Student-t bands across the {seeds} run seeds"
+    return f"no confidence band ({seeds} run seed{'s' if seeds != 1 else ''}: too few for one)"
 
 
 def reward_trajectory(data: ReportData, options: ReportOptions, out_dir: Path) -> FigureFile | Skipped:
-    """Episode-wise cumulative reward: mean over run seeds with a 95 % band across seeds."""
+    """Episode-wise cumulative reward: mean over run seeds, with a band across seeds when drawn."""
     key, title = "reward_trajectory", "Episode-wise reward trajectory"
     rollouts, policies = _main(data)
     if rollouts.empty:
@@ -100,14 +112,15 @@ def reward_trajectory(data: ReportData, options: ReportOptions, out_dir: Path) -
     seeds = rollouts["run_seed"].nunique()
     with new_figure() as (figure, axes):
         ax = axes[0, 0]
+        drawn = False
         for policy in policies:
             group = rollouts[rollouts["policy"] == policy]
-            trajectory(ax, group, "cumulative_reward", policy_colour(policy, policies), policy_label(policy), options.confidence)
+            drawn |= trajectory(ax, group, "cumulative_reward", policy_colour(policy, policies), policy_label(policy), options.confidence)
         ax.set_xlabel("Episode index within a run seed")
         ax.set_ylabel("Cumulative reward")
         ax.set_title(title)
         ax.legend(loc="best", ncols=2)
-        band = f"{options.confidence:.0%} Student-t bands across the {seeds} run seeds" if seeds > 1 else "no band (one run seed)"
+        band = band_phrase(drawn, options.confidence, seeds)
         return save_figure(figure, out_dir, key, title, f"Episode-wise reward trajectory: mean over run seeds with {band}.")
 
 
