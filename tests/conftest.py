@@ -4,6 +4,9 @@ The paper's data is read from ``../shared/data`` beside the repository (override
 ``SOLARCHAIN_SHARED_DATA`` environment variable); tests that need it skip with the reason when
 it is absent. Every test session gets its own cache directory, so nothing is written to the
 user's real cache.
+
+With ``SOLARCHAIN_STRICT_SKIPS=1`` (set by CI) the session fails when a test skips for any
+reason but a missing optional tool of :data:`ALLOWED_SKIP_REASONS` or the shared data.
 """
 
 from __future__ import annotations
@@ -16,6 +19,31 @@ import pytest
 REPO_ROOT = Path(__file__).resolve().parents[1]
 PAPER_WEATHER = "open_meteo_weather_2026-04-01_2026-05-01.json"
 PUBLISHED = "published_2026_04"
+
+
+#: Words of the skip reasons CI accepts (case-insensitive): tools a plain machine may lack, and
+#: the paper's shared data. Every other skip (a missing extra, a forgotten fixture) fails CI.
+ALLOWED_SKIP_REASONS = ("chromium", "pdflatex", "llama", "jax", "gpu", "cuda", "SOLARCHAIN_SHARED_DATA")
+_disallowed_skips: list[str] = []
+
+
+def pytest_runtest_logreport(report: pytest.TestReport) -> None:
+    if report.skipped and not hasattr(report, "wasxfail") and isinstance(report.longrepr, tuple):
+        reason = str(report.longrepr[2])
+        if not any(word.lower() in reason.lower() for word in ALLOWED_SKIP_REASONS):
+            _disallowed_skips.append(f"{report.nodeid}: {reason}")
+
+
+def pytest_sessionfinish(session: pytest.Session, exitstatus: int) -> None:
+    if _disallowed_skips and os.environ.get("SOLARCHAIN_STRICT_SKIPS") == "1":
+        session.exitstatus = pytest.ExitCode.TESTS_FAILED
+
+
+def pytest_terminal_summary(terminalreporter, exitstatus: int, config: pytest.Config) -> None:
+    if _disallowed_skips and os.environ.get("SOLARCHAIN_STRICT_SKIPS") == "1":
+        terminalreporter.section("skips that need no optional tool (SOLARCHAIN_STRICT_SKIPS=1 fails on them)")
+        for line in _disallowed_skips:
+            terminalreporter.line(line)
 
 
 def shared_data_dir() -> Path:

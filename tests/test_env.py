@@ -62,23 +62,25 @@ def test_bad_actions_are_rejected_with_a_clear_message(tiny_dataset):
         discrete.step(125)
 
 
-def test_start_hour_option_and_reset_seeding(published_dir):
-    env = SolarChainEnv(published_dir)
+def test_start_hour_option_and_reset_seeding(tiny_dataset):
+    env = SolarChainEnv(tiny_dataset)
+    hours = env.table.hours
+    assert hours == 96  # four days: starts 0, 24, 48, 72
     _, info = env.reset(options={"start_hour": 10_000})
-    assert info["episode_start_hour"] == 720 - 24
+    assert info["episode_start_hour"] == hours - 24
     a, _ = env.reset(seed=42)
     b, _ = env.reset(seed=42)
     assert np.array_equal(a, b)
     # Starts are midnights drawn as rng.choice of the admissible starts.
-    starts = np.arange(0, 697, 24)
+    starts = np.arange(0, hours - 24 + 1, 24)
     expected = np.random.default_rng(42).choice(starts)
     assert env.reset(seed=42)[1]["episode_start_hour"] == expected
 
 
-def _sequential_reference(seed: int, steps_per_episode: list[int]) -> list[tuple[int, list[float]]]:
+def _sequential_reference(seed: int, steps_per_episode: list[int], hours: int) -> list[tuple[int, list[float]]]:
     """What drawing one shock per step (the original release) gives: (start, shocks) per episode."""
     rng = np.random.default_rng(seed)
-    starts = np.arange(0, 697, 24)
+    starts = np.arange(0, hours - 24 + 1, 24)
     episodes = []
     for steps in steps_per_episode:
         start = int(rng.choice(starts))
@@ -86,11 +88,11 @@ def _sequential_reference(seed: int, steps_per_episode: list[int]) -> list[tuple
     return episodes
 
 
-def test_cutting_episodes_short_keeps_the_random_stream_of_sequential_drawing(published_dir):
+def test_cutting_episodes_short_keeps_the_random_stream_of_sequential_drawing(tiny_dataset):
     lengths = [24, 7, 0, 24, 13, 24] + [24] * 70 + [3, 24]  # crosses the 64-episode checkpoint
-    reference = _sequential_reference(5, lengths)
-    env = SolarChainEnv(published_dir)
-    vec = SolarChainVectorEnv(2, published_dir)
+    env = SolarChainEnv(tiny_dataset)
+    reference = _sequential_reference(5, lengths, env.table.hours)
+    vec = SolarChainVectorEnv(2, tiny_dataset)
     vec.reset(seed=[5, 99])
     action = np.array([0.4, 0.6, 0.2], F32)
     for episode, steps in enumerate(lengths):
@@ -108,10 +110,10 @@ def test_cutting_episodes_short_keeps_the_random_stream_of_sequential_drawing(pu
 
 @pytest.mark.parametrize("autoreset", ["NextStep", "SameStep"])
 @pytest.mark.parametrize("mode", ["continuous", "discrete"])
-def test_vector_sub_envs_equal_single_envs(published_dir, autoreset, mode):
+def test_vector_sub_envs_equal_single_envs(tiny_dataset, autoreset, mode):
     n, calls = 4, 60
     vec = gym.make_vec(
-        "SolarChainEval-v0", num_envs=n, vectorization_mode="vector_entry_point", data_dir=str(published_dir),
+        "SolarChainEval-v0", num_envs=n, vectorization_mode="vector_entry_point", data_dir=str(tiny_dataset),
         action_mode=mode, autoreset_mode=autoreset,
     )
     rng = np.random.default_rng(11)
@@ -125,7 +127,7 @@ def test_vector_sub_envs_equal_single_envs(published_dir, autoreset, mode):
     obs, _ = vec.reset(seed=200)
     history = [vec.step(actions[t]) for t in range(calls)]
     for i in range(n):
-        env = SolarChainEnv(published_dir, action_mode=mode)
+        env = SolarChainEnv(tiny_dataset, action_mode=mode)
         single_obs, _ = env.reset(seed=200 + i)
         assert np.array_equal(single_obs, obs[i])
         for t, (v_obs, v_rew, v_term, v_trunc, v_info) in enumerate(history):

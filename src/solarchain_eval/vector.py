@@ -25,6 +25,12 @@ from .market.dynamics import RewardWeights, market_step
 from .market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE
 from .market.ops import BATCH
 
+#: The market state carried between steps: market_step's state arguments in their order and
+#: the StepOutcome fields that update them. The vector env keeps it as one (4, N) array.
+_STATE_FIELDS = ("liquidity", "peak_liquidity", "token_price", "peak_price")
+_LIQUIDITY, _PRICE = _STATE_FIELDS.index("liquidity"), _STATE_FIELDS.index("token_price")
+
+
 class SolarChainVectorEnv(VectorEnv):
     """``num_envs`` SolarChain markets stepped together.
 
@@ -88,7 +94,6 @@ class SolarChainVectorEnv(VectorEnv):
         self._n_cities = len(self.cities)
         self._city_inputs = np.ascontiguousarray(np.vstack([hours.city_share.T, hours.city_trust.T]))
         m = cfg.market
-        self._initial = (m.initial_liquidity, m.initial_token_price)
         self._depth_scale = max(m.initial_liquidity, 1e-9)
         self._initial_action = np.array(
             [m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate], dtype=np.float32
@@ -109,12 +114,12 @@ class SolarChainVectorEnv(VectorEnv):
         self._k = np.zeros(n, dtype=np.int64)
         self._open = np.zeros(n, dtype=bool)
         self._needs_reset = np.zeros(n, dtype=bool)
-        self._liquidity = np.zeros(n)
-        self._peak_liquidity = np.zeros(n)
-        self._price = np.zeros(n)
-        self._peak_price = np.zeros(n)
+        # One array for the state (see _STATE_FIELDS), so commits and resets cannot miss a field.
+        self._initial_state = np.array(
+            [m.initial_liquidity, m.initial_liquidity, m.initial_token_price, m.initial_token_price]
+        )[:, None]
+        self._state = np.repeat(self._initial_state, n, axis=1)
         self._prev = np.zeros((3, n), dtype=np.float32)  # component-major
-        self._city_totals = np.zeros((len(self.cities), n))
         self._lockstep: int | None = None  # the common step index when all sub-envs share it
         self._all_true = np.ones(n, dtype=bool)
         self._all_true.setflags(write=False)  # shared by every info mask; read-only
@@ -132,81 +137,63 @@ class SolarChainVectorEnv(VectorEnv):
     def _reset_many(
         self, mask: np.ndarray, seeds: Sequence[int | None] | None = None, start_hours: Sequence[int | None] | None = None
     ) -> None:
-        """Reset the sub-envs in ``mask``; ``seeds``/``start_hours`` None means none for any."""
+        """Reset the sub-envs in ``mask``; ``seeds``/``start_hours`` None means none for any.
+
+        Every sub-env's generator sees exactly the single env's draws (see
+        :class:`EpisodeStream`). The draws themselves are batched, and episodes that draw a
+        start among all admissible ones are logged in bulk (``_pending``): per-sub-env stream
+        calls would cost the benchmark about a third of its throughput.
+        """
         idx = np.flatnonzero(mask)
         if idx.size == 0:
             return
-        everyone = idx.size == self.num_envs
-        max_start = max(self._n_hours - self.episode_steps, 0)
-        n_starts = len(self._starts) if self._n_hours > self.episode_steps else 0
-        starts = self._start.copy()  # fresh arrays: the previous step's info may reference the old ones
-        rows, indices = self._noise_rows, idx.tolist()
-        if seeds is None and start_hours is None and not self._open[idx].any():
-            # The autoreset path: every sub-env draws a start and a full episode of shocks.
-            # Draws go straight to the generators; the streams' logs are updated in bulk.
-            for i in idx[self._since_checkpoint[idx] >= CHECKPOINT_EVERY].tolist():
-                self._flush(i).checkpoint()
+        indices = idx.tolist()
+        seeded = [i for i in indices if seeds[i] is not None] if seeds is not None else []
+        fixed = [i for i in indices if start_hours[i] is not None] if start_hours is not None else []
+        # Streams that need more than the next episode's draws: a new seed, an episode cut short.
+        for i in sorted({*seeded, *fixed, *idx[self._open[idx]].tolist()}):
+            stream = self._flush(i)
+            if seeds is not None and seeds[i] is not None:
+                stream = self._streams[i] = EpisodeStream(np.random.default_rng(seeds[i]))
+                self._draw_int[i], self._draw_normal[i] = stream.rng.integers, stream.rng.standard_normal
                 self._since_checkpoint[i] = 0
-            ints, normals, int32 = self._draw_int, self._draw_normal, np.int32
-            if n_starts:
-                drawn = [int(ints[i](0, n_starts, dtype=int32)) for i in indices]
-                starts[idx] = self._starts[drawn]
-            else:
-                starts[idx] = 0
-            for i in indices:
-                normals[i](out=rows[i])
-            self._pending[idx] += 1
-            self._since_checkpoint[idx] += 1
+            elif self._open[i]:
+                stream.truncate_last(int(self._k[i]))
+        for i in idx[self._since_checkpoint[idx] >= CHECKPOINT_EVERY].tolist():
+            self._flush(i).checkpoint()
+            self._since_checkpoint[i] = 0
+        starts = self._start.copy()  # a fresh array: the previous step's info references the old one
+        drawing = np.setdiff1d(idx, fixed, assume_unique=True) if fixed else idx
+        if self._plain_starts:
+            ints, int32 = self._draw_int, np.int32
+            starts[drawing] = self._starts[[int(ints[i](0, self._plain_starts, dtype=int32)) for i in drawing.tolist()]]
         else:
-            k, is_open = self._k, self._open
-            for i in indices:
-                stream = self._flush(i)
-                seed = None if seeds is None else seeds[i]
-                fixed = None if start_hours is None else start_hours[i]
-                if seed is not None:
-                    stream = self._streams[i] = EpisodeStream(np.random.default_rng(seed))
-                    self._draw_int[i], self._draw_normal[i] = stream.rng.integers, stream.rng.standard_normal
-                elif is_open[i]:
-                    stream.truncate_last(int(k[i]))
-                if fixed is not None:
-                    stream.begin(0, rows[i])
-                    starts[i] = min(max(int(fixed), 0), max_start)
-                else:
-                    index = stream.begin(n_starts, rows[i])
-                    starts[i] = self._starts[index] if n_starts else 0
-                self._since_checkpoint[i] = stream.episodes
-        self._start = starts
-        n = self.num_envs
-        if everyone:  # plain assignments instead of masked selections
-            self._noise *= PRICE_NOISE_STD
-            self._k = np.zeros(n, dtype=np.int64)
-            self._open = np.ones(n, dtype=bool)
-            self._needs_reset = np.zeros(n, dtype=bool)
-            self._liquidity, self._peak_liquidity = np.full(n, self._initial[0]), np.full(n, self._initial[0])
-            self._price, self._peak_price = np.full(n, self._initial[1]), np.full(n, self._initial[1])
-            self._prev = np.repeat(self._initial_action, n, axis=1)
-            self._city_totals = np.zeros_like(self._city_totals)
-            self._lockstep = 0
-            return
+            starts[drawing] = 0
+        normals, rows = self._draw_normal, self._noise_rows
+        for i in indices:
+            normals[i](out=rows[i])
+        max_start = max(self._n_hours - self.episode_steps, 0)
+        for i in fixed:  # no start drawn; its stream was flushed above, so the log stays in order
+            starts[i] = min(max(int(start_hours[i]), 0), max_start)
+            self._streams[i].record(0, self.episode_steps)
+        self._pending[drawing] += 1
+        self._since_checkpoint[idx] += 1
         self._noise[idx] *= PRICE_NOISE_STD
+        self._start = starts
         self._k = np.where(mask, 0, self._k)
         self._open = self._open | mask
         self._needs_reset = self._needs_reset & ~mask
-        self._liquidity = np.where(mask, self._initial[0], self._liquidity)
-        self._peak_liquidity = np.where(mask, self._initial[0], self._peak_liquidity)
-        self._price = np.where(mask, self._initial[1], self._price)
-        self._peak_price = np.where(mask, self._initial[1], self._peak_price)
+        self._state = np.where(mask, self._initial_state, self._state)
         self._prev = np.where(mask, self._initial_action, self._prev)
-        self._city_totals = np.where(mask, 0.0, self._city_totals)
-        # Lockstep: every sub-env at the same step of an open episode (scalar indexing applies).
-        lockstep = bool((self._open & (self._k == 0)).all()) and not self._needs_reset.any()
+        # Lockstep: every sub-env at the first step of an open episode (scalar indexing applies).
+        lockstep = bool(self._open.all() and not self._k.any() and not self._needs_reset.any())
         self._lockstep = 0 if lockstep else None
 
     def _observations(self) -> np.ndarray:
         hour = np.minimum(self._start + self._k, self._n_hours - 1)
         obs = np.take(self._obs_template, hour, axis=0)
-        obs[:, OBS_LIQUIDITY] = np.minimum(self._liquidity, OBS_LIMIT)
-        obs[:, OBS_PRICE] = np.minimum(self._price, OBS_LIMIT)
+        obs[:, OBS_LIQUIDITY] = np.minimum(self._state[_LIQUIDITY], OBS_LIMIT)
+        obs[:, OBS_PRICE] = np.minimum(self._state[_PRICE], OBS_LIMIT)
         obs[:, OBS_PREV_ALPHA] = self._prev[0]
         obs[:, OBS_PREV_ELL] = self._prev[1]
         return obs
@@ -247,48 +234,41 @@ class SolarChainVectorEnv(VectorEnv):
 
     def step(self, actions: Any):
         n = self.num_envs
-        resetting = self._needs_reset
-        if resetting.all():  # NEXT_STEP autoreset of every sub-env
+        resetting = self._needs_reset  # NEXT_STEP: sub-envs whose episode ended on the last call
+        if resetting.all():  # this call only resets, every sub-env
             self._reset_many(resetting)
             zeros, falses = np.zeros(n), np.zeros(n, dtype=bool)
             return self._observations(), zeros, falses, falses.copy(), {}
-        if self._lockstep is not None:
-            return self._step_lockstep(actions, self._lockstep)
-        partial = bool(resetting.any())
-        stepping = ~resetting
-        if not (self._open | resetting).all():
-            raise RuntimeError("a sub-environment's episode is over (or never started): call reset() first")
-        k = np.minimum(self._k, self.episode_steps - 1)
-        hour = np.minimum(self._start + k, self._n_hours - 1)
-        executed32, out, executed, inputs = self._advance(actions, hour, self._noise[self._arange, k])
-        if partial:  # sub-envs that reset this call keep their state until the reset below
-            self._liquidity = np.where(stepping, out.liquidity, self._liquidity)
-            self._peak_liquidity = np.where(stepping, out.peak_liquidity, self._peak_liquidity)
-            self._price = np.where(stepping, out.token_price, self._price)
-            self._peak_price = np.where(stepping, out.peak_price, self._peak_price)
-            self._prev = np.where(stepping, executed32, self._prev)
-            self._city_totals = self._city_totals + np.where(stepping, out.city_rewards, 0.0)
-            self._k = np.where(stepping, self._k + 1, self._k)
+        k = self._lockstep
+        if k is not None:  # the usual case: every sub-env at step k, scalar indexing
+            stepping, noise = self._all_true, self._noise[:, k]
+            hour = self._start + k
         else:
-            self._commit(executed32, out)
+            if not (self._open | resetting).all():
+                raise RuntimeError("a sub-environment's episode is over (or never started): call reset() first")
+            stepping = self._all_true if not resetting.any() else ~resetting
+            k = np.minimum(self._k, self.episode_steps - 1)  # sub-envs that reset this call read any valid step
+            hour = self._start + k
+            noise = self._noise[self._arange, k]
+        if self._n_hours <= self.episode_steps:  # an episode longer than the table repeats its last hour
+            hour = np.minimum(hour, self._n_hours - 1)
+        executed32, out, executed, inputs = self._advance(actions, hour, noise)
+        self._commit(stepping, executed32, out)
         truncated = stepping & (self._k >= self.episode_steps)
-        reward = np.where(stepping, out.reward, 0.0) if partial else out.reward
-        info = self._step_info(out, executed, hour, inputs, stepping if partial else self._all_true)
-        obs = self._observations()
-        if partial:
+        reward = out.reward if stepping is self._all_true else np.where(stepping, out.reward, 0.0)
+        info = self._step_info(out, executed, hour, inputs, stepping)
+        self._open = self._open & ~truncated
+        if stepping is not self._all_true:
             self._reset_many(resetting)
-            obs[resetting] = self._observations()[resetting]
-        return self._finish(obs, reward, truncated, info)
-
-    def _step_lockstep(self, actions: Any, k: int):
-        """Every sub-env is at step ``k`` of an open episode (the usual case): scalar indexing."""
-        hour = self._start + k if self._n_hours > self.episode_steps else np.minimum(self._start + k, self._n_hours - 1)
-        executed32, out, executed, inputs = self._advance(actions, hour, self._noise[:, k])
-        self._commit(executed32, out)
-        truncated = np.full(self.num_envs, k + 1 >= self.episode_steps)
-        info = self._step_info(out, executed, hour, inputs, self._all_true)
-        self._lockstep = k + 1 if k + 1 < self.episode_steps else None
-        return self._finish(self._observations(), out.reward, truncated, info)
+        obs = self._observations()
+        if self.metadata["autoreset_mode"] == AutoresetMode.NEXT_STEP:
+            self._needs_reset = truncated
+        elif truncated.any():
+            info["final_obs"] = obs
+            info["_final_obs"] = truncated.copy()
+            self._reset_many(truncated)
+            obs = self._observations()
+        return obs, reward, np.zeros(n, dtype=bool), truncated, info
 
     def _advance(self, actions: Any, hour: np.ndarray, noise: np.ndarray):
         executed32 = self._decode(actions)
@@ -304,39 +284,23 @@ class SolarChainVectorEnv(VectorEnv):
             inputs[2],
             cities[: self._n_cities],
             cities[self._n_cities :],
-            self._liquidity,
-            self._peak_liquidity,
-            self._price,
-            self._peak_price,
+            *self._state,
             executed,
             action_jitter_f32_batch(executed32, self._prev),
             noise,
         )
         return executed32, out, executed, inputs
 
-    def _commit(self, executed32: np.ndarray, out: Any) -> None:
-        self._liquidity, self._peak_liquidity = out.liquidity, out.peak_liquidity
-        self._price, self._peak_price = out.token_price, out.peak_price
-        self._prev = executed32
-        self._city_totals = self._city_totals + out.city_rewards
-        self._k = self._k + 1
-
-    def _finish(self, obs: np.ndarray, reward: np.ndarray, truncated: np.ndarray, info: dict):
-        n = self.num_envs
-        self._open = self._open & ~truncated
-        if self.metadata["autoreset_mode"] == AutoresetMode.SAME_STEP:
-            if truncated.any():
-                info["final_obs"] = obs
-                info["_final_obs"] = truncated.copy()
-                self._reset_many(truncated)
-                if truncated.all():
-                    obs = self._observations()
-                else:
-                    obs = obs.copy()
-                    obs[truncated] = self._observations()[truncated]
-        else:
-            self._needs_reset = truncated
-        return obs, reward, np.zeros(n, dtype=bool), truncated, info
+    def _commit(self, stepping: np.ndarray, executed32: np.ndarray, out: Any) -> None:
+        """Take the step's state for the sub-envs in ``stepping``; the others keep theirs."""
+        state = np.stack([getattr(out, field) for field in _STATE_FIELDS])
+        if stepping is not self._all_true:
+            state = np.where(stepping, state, self._state)
+            executed32 = np.where(stepping, executed32, self._prev)
+        self._state, self._prev = state, executed32
+        self._k = self._k + stepping
+        if self._lockstep is not None:
+            self._lockstep = self._lockstep + 1 if self._lockstep + 1 < self.episode_steps else None
 
     def _step_info(self, out: Any, executed: tuple, hour: np.ndarray, inputs: np.ndarray, mask: np.ndarray) -> dict:
         values = step_info(

@@ -67,10 +67,10 @@ class ActionCodec:
             if u.shape != (3,):
                 raise ValueError(f"a continuous action has 3 components, got shape {np.shape(action)}")
         u0, u1, u2 = u.tolist()
-        # NaN -> 0; ±inf and everything else clipped to [0, 1].
-        u0 = 0.0 if u0 != u0 or u0 < 0.0 else (1.0 if u0 > 1.0 else u0)
-        u1 = 0.0 if u1 != u1 or u1 < 0.0 else (1.0 if u1 > 1.0 else u1)
-        u2 = 0.0 if u2 != u2 or u2 < 0.0 else (1.0 if u2 > 1.0 else u2)
+        # NaN -> 0; ±inf and everything else clipped to [0, 1]; -0.0 -> +0.0 like decode_batch's fmax.
+        u0 = 0.0 if u0 != u0 or u0 <= 0.0 else (1.0 if u0 > 1.0 else u0)
+        u1 = 0.0 if u1 != u1 or u1 <= 0.0 else (1.0 if u1 > 1.0 else u1)
+        u2 = 0.0 if u2 != u2 or u2 <= 0.0 else (1.0 if u2 > 1.0 else u2)
         w0, w1, w2 = self.width32
         p0, p1, p2 = _F3.unpack(_F3.pack(u0 * w0, u1 * w1, u2 * w2))
         alpha, ell, burn = _F3.unpack(_F3.pack(self.lo32[0] + p0, self.lo32[1] + p1, p2))
