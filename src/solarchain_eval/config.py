@@ -138,6 +138,16 @@ def check_episode_fits(config: BenchmarkConfig, hours: int, source: str = "the d
         raise ConfigError(f"episode_steps = {config.episode_steps} is longer than {source}, which has {hours} hours")
 
 
+def check_seeds(seeds: list[int] | tuple[int, ...]) -> None:
+    """Refuse negative, too large or repeated run seeds (a repeat would count one run twice)."""
+    for seed in seeds:
+        if not 0 <= seed <= MAX_SEED:
+            raise ConfigError(f"seed {seed} is outside 0..{MAX_SEED}")
+    repeated = sorted({seed for seed in seeds if list(seeds).count(seed) > 1})
+    if repeated:
+        raise ConfigError(f"seed(s) {', '.join(map(str, repeated))} given twice; each run seed must be distinct")
+
+
 class _UniqueKeyLoader(yaml.SafeLoader):
     """A safe YAML loader that refuses a key given twice in one mapping (YAML keeps the last silently)."""
 

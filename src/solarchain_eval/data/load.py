@@ -62,7 +62,7 @@ def _os_problem(error: OSError) -> str:
     if isinstance(error, FileNotFoundError):
         return "not found"
     if error.errno == errno.ELOOP:
-        return "is a symbolic link loop (it never reaches a file)"
+        return "is a symbolic link loop (it never resolves to a real path)"
     return f"cannot be read: {error.strerror or error}"
 
 
