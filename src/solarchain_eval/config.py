@@ -18,24 +18,33 @@ class ConfigError(ValueError):
     """A configuration file is missing, unreadable or invalid."""
 
 
+#: Seeds feed numpy's legacy and torch seeding, whose range is 0 .. 2**32 - 1.
+MAX_SEED = 2**32 - 1
+#: Penalty weights and market magnitudes are bounded so that no value overflows a step's arithmetic.
+MAX_WEIGHT = 1e6
+#: levels**3 discrete actions: 50 levels already give 125,000.
+MAX_DISCRETE_LEVELS = 50
+
+
 class _Section(BaseModel):
-    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False)
+    # NaN and ±inf are refused everywhere: one of them would make every metric NaN.
+    model_config = ConfigDict(extra="forbid", validate_assignment=True, frozen=False, allow_inf_nan=False)
 
 
 class MarketConfig(_Section):
     """Market state at reset and the admissible action ranges (dimensionless ratios)."""
 
-    initial_liquidity: float = Field(1.0, ge=0.0, description="Liquidity pool at reset, MWh.")
-    initial_token_price: float = Field(1.0, gt=0.0, description="Token price at reset.")
+    initial_liquidity: float = Field(1.0, ge=0.0, le=MAX_WEIGHT, description="Liquidity pool at reset, MWh.")
+    initial_token_price: float = Field(1.0, gt=0.0, le=MAX_WEIGHT, description="Token price at reset.")
     min_reward_ratio: float = Field(0.05, ge=0.0, le=1.0)
     max_reward_ratio: float = Field(0.65, ge=0.0, le=1.0)
     min_liquidity_ratio: float = Field(0.20, ge=0.0, le=1.0)
     max_liquidity_ratio: float = Field(0.95, ge=0.0, le=1.0)
     max_burn_rate: float = Field(0.20, gt=0.0, le=1.0)
     max_total_allocation: float = Field(0.98, gt=0.0, le=2.0)
-    static_reward_ratio: float = 0.25
-    static_liquidity_ratio: float = 0.75
-    static_burn_rate: float = 0.02
+    static_reward_ratio: float = Field(0.25, ge=0.0, le=1.0)
+    static_liquidity_ratio: float = Field(0.75, ge=0.0, le=1.0)
+    static_burn_rate: float = Field(0.02, ge=0.0, le=1.0)
 
     @model_validator(mode="after")
     def _ranges_ordered(self) -> "MarketConfig":
@@ -43,46 +52,54 @@ class MarketConfig(_Section):
             raise ValueError("market.min_reward_ratio must be below market.max_reward_ratio")
         if self.min_liquidity_ratio >= self.max_liquidity_ratio:
             raise ValueError("market.min_liquidity_ratio must be below market.max_liquidity_ratio")
+        # The static action is the first step's previous action (not sanitized), so it must be admissible.
+        for name, low, high in (
+            ("static_reward_ratio", self.min_reward_ratio, self.max_reward_ratio),
+            ("static_liquidity_ratio", self.min_liquidity_ratio, self.max_liquidity_ratio),
+            ("static_burn_rate", 0.0, self.max_burn_rate),
+        ):
+            if not low <= getattr(self, name) <= high:
+                raise ValueError(f"market.{name} = {getattr(self, name)} is outside its range [{low}, {high}]")
         return self
 
 
 class RewardConfig(_Section):
     """Penalty weights of the step reward R = M - λd D - λj J - λu U - λf F - λp (V + A)."""
 
-    drawdown_penalty: float = 1.50
-    action_jitter_penalty: float = 0.25
-    unmet_demand_penalty: float = 0.40
-    physics_penalty: float = 2.00
-    fairness_penalty: float = 0.20
+    drawdown_penalty: float = Field(1.50, ge=0.0, le=MAX_WEIGHT)
+    action_jitter_penalty: float = Field(0.25, ge=0.0, le=MAX_WEIGHT)
+    unmet_demand_penalty: float = Field(0.40, ge=0.0, le=MAX_WEIGHT)
+    physics_penalty: float = Field(2.00, ge=0.0, le=MAX_WEIGHT)
+    fairness_penalty: float = Field(0.20, ge=0.0, le=MAX_WEIGHT)
 
 
 class TrainingConfig(_Section):
     """Stable-Baselines3 settings shared by PPO, SAC and DQN."""
 
-    timesteps: int = Field(10_000, ge=1)
-    n_envs: int = Field(1, ge=1)
-    learning_rate: float = Field(3e-4, gt=0.0)
-    batch_size: int = Field(64, ge=1)
+    timesteps: int = Field(10_000, ge=1, le=10**12)
+    n_envs: int = Field(1, ge=1, le=4096)
+    learning_rate: float = Field(3e-4, gt=0.0, le=1.0)
+    batch_size: int = Field(64, ge=1, le=10**7)
     gamma: float = Field(0.98, gt=0.0, le=1.0)
 
 
 class EvaluationConfig(_Section):
-    episodes: int = Field(5, ge=1)
+    episodes: int = Field(5, ge=1, le=10**6)
     policies: list[str] = Field(default_factory=lambda: ["static", "random", "myopic"])
 
 
 class BenchmarkConfig(_Section):
     """Top-level configuration in the layout of the paper's ``configs/*.yaml``."""
 
-    seed: int = 20260511
-    episode_steps: int = Field(24, ge=1)
+    seed: int = Field(20260511, ge=0, le=MAX_SEED)
+    episode_steps: int = Field(24, ge=1, le=10**6, description="Steps per episode; at most the dataset's hours.")
     data_dir: str | None = Field(
         None, description="Dataset directory; None selects the embedded default dataset."
     )
     output_dir: str = "outputs/runs"
     figures_dir: str = "figures"
     action_mode: Literal["continuous", "discrete"] = "continuous"
-    discrete_levels: int = Field(5, ge=2)
+    discrete_levels: int = Field(5, ge=2, le=MAX_DISCRETE_LEVELS)
     no_physics_penalty: bool = False
     market: MarketConfig = Field(default_factory=MarketConfig)
     reward: RewardConfig = Field(default_factory=RewardConfig)
@@ -97,14 +114,15 @@ class BenchmarkConfig(_Section):
 
 
 def _format_validation_error(path: Path | str, error: ValidationError) -> str:
-    lines = [f"invalid configuration in {path}:"]
+    # One line: every problem, each naming its key.
+    problems = []
     for item in error.errors():
         where = ".".join(str(part) for part in item["loc"]) or "<top level>"
         if item["type"] == "extra_forbidden":
-            lines.append(f"  - unknown key '{where}'")
+            problems.append(f"unknown key '{where}'")
         else:
-            lines.append(f"  - {where}: {item['msg']}")
-    return "\n".join(lines)
+            problems.append(f"{where}: {item['msg']}")
+    return f"invalid configuration in {path}: " + "; ".join(problems)
 
 
 def config_from_mapping(payload: dict[str, Any], source: str = "<mapping>") -> BenchmarkConfig:
@@ -114,15 +132,69 @@ def config_from_mapping(payload: dict[str, Any], source: str = "<mapping>") -> B
         raise ConfigError(_format_validation_error(source, error)) from None
 
 
-def load_config(path: str | Path) -> BenchmarkConfig:
-    """Load a YAML config file; unknown keys and a missing file are errors."""
-    config_path = Path(path)
-    if not config_path.is_file():
-        raise ConfigError(f"config file not found: {config_path}")
+def check_episode_fits(config: BenchmarkConfig, hours: int, source: str = "the dataset") -> None:
+    """Refuse an ``episode_steps`` longer than the dataset (it would repeat the last hour)."""
+    if config.episode_steps > hours:
+        raise ConfigError(f"episode_steps = {config.episode_steps} is longer than {source}, which has {hours} hours")
+
+
+def check_seeds(seeds: list[int] | tuple[int, ...]) -> None:
+    """Refuse negative, too large or repeated run seeds (a repeat would count one run twice)."""
+    for seed in seeds:
+        if not 0 <= seed <= MAX_SEED:
+            raise ConfigError(f"seed {seed} is outside 0..{MAX_SEED}")
+    repeated = sorted({seed for seed in seeds if list(seeds).count(seed) > 1})
+    if repeated:
+        raise ConfigError(f"seed(s) {', '.join(map(str, repeated))} given twice; each run seed must be distinct")
+
+
+class _UniqueKeyLoader(yaml.SafeLoader):
+    """A safe YAML loader that refuses a key given twice in one mapping (YAML keeps the last silently)."""
+
+    def construct_mapping(self, node: yaml.MappingNode, deep: bool = False) -> dict:
+        seen: set = set()
+        for key_node, _ in node.value:
+            key = self.construct_object(key_node, deep=deep)
+            if key in seen:
+                raise yaml.constructor.ConstructorError(
+                    None, None, f"duplicate key '{key}'", key_node.start_mark
+                )
+            seen.add(key)
+        return super().construct_mapping(node, deep=deep)
+
+
+def _read_text(config_path: Path) -> str:
     try:
-        payload = yaml.safe_load(config_path.read_text(encoding="utf-8"))
+        raw = config_path.read_bytes()
+    except FileNotFoundError:
+        raise ConfigError(f"config file not found: {config_path}") from None
+    except IsADirectoryError:
+        raise ConfigError(f"config file {config_path} is a directory, not a file") from None
+    except PermissionError:
+        raise ConfigError(f"config file {config_path}: permission denied (this user cannot read it)") from None
+    except OSError as error:
+        raise ConfigError(f"config file {config_path} cannot be read: {error.strerror or error}") from None
+    try:
+        return raw.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise ConfigError(
+            f"{config_path} is not UTF-8 text (byte {raw[error.start]:#04x} at offset {error.start})"
+        ) from None
+
+
+def load_config(path: str | Path) -> BenchmarkConfig:
+    """Load a YAML config file; unknown or repeated keys and an unreadable file are errors."""
+    config_path = Path(path)
+    text = _read_text(config_path)
+    try:
+        payload = yaml.load(text, Loader=_UniqueKeyLoader)  # a SafeLoader subclass
     except yaml.YAMLError as error:
-        raise ConfigError(f"{config_path} is not valid YAML: {error}") from None
+        mark = getattr(error, "problem_mark", None)
+        if mark is not None:
+            detail = f"{getattr(error, 'problem', None) or error} (line {mark.line + 1}, column {mark.column + 1})"
+        else:
+            detail = " ".join(str(error).split())
+        raise ConfigError(f"{config_path} is not valid YAML: {detail}") from None
     if payload is None:
         payload = {}
     if not isinstance(payload, dict):

@@ -9,11 +9,11 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from .config import BenchmarkConfig, load_config
+from .config import BenchmarkConfig, check_episode_fits, load_config
 from .data.default import default_dataset_dir
 from .data.table import HourlyTable, load_table
 from .episodes import PRICE_NOISE_STD, EpisodeStream
-from .market.actions import ActionCodec, action_jitter_f32
+from .market.actions import ActionCodec, action_jitter_f32, discrete_index
 from .market.dynamics import MarketHours, RewardWeights, StepOutcome, market_step
 from .market.observation import (
     OBS_LIMIT,
@@ -231,6 +231,7 @@ class SolarChainEnv(gym.Env):
         cfg = cfg.with_updates(action_mode=action_mode, no_physics_penalty=no_physics_penalty)
         self.config = cfg
         self.table = table if table is not None else resolve_table(data_dir, cfg)
+        check_episode_fits(cfg, self.table.hours, str(self.table.source))
         self.market_hours, self._obs_template = market_inputs(self.table)
         self.codec = ActionCodec.from_config(cfg.market)
         self.weights = RewardWeights.from_config(cfg)
@@ -321,10 +322,7 @@ class SolarChainEnv(gym.Env):
     def decode_action(self, action: Any) -> tuple[float, float, float]:
         """The executed (α, ℓ, b) for a policy action (float32 values)."""
         if self.action_mode == "discrete":
-            index = int(np.asarray(action).reshape(-1)[0]) if np.ndim(action) else int(action)
-            if not 0 <= index < len(self._discrete_actions):
-                raise ValueError(f"discrete action {index} is outside 0..{len(self._discrete_actions) - 1}")
-            return self._discrete_actions[index]
+            return self._discrete_actions[discrete_index(action, len(self._discrete_actions))]
         return self.codec.decode(action)
 
     def step(self, action: Any):

@@ -51,8 +51,25 @@ def atomic_write_bytes(path: Path | str, data: bytes) -> Path:
     return _atomic_write(Path(path), lambda tmp: tmp.write_bytes(data))
 
 
+def _non_finite_at(value: Any, where: str = "") -> str | None:
+    """The path (``a.b[2]``) of the first NaN or ±inf float inside ``value``, if any."""
+    if isinstance(value, float):
+        return None if value - value == 0.0 else where or "<top level>"
+    items = value.items() if isinstance(value, dict) else enumerate(value) if isinstance(value, (list, tuple)) else ()
+    for key, item in items:
+        found = _non_finite_at(item, f"{where}[{key}]" if isinstance(key, int) else f"{where}.{key}".lstrip("."))
+        if found:
+            return found
+    return None
+
+
 def atomic_write_json(path: Path | str, payload: Any) -> Path:
-    return atomic_write_text(path, json.dumps(payload, indent=2, sort_keys=False, default=_json_default) + "\n")
+    """Write strict JSON (a NaN or ±inf is refused, naming where it is: other tools cannot read it)."""
+    where = _non_finite_at(payload)
+    if where is not None:
+        raise ValueError(f"{path}: refusing to write a non-finite number at {where} (strict JSON)")
+    text = json.dumps(payload, indent=2, sort_keys=False, default=_json_default, allow_nan=False)
+    return atomic_write_text(path, text + "\n")
 
 
 def atomic_write_csv(path: Path | str, frame: Any, **kwargs: Any) -> Path:

@@ -16,11 +16,11 @@ from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .config import BenchmarkConfig
+from .config import BenchmarkConfig, check_episode_fits
 from .data.table import HourlyTable
 from .env import STEP_INFO_KEYS, market_inputs, resolve_config, resolve_table, start_hours, step_info
 from .episodes import CHECKPOINT_EVERY, PRICE_NOISE_STD, EpisodeStream
-from .market.actions import ActionCodec, action_jitter_f32_batch
+from .market.actions import ActionCodec, action_jitter_f32_batch, discrete_indices
 from .market.dynamics import RewardWeights, market_step
 from .market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE
 from .market.ops import BATCH
@@ -65,6 +65,7 @@ class SolarChainVectorEnv(VectorEnv):
         self.config = cfg
         self.num_envs = int(num_envs)
         self.table = table if table is not None else resolve_table(data_dir, cfg)
+        check_episode_fits(cfg, self.table.hours, str(self.table.source))
         self.market_hours, self._obs_template = market_inputs(self.table)
         self.codec = ActionCodec.from_config(cfg.market)
         self.weights = RewardWeights.from_config(cfg)
@@ -221,12 +222,7 @@ class SolarChainVectorEnv(VectorEnv):
     # --- stepping -----------------------------------------------------------------------------
     def _decode(self, actions: Any) -> np.ndarray:
         if self._discrete is not None:
-            index = np.asarray(actions).reshape(-1)
-            if index.shape != (self.num_envs,):
-                raise ValueError(f"expected {self.num_envs} discrete actions, got shape {np.shape(actions)}")
-            if index.size and (index.min() < 0 or index.max() >= self._discrete.shape[1]):
-                raise ValueError(f"discrete actions must lie in 0..{self._discrete.shape[1] - 1}")
-            return self._discrete[:, index]
+            return self._discrete[:, discrete_indices(actions, self._discrete.shape[1], self.num_envs)]
         batch = np.asarray(actions)
         if batch.shape != (self.num_envs, 3):
             raise ValueError(f"expected actions of shape ({self.num_envs}, 3), got {batch.shape}")

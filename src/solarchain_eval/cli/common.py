@@ -14,7 +14,7 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
-from ..config import ConfigError
+from ..config import ConfigError, check_seeds
 from ..data.errors import DatasetError
 from ..data.weather import WeatherError
 
@@ -89,6 +89,13 @@ def parse_int_list(text: str, what: str) -> list[int]:
     if not values:
         raise CliError(f"no {what} given")
     return values
+
+
+def parse_seeds(text: str) -> list[int]:
+    """Comma-separated run seeds: distinct integers in 0..2**32 - 1."""
+    seeds = parse_int_list(text, "seeds")
+    check_seeds(seeds)
+    return seeds
 
 
 def results_table(summary: list[dict], title: str) -> Table:

@@ -19,7 +19,7 @@ from .common import (
     CliError,
     console,
     invoked_command,
-    parse_int_list,
+    parse_seeds,
     progress_bar,
     reports_errors,
     results_table,
@@ -108,7 +108,7 @@ def evaluate(
     governance = agentic_cli.options_from(locals(), agentic)
     spec = EvaluationSpec(
         policies=names,
-        run_seeds=parse_int_list(seeds, "seeds"),
+        run_seeds=parse_seeds(seeds),
         episodes=episodes,
         data_dir=data,
         no_physics_penalty=no_physics_penalty,
@@ -144,7 +144,7 @@ def run(
     cfg = BenchmarkConfig()
     spec = EvaluationSpec(
         policies=["static", "random", "myopic"],
-        run_seeds=parse_int_list(seeds, "seeds"),
+        run_seeds=parse_seeds(seeds),
         episodes=episodes,
         data_dir=dataset,
         config=cfg,

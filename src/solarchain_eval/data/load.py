@@ -1,12 +1,18 @@
-"""Load and validate a dataset directory (the four CSVs of docs/dataset.md).
+"""Load and validate a dataset directory (the four CSVs; see docs/dataset.md).
 
 Every problem is reported as one :class:`DatasetError` naming the file, the column and the
 first offending row (1-based data row; the file line is one more, for the header).
-Only the columns the benchmark reads are required.
+Only the columns the benchmark reads are required; the checks refuse anything that would
+silently change the results (a gap, a contradiction, a value rounded or summed into overflow).
 """
 
 from __future__ import annotations
 
+import csv
+import errno
+import io
+import re
+import stat
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -25,6 +31,14 @@ REQUIRED_COLUMNS = {
     TRADES_FILE: ("timestamp", "energy_purchased_MW"),
 }
 
+# Plausibility ceilings: far above any real reading, yet low enough that a month of sums stays finite.
+MAX_NODE_POWER_W = 1e9  # 1 GW, more than any single solar plant
+MAX_MARKET_MW = 1e6
+MAX_SLIPPAGE_PCT = 100.0
+
+# An ISO date and time that ends in a UTC offset ("Z", "+08:00", "-0500").
+_HAS_OFFSET = re.compile(r"^\s*\d{4}-\d{2}-\d{2}[T ].*(?:Z|[+-]\d{2}:?\d{2})\s*$")
+
 
 @dataclass(frozen=True)
 class RawDataset:
@@ -39,51 +53,123 @@ class RawDataset:
     hours: int
 
 
+# --- files -------------------------------------------------------------------------------------
+def _os_problem(error: OSError) -> str:
+    if isinstance(error, IsADirectoryError):
+        return "is a directory, not a file"
+    if isinstance(error, PermissionError):
+        return "permission denied (this user cannot read it)"
+    if isinstance(error, FileNotFoundError):
+        return "not found"
+    if error.errno == errno.ELOOP:
+        return "is a symbolic link loop (it never resolves to a real path)"
+    return f"cannot be read: {error.strerror or error}"
+
+
+def check_dataset_dir(data_dir: str | Path) -> Path:
+    """The dataset directory as a path, or a :class:`DatasetError` saying why it is not one."""
+    root = Path(data_dir)
+    try:
+        mode = root.stat().st_mode
+    except OSError as error:
+        problem = "dataset directory not found" if isinstance(error, FileNotFoundError) else _os_problem(error)
+        raise DatasetError(root, problem) from None
+    if not stat.S_ISDIR(mode):
+        raise DatasetError(root, "is a file, not a dataset directory (give the folder that holds the four CSVs)")
+    return root
+
+
+def _rows(path: Path) -> tuple[list[str], list[list[str]]]:
+    """Header and data rows of a UTF-8 CSV file (a byte-order mark is allowed); blank lines skipped."""
+    try:
+        raw = path.read_bytes()
+    except OSError as error:
+        problem = _os_problem(error)
+        if isinstance(error, FileNotFoundError):
+            problem = "file not found (a dataset needs " + ", ".join(REQUIRED_COLUMNS) + ")"
+        raise DatasetError(path, problem) from None
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as error:
+        raise DatasetError(path, f"not UTF-8 text (byte {raw[error.start]:#04x} at offset {error.start})") from None
+    try:
+        records = [row for row in csv.reader(io.StringIO(text, newline="")) if row]
+    except csv.Error as error:
+        raise DatasetError(path, f"not a readable CSV file: {error}") from None
+    if not records:
+        raise DatasetError(path, "the file is empty (no header line)")
+    return records[0], records[1:]
+
+
 def _read(root: Path, name: str) -> pd.DataFrame:
     path = root / name
-    if not path.is_file():
-        raise DatasetError(path, "file not found (a dataset needs " + ", ".join(REQUIRED_COLUMNS) + ")")
-    try:
-        frame = pd.read_csv(path, dtype=str, keep_default_na=False)
-    except (pd.errors.ParserError, UnicodeDecodeError, pd.errors.EmptyDataError) as error:
-        raise DatasetError(path, f"not a readable CSV file: {error}") from None
-    missing = [c for c in REQUIRED_COLUMNS[name] if c not in frame.columns]
+    header, rows = _rows(path)
+    seen: set[str] = set()
+    for column in header:
+        if column in seen:
+            raise DatasetError(path, "the column name appears twice in the header", column=column)
+        seen.add(column)
+    missing = [c for c in REQUIRED_COLUMNS[name] if c not in seen]
     if missing:
         raise DatasetError(path, f"missing column(s): {', '.join(missing)}", column=missing[0])
-    return frame
+    for index, row in enumerate(rows):
+        if len(row) != len(header):
+            column = header[min(len(row), len(header) - 1)]
+            raise DatasetError(
+                path, f"the row has {len(row)} fields, the header {len(header)} (a truncated or malformed line)", column, index
+            )
+    return pd.DataFrame(rows, columns=header, dtype=str)
 
 
+# --- columns -----------------------------------------------------------------------------------
 def _first(mask: np.ndarray) -> int | None:
     hits = np.flatnonzero(mask)
     return int(hits[0]) if hits.size else None
 
 
-def _numeric(frame: pd.DataFrame, path: Path, column: str, *, non_negative: bool, what: str = "power") -> np.ndarray:
+def _numeric(frame: pd.DataFrame, path: Path, column: str, *, maximum: float, what: str) -> np.ndarray:
+    """A non-negative finite column, at most ``maximum`` (a plausibility ceiling in the column's unit)."""
     text = frame[column]
     values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=np.float64)
     bad = _first(~np.isfinite(values))
     if bad is not None:
         shown = text.iloc[bad]
-        what = "empty" if shown.strip() == "" else f"'{shown}'"
-        raise DatasetError(path, f"value is {what}, not a finite number", column, bad)
-    if non_negative:
-        bad = _first(values < 0)
-        if bad is not None:
-            raise DatasetError(path, f"negative value {float(values[bad])!r} ({what} cannot be negative)", column, bad)
+        shown = "empty" if shown.strip() == "" else f"'{shown}'"
+        raise DatasetError(path, f"value is {shown}, not a finite number", column, bad)
+    bad = _first(values < 0)
+    if bad is not None:
+        raise DatasetError(path, f"negative value {float(values[bad])!r} ({what} cannot be negative)", column, bad)
+    bad = _first(values > maximum)
+    if bad is not None:
+        raise DatasetError(path, f"value {float(values[bad])!r} is implausibly large ({what} above {maximum:g})", column, bad)
     return values
 
 
 def _timestamps(frame: pd.DataFrame, path: Path) -> pd.DatetimeIndex:
     text = frame["timestamp"]
     parsed = pd.to_datetime(text, format="ISO8601", errors="coerce", utc=True)
-    bad = _first(parsed.isna().to_numpy())
+    unparsed = parsed.isna().to_numpy()
+    naive = ~text.str.match(_HAS_OFFSET).to_numpy()
+    bad = _first(unparsed | naive)
     if bad is not None:
-        raise DatasetError(path, f"'{text.iloc[bad]}' is not an ISO timestamp", "timestamp", bad)
+        if unparsed[bad]:
+            raise DatasetError(path, f"'{text.iloc[bad]}' is not an ISO timestamp", "timestamp", bad)
+        raise DatasetError(
+            path,
+            f"'{text.iloc[bad]}' has no UTC offset (a naive time is ambiguous; write e.g. 2026-04-01T00:00:00+08:00)",
+            "timestamp",
+            bad,
+        )
     return pd.DatetimeIndex(parsed)
 
 
-def _hours_since(stamps: pd.DatetimeIndex, first: pd.Timestamp) -> np.ndarray:
-    return ((stamps - first) / pd.Timedelta(hours=1)).to_numpy(dtype=np.float64)
+def _whole_hours(stamps: pd.DatetimeIndex, first: pd.Timestamp, frame: pd.DataFrame, path: Path) -> np.ndarray:
+    """Whole hours since ``first``; a time between two hours is an error, never rounded."""
+    hours = ((stamps - first) / pd.Timedelta(hours=1)).to_numpy(dtype=np.float64)
+    bad = _first(hours != np.round(hours))
+    if bad is not None:
+        raise DatasetError(path, f"'{frame['timestamp'].iloc[bad]}' is not on the hour", "timestamp", bad)
+    return hours.astype(np.int64)
 
 
 def _booleans(frame: pd.DataFrame, path: Path, column: str) -> np.ndarray:
@@ -95,82 +181,111 @@ def _booleans(frame: pd.DataFrame, path: Path, column: str) -> np.ndarray:
     return text.isin(["true", "1"]).to_numpy()
 
 
-def load_raw_dataset(data_dir: str | Path) -> RawDataset:
-    """Read and validate the four CSVs of a dataset directory."""
-    root = Path(data_dir)
-    if not root.is_dir():
-        raise DatasetError(root, "dataset directory not found")
-    nodes = _read(root, NODES_FILE)
-    generation = _read(root, GENERATION_FILE)
-    market = _read(root, MARKET_FILE)
-    trades = _read(root, TRADES_FILE)
+# --- generation --------------------------------------------------------------------------------
+def _data_window(generation: pd.DataFrame, path: Path) -> tuple[pd.Timestamp, np.ndarray]:
+    """The first hour (in the data's own UTC offset, that of its first record) and each row's hour."""
+    if len(generation) == 0:
+        raise DatasetError(path, "the file has no data rows")
+    stamps = _timestamps(generation, path)
+    earliest = int(np.argmin(stamps.asi8))
+    first = stamps[earliest].tz_convert(pd.Timestamp(generation["timestamp"].iloc[0]).tzinfo)
+    if first != first.normalize():
+        # Hour of day is counted from the first hour, so a 06:00 start would make 06:00 "hour 0".
+        raise DatasetError(
+            path, f"the data starts at {first.isoformat()}, not at local midnight", "timestamp", earliest
+        )
+    return first, _whole_hours(stamps, first, generation, path)
 
-    nodes_path, gen_path = root / NODES_FILE, root / GENERATION_FILE
-    market_path, trades_path = root / MARKET_FILE, root / TRADES_FILE
 
+def _check_nodes(nodes: pd.DataFrame, generation: pd.DataFrame, nodes_path: Path, gen_path: Path) -> None:
+    """Every generation row names a listed node in that node's city; every node has records."""
     duplicated = _first(nodes["node_id"].duplicated().to_numpy())
     if duplicated is not None:
         raise DatasetError(nodes_path, f"node '{nodes['node_id'].iloc[duplicated]}' is listed twice", "node_id", duplicated)
-    if len(generation) == 0:
-        raise DatasetError(gen_path, "the file has no data rows")
-
-    # Generation rows.
-    stamps = _timestamps(generation, gen_path)
-    # Report times in the data's own UTC offset (that of its first record).
-    first = stamps.min().tz_convert(pd.Timestamp(generation["timestamp"].iloc[0]).tzinfo)
-    hours_float = _hours_since(stamps, first)
-    bad = _first(hours_float != np.round(hours_float))
-    if bad is not None:
-        raise DatasetError(gen_path, f"'{generation['timestamp'].iloc[bad]}' is not on the hour", "timestamp", bad)
-    absolute_hour = hours_float.astype(np.int64)
-    p_max = _numeric(generation, gen_path, "P_max_W", non_negative=True)
-    p_reported = _numeric(generation, gen_path, "P_reported_W", non_negative=True)
-    fdia = _booleans(generation, gen_path, "fdia_detected")
-    status = generation["verification_status"].str.strip()
-    bad = _first(~status.isin(VALID_STATUSES).to_numpy())
-    if bad is not None:
-        raise DatasetError(
-            gen_path,
-            f"unknown verification status '{generation['verification_status'].iloc[bad]}' "
-            f"(expected one of {', '.join(VALID_STATUSES)})",
-            "verification_status",
-            bad,
-        )
     unknown = _first(~generation["node_id"].isin(nodes["node_id"]).to_numpy())
     if unknown is not None:
         raise DatasetError(
             gen_path, f"node '{generation['node_id'].iloc[unknown]}' is not in {NODES_FILE}", "node_id", unknown
         )
-    duplicated = _first(pd.Series(list(zip(generation["node_id"], absolute_hour))).duplicated().to_numpy())
+    absent = _first(~nodes["node_id"].isin(generation["node_id"]).to_numpy())
+    if absent is not None:
+        raise DatasetError(nodes_path, f"node '{nodes['node_id'].iloc[absent]}' has no records in {GENERATION_FILE}", "node_id", absent)
+    listed_city = generation["node_id"].map(nodes.set_index("node_id")["city"])
+    contradicts = (generation["city"] != listed_city).to_numpy()
+    if not contradicts.any():
+        return
+    by_node = pd.DataFrame({"node": generation["node_id"], "bad": contradicts, "city": generation["city"]}).groupby("node")
+    # A node whose rows all agree on another city: the nodes file is the one at fault.
+    wrong_in_nodes_file = by_node["bad"].all() & (by_node["city"].nunique() == 1)
+    blamed = _first(nodes["node_id"].map(wrong_in_nodes_file).fillna(False).to_numpy(dtype=bool))
+    if blamed is not None:
+        node = nodes["node_id"].iloc[blamed]
+        other = generation["city"][generation["node_id"] == node].iloc[0]
+        raise DatasetError(
+            nodes_path,
+            f"node '{node}' is in city '{nodes['city'].iloc[blamed]}' here but in '{other}' in {GENERATION_FILE}",
+            "city",
+            blamed,
+        )
+    row = _first(contradicts)
+    raise DatasetError(
+        gen_path,
+        f"city '{generation['city'].iloc[row]}' contradicts node '{generation['node_id'].iloc[row]}''s city "
+        f"'{listed_city.iloc[row]}' in {NODES_FILE}",
+        "city",
+        row,
+    )
+
+
+def _first_gap(hours_present: np.ndarray, hours: int) -> int | None:
+    present = np.zeros(hours, dtype=bool)
+    present[hours_present] = True
+    return _first(~present)
+
+
+def _check_coverage(generation: pd.DataFrame, absolute_hour: np.ndarray, first: pd.Timestamp, path: Path) -> int:
+    """One record per node and hour over the whole window; returns the number of hours."""
+    keys = pd.DataFrame({"node": generation["node_id"].to_numpy(), "hour": absolute_hour})
+    duplicated = _first(keys.duplicated().to_numpy())
     if duplicated is not None:
         raise DatasetError(
-            gen_path,
+            path,
             f"duplicate record for node '{generation['node_id'].iloc[duplicated]}' at "
             f"{generation['timestamp'].iloc[duplicated]}",
             "timestamp",
             duplicated,
         )
     hours = int(absolute_hour.max()) + 1
-    present = np.zeros(hours, dtype=bool)
-    present[absolute_hour] = True
-    if not present.all():
-        gap = int(np.flatnonzero(~present)[0])
-        raise DatasetError(
-            gen_path, f"missing hour {(first + pd.Timedelta(hours=gap)).isoformat()} (no records at all)", "timestamp"
-        )
-    cities = sorted(generation["city"].unique())
-    for city in cities:
-        city_hours = np.zeros(hours, dtype=bool)
-        city_hours[absolute_hour[(generation["city"] == city).to_numpy()]] = True
-        if not city_hours.all():
-            gap = int(np.flatnonzero(~city_hours)[0])
-            raise DatasetError(
-                gen_path,
-                f"city '{city}' has no records at {(first + pd.Timedelta(hours=gap)).isoformat()} (missing hour)",
-                "timestamp",
-            )
 
-    gen = pd.DataFrame(
+    def when(hour: int) -> str:
+        return (first + pd.Timedelta(hours=hour)).isoformat()
+
+    gap = _first_gap(absolute_hour, hours)
+    if gap is not None:
+        raise DatasetError(path, f"missing hour {when(gap)} (no records at all)", "timestamp")
+    for column, what in (("city", "city"), ("node_id", "node")):
+        for name, group in keys.groupby(generation[column].to_numpy(), sort=True):
+            gap = _first_gap(group["hour"].to_numpy(), hours)
+            if gap is not None:
+                raise DatasetError(path, f"{what} '{name}' has no records at {when(gap)} (missing hour)", "timestamp")
+    return hours
+
+
+def _generation_table(generation: pd.DataFrame, absolute_hour: np.ndarray, path: Path) -> pd.DataFrame:
+    p_max = _numeric(generation, path, "P_max_W", maximum=MAX_NODE_POWER_W, what="power, W,")
+    p_reported = _numeric(generation, path, "P_reported_W", maximum=MAX_NODE_POWER_W, what="power, W,")
+    fdia = _booleans(generation, path, "fdia_detected")
+    status = generation["verification_status"].str.strip()
+    bad = _first(~status.isin(VALID_STATUSES).to_numpy())
+    if bad is not None:
+        raise DatasetError(
+            path,
+            f"unknown verification status '{generation['verification_status'].iloc[bad]}' "
+            f"(expected one of {', '.join(VALID_STATUSES)})",
+            "verification_status",
+            bad,
+        )
+    return pd.DataFrame(
         {
             "absolute_hour": absolute_hour,
             "node_id": generation["node_id"].to_numpy(),
@@ -182,50 +297,78 @@ def load_raw_dataset(data_dir: str | Path) -> RawDataset:
         }
     )
 
-    # Market rows: exactly one per hour of the window.
-    market_stamps = _timestamps(market, market_path)
-    market_hours = _hours_since(market_stamps, first)
-    outside = _first((market_hours < 0) | (market_hours > hours - 1) | (market_hours != np.round(market_hours)))
+
+# --- market and trades -------------------------------------------------------------------------
+def _market_table(market: pd.DataFrame, first: pd.Timestamp, hours: int, path: Path) -> pd.DataFrame:
+    """Exactly one market row per hour of the window."""
+    market_hours = _whole_hours(_timestamps(market, path), first, market, path)
+    outside = _first((market_hours < 0) | (market_hours > hours - 1))
     if outside is not None:
         raise DatasetError(
-            market_path, f"timestamp {market['timestamp'].iloc[outside]} is outside the data window", "timestamp", outside
+            path, f"timestamp {market['timestamp'].iloc[outside]} is outside the data window", "timestamp", outside
         )
-    market_hours_int = market_hours.astype(np.int64)
-    duplicated = _first(pd.Series(market_hours_int).duplicated().to_numpy())
+    duplicated = _first(pd.Series(market_hours).duplicated().to_numpy())
     if duplicated is not None:
-        raise DatasetError(market_path, f"hour {market['timestamp'].iloc[duplicated]} appears twice", "timestamp", duplicated)
-    if len(market_hours_int) != hours:
-        have = np.zeros(hours, dtype=bool)
-        have[market_hours_int] = True
-        gap = int(np.flatnonzero(~have)[0])
-        raise DatasetError(market_path, f"missing hour {(first + pd.Timedelta(hours=gap)).isoformat()}", "timestamp")
-    mkt = pd.DataFrame(
+        raise DatasetError(path, f"hour {market['timestamp'].iloc[duplicated]} appears twice", "timestamp", duplicated)
+    gap = _first_gap(market_hours, hours)
+    if gap is not None:
+        raise DatasetError(path, f"missing hour {(first + pd.Timedelta(hours=gap)).isoformat()}", "timestamp")
+    return pd.DataFrame(
         {
-            "absolute_hour": market_hours_int,
-            "total_verified_MW": _numeric(market, market_path, "total_verified_MW", non_negative=True),
+            "absolute_hour": market_hours,
+            "total_verified_MW": _numeric(market, path, "total_verified_MW", maximum=MAX_MARKET_MW, what="power, MW,"),
             "slippage_solarchain_pct": _numeric(
-                market, market_path, "slippage_solarchain_pct", non_negative=True, what="slippage"
+                market, path, "slippage_solarchain_pct", maximum=MAX_SLIPPAGE_PCT, what="slippage, %,"
             ),
         }
     ).sort_values("absolute_hour", kind="stable")
 
-    # Trades: inside the window, non-negative energy.
-    if len(trades):
-        trade_stamps = _timestamps(trades, trades_path)
-        trade_hours = np.round(_hours_since(trade_stamps, first))
-        outside = _first((trade_hours < 0) | (trade_hours > hours - 1))
-        if outside is not None:
-            last = (first + pd.Timedelta(hours=hours - 1)).isoformat()
-            raise DatasetError(
-                trades_path,
-                f"trade at {trades['timestamp'].iloc[outside]} is outside the data window "
-                f"[{first.isoformat()}, {last}]",
-                "timestamp",
-                outside,
-            )
-        energy = _numeric(trades, trades_path, "energy_purchased_MW", non_negative=True, what="energy")
-    else:
-        trade_hours, energy = np.zeros(0), np.zeros(0)
-    trd = pd.DataFrame({"absolute_hour": trade_hours.astype(np.int64), "energy_purchased_MW": energy})
 
+def _trades_table(trades: pd.DataFrame, first: pd.Timestamp, hours: int, path: Path) -> pd.DataFrame:
+    """Trades on the hour inside the window, non-negative energy."""
+    if len(trades) == 0:
+        return pd.DataFrame({"absolute_hour": np.zeros(0, dtype=np.int64), "energy_purchased_MW": np.zeros(0)})
+    trade_hours = _whole_hours(_timestamps(trades, path), first, trades, path)
+    outside = _first((trade_hours < 0) | (trade_hours > hours - 1))
+    if outside is not None:
+        last = (first + pd.Timedelta(hours=hours - 1)).isoformat()
+        raise DatasetError(
+            path,
+            f"trade at {trades['timestamp'].iloc[outside]} is outside the data window [{first.isoformat()}, {last}]",
+            "timestamp",
+            outside,
+        )
+    energy = _numeric(trades, path, "energy_purchased_MW", maximum=MAX_MARKET_MW, what="energy, MWh,")
+    return pd.DataFrame({"absolute_hour": trade_hours, "energy_purchased_MW": energy})
+
+
+def load_raw_dataset(data_dir: str | Path) -> RawDataset:
+    """Read and validate the four CSVs of a dataset directory.
+
+    Parameters
+    ----------
+    data_dir : str or Path
+        The dataset directory.
+
+    Returns
+    -------
+    RawDataset
+        The validated tables, each row tagged with its ``absolute_hour``.
+
+    Raises
+    ------
+    DatasetError
+        On the first problem found, naming the file, column and row.
+    """
+    root = check_dataset_dir(data_dir)
+    nodes, generation = _read(root, NODES_FILE), _read(root, GENERATION_FILE)
+    market, trades = _read(root, MARKET_FILE), _read(root, TRADES_FILE)
+    gen_path = root / GENERATION_FILE
+
+    first, absolute_hour = _data_window(generation, gen_path)
+    gen = _generation_table(generation, absolute_hour, gen_path)
+    _check_nodes(nodes, generation, root / NODES_FILE, gen_path)
+    hours = _check_coverage(generation, absolute_hour, first, gen_path)
+    mkt = _market_table(market, first, hours, root / MARKET_FILE)
+    trd = _trades_table(trades, first, hours, root / TRADES_FILE)
     return RawDataset(root=root, nodes=nodes, generation=gen, market=mkt, trades=trd, first_timestamp=first, hours=hours)

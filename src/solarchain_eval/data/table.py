@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from .files import DATASET_FILES
-from .load import RawDataset, load_raw_dataset
+from .load import RawDataset, check_dataset_dir, load_raw_dataset
 
 
 @dataclass(frozen=True, eq=False)
@@ -153,7 +153,7 @@ def dataset_fingerprint(data_dir: str | Path) -> str:
         try:
             stat = os.stat(path)
             digest.update(f"{name}:{stat.st_size}:{stat.st_mtime_ns}".encode())
-        except FileNotFoundError:
+        except OSError:  # unreadable or missing: load_raw_dataset names the problem
             digest.update(f"{name}:missing".encode())
     return digest.hexdigest()
 
@@ -167,7 +167,7 @@ def load_table(data_dir: str | Path) -> HourlyTable:
 
     Later calls for an unchanged directory return the same (read-only) object.
     """
-    fingerprint = dataset_fingerprint(data_dir)
+    fingerprint = dataset_fingerprint(check_dataset_dir(data_dir))
     with _LOCK:
         cached = _CACHE.get(fingerprint)
     if cached is not None:

@@ -158,3 +158,50 @@ def action_jitter_f32_batch(actions: np.ndarray, prev: np.ndarray) -> np.ndarray
     """J per sub-env of (3, N) float32 action arrays, in float32; returned as float64."""
     d = np.abs(actions - prev)
     return ((d[0] + d[1]) + d[2]).astype(np.float64)
+
+
+def _is_integer(value: Any) -> bool:
+    # bool is an int subclass in Python, but True is not an action index.
+    if isinstance(value, (bool, np.bool_)):
+        return False
+    if isinstance(value, (int, np.integer)):
+        return True
+    return isinstance(value, np.ndarray) and value.shape == () and np.issubdtype(value.dtype, np.integer)
+
+
+def discrete_index(action: Any, n_actions: int) -> int:
+    """The index of one discrete action, accepted as ``gymnasium.spaces.Discrete.contains`` would.
+
+    Parameters
+    ----------
+    action : int, numpy integer scalar or 0-d integer array
+        The action; bools, floats, strings, lists and vectors are refused.
+    n_actions : int
+        Size of the action space (indices ``0 .. n_actions - 1``).
+
+    Raises
+    ------
+    ValueError
+        If ``action`` is not an integer or is out of range.
+    """
+    if not _is_integer(action):
+        raise ValueError(
+            f"a discrete action must be an integer in 0..{n_actions - 1}, not {action!r} ({type(action).__name__})"
+        )
+    index = int(action)
+    if not 0 <= index < n_actions:
+        raise ValueError(f"discrete action {index} is outside 0..{n_actions - 1}")
+    return index
+
+
+def discrete_indices(actions: Any, n_actions: int, num_envs: int) -> np.ndarray:
+    """One discrete index per sub-env: an integer array of shape ``(num_envs,)`` in range (int64)."""
+    batch = np.asarray(actions) if not isinstance(actions, (str, bytes)) else np.asarray([actions])
+    if batch.shape != (num_envs,) or batch.dtype == np.bool_ or not np.issubdtype(batch.dtype, np.integer):
+        raise ValueError(
+            f"expected {num_envs} discrete actions as an integer array of shape ({num_envs},), "
+            f"got {batch.dtype} of shape {batch.shape}"
+        )
+    if batch.size and (batch.min() < 0 or batch.max() >= n_actions):
+        raise ValueError(f"discrete actions must lie in 0..{n_actions - 1}, got {batch.tolist()}")
+    return batch.astype(np.int64, copy=False)
