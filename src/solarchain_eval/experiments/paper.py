@@ -190,9 +190,21 @@ def run_paper(
             root / PAPER_METADATA_FILE,
             {**meta, "status": status, "complete": outcome.complete, "wall_s": round(outcome.wall_s, 3),
              "units": _unit_table(root, units, report), "combined": outcome.combined,
+             "combined_sha256": _combined_sha256(root, outcome.combined),
              "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed]},
         )
     return outcome
+
+
+def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str, str]]:
+    """sha256 of each combined file, so that ``report`` can tell they are this grid's."""
+    from ..io import sha256_file
+    from .layout import combined_dir
+
+    return {
+        s: {p.name: sha256_file(p) for p in sorted(combined_dir(root, s).iterdir()) if p.is_file() and not p.name.startswith(".")}
+        for s in settings
+    }
 
 
 def _task(spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit, command: list[str] | None) -> UnitTask:
