@@ -4,7 +4,7 @@ A command line may carry secrets in three places: URL user info (``https://user:
 URL query values (``?token=…``) and the value of any option whose name mentions a key, token,
 secret, password or credential (``--api-key sk-…``, ``--hf-token=…``). :func:`redact_command`
 replaces each with ``[redacted]``, as do the values of the API-key environment variables should
-they appear verbatim. See docs/run_directories.md.
+they appear verbatim. See docs/output_safety.md.
 """
 
 from __future__ import annotations
@@ -12,7 +12,6 @@ from __future__ import annotations
 import os
 import re
 from typing import Iterable, Sequence
-from urllib.parse import parse_qsl, urlencode, urlsplit, urlunsplit
 
 REDACTED = "[redacted]"
 #: Words of an option name (split at - and _) that make its value a secret ("tokens" is a count).
@@ -23,22 +22,18 @@ SECRET_ENV_VARS = ("SOLARCHAIN_LLM_API_KEY", "OPENAI_API_KEY")
 
 
 def redact_url(url: str) -> str:
-    """``url`` with its user info and every query value (and the fragment) replaced."""
-    try:
-        parts = urlsplit(url)
-        port = parts.port
-    except ValueError:
-        return REDACTED
-    netloc = parts.netloc
+    """``url`` with its user info, every query value and the fragment replaced (idempotent)."""
+    match = re.match(r"([A-Za-z][A-Za-z0-9+.-]*://)([^/?#]*)(.*)", url, re.DOTALL)
+    if match is None:
+        return url
+    scheme, netloc, rest = match.groups()
     if "@" in netloc:
-        host = parts.hostname or ""
-        netloc = f"{REDACTED}@{host}" + (f":{port}" if port else "")
-    query = parts.query
+        netloc = f"{REDACTED}@{netloc.rpartition('@')[2]}"
+    rest, hash_, fragment = rest.partition("#")
+    path, question, query = rest.partition("?")
     if query:
-        pairs = parse_qsl(query, keep_blank_values=True)
-        query = urlencode([(k, REDACTED) for k, _ in pairs], safe="[]") if pairs else REDACTED
-    fragment = REDACTED if parts.fragment else ""
-    return urlunsplit((parts.scheme, netloc, parts.path, query, fragment))
+        query = "&".join(f"{k}={REDACTED}" if eq else REDACTED for k, eq, _ in (part.partition("=") for part in query.split("&")))
+    return f"{scheme}{netloc}{path}{question}{query}{hash_}{REDACTED if fragment else ''}"
 
 
 def redact_text(text: str, secrets: Iterable[str | None] = ()) -> str:

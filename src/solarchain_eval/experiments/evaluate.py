@@ -3,7 +3,7 @@
 Inputs and the run directory are validated (dataset, policy names, config, ``--out``) before
 any work; the files are staged beside the run directory, ``run_metadata.json`` (with the sha256
 of every other file) last, and the whole directory is published by a rename
-(:class:`~.rundir.RunDirWriter`, see docs/run_directories.md).
+(:class:`~.rundir.RunDirWriter`, see docs/output_safety.md).
 """
 
 from __future__ import annotations

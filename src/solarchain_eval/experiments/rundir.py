@@ -1,4 +1,4 @@
-"""Writing a run directory so that it is one whole run or nothing (see docs/run_directories.md).
+"""Writing a run directory so that it is one whole run or nothing (see docs/output_safety.md).
 
 :class:`RunDirWriter` guards ``RUN_DIR`` for one writer:
 
