@@ -25,6 +25,7 @@ from ..data.default import default_dataset_dir
 from ..data.table import load_table
 from ..io import atomic_write_json
 from ..training import ALGOS, MODEL_FILE, differences
+from ..redaction import redact_command
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
 from .evaluate import dataset_provenance
@@ -254,7 +255,7 @@ def _metadata(spec: GridSpec, identity: dict, dataset: dict, data_dir: Path, com
         "data_dir": str(data_dir),
         "dataset": dataset,
         "execution": {"workers": workers, "ray_address": ray_address, "pid": os.getpid()},
-        "command": list(command or sys.argv),
+        "command": redact_command(command or sys.argv),
         "updated_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "git_commit": git_commit(),
         "package_versions": package_versions(),
