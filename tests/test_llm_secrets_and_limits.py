@@ -10,10 +10,25 @@ import sys
 import time
 
 import pytest
-from fake_openai import VALID_AUDIT, VALID_PLAN, FakeOpenAI, Reply, chat_body, default_responder, ok, schema_name
+from fake_openai import (
+    VALID_AUDIT,
+    VALID_PLAN,
+    FakeOpenAI,
+    Reply,
+    chat_body,
+    default_responder,
+    ok,
+    schema_name,
+)
 from typer.testing import CliRunner
 
-from solarchain_eval.agentic import CallSite, LLMSchemaError, LLMTransportError, StructuredLLM, resolve_llm_settings
+from solarchain_eval.agentic import (
+    CallSite,
+    LLMSchemaError,
+    LLMTransportError,
+    StructuredLLM,
+    resolve_llm_settings,
+)
 from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput
 from solarchain_eval.cli import app
 

@@ -14,7 +14,14 @@ import pytest
 from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
-from solarchain_eval.experiments.rundir import KILL_AT_ENV, KILL_POINTS, RunDirError, RunDirWriter, lock_path, verify_run_dir
+from solarchain_eval.experiments.rundir import (
+    KILL_AT_ENV,
+    KILL_POINTS,
+    RunDirError,
+    RunDirWriter,
+    lock_path,
+    verify_run_dir,
+)
 from solarchain_eval.report import ReportDataError, load_report_data
 
 CLI = [sys.executable, "-c", "from solarchain_eval.cli import main; main()"]
@@ -212,3 +219,15 @@ def test_report_shows_no_credentials_of_an_old_verbatim_command(finished, tmp_pa
     assert result.exit_code == 0, result.output
     html = (run / "report" / "index.html").read_text()
     assert "SECRET" not in html and "https://[redacted]@h/v1?token=[redacted]" in html
+
+
+def test_command_lines_are_redacted_and_redaction_is_idempotent(monkeypatch):
+    from solarchain_eval.redaction import redact_command
+
+    monkeypatch.setenv("OPENAI_API_KEY", "sk-env-key-123")
+    argv = ["solarchain-eval", "evaluate", "--llm-base-url", "http://u:pw@h:8080/v1?token=t1&x=2#f", "--api-key", "k1",
+            "--hf-token=t2", "--llm-max-output-tokens", "512", "--note", "key is sk-env-key-123"]
+    expected = ["solarchain-eval", "evaluate", "--llm-base-url", "http://[redacted]@h:8080/v1?token=[redacted]&x=[redacted]#[redacted]",
+                "--api-key", "[redacted]", "--hf-token=[redacted]", "--llm-max-output-tokens", "512", "--note", "key is [redacted]"]
+    assert redact_command(argv) == expected
+    assert redact_command(expected) == expected
