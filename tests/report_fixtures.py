@@ -9,6 +9,7 @@ tests can check the report's log- and metrics-based numbers against each other.
 
 from __future__ import annotations
 
+import hashlib
 import json
 from pathlib import Path
 
@@ -161,7 +162,14 @@ def make_paper_root(root: Path, seed: int = 5) -> Path:
         if logs:
             (folder / "agentic_logs.jsonl").write_text("".join(json.dumps(s) + "\n" for s in logs), encoding="utf-8")
     (root / "paper_metadata.json").write_text(
-        json.dumps({"grid": {"settings": list(SETTINGS)}, "dataset": {"data_dir": str(root / "no-such-data"), "files": {"market_liquidity.csv": "0" * 64}}}),
+        json.dumps({
+            "grid": {"settings": list(SETTINGS)},
+            "dataset": {"data_dir": str(root / "no-such-data"), "files": {"market_liquidity.csv": "0" * 64}},
+            "combined_sha256": {  # as the grid records them, so that the report trusts these files
+                s: {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted((root / "combined" / s).iterdir())}
+                for s in SETTINGS
+            },
+        }),
         encoding="utf-8",
     )
     return root

@@ -32,6 +32,7 @@ import numpy as np
 
 from .config import BenchmarkConfig
 from .io import atomic_write_csv, atomic_write_json, atomic_write_with
+from .redaction import redact_command
 from .versions import git_commit, package_versions
 
 ALGOS = ("ppo", "sac", "dqn")
@@ -334,7 +335,7 @@ def train(
             "torch_threads": spec.torch_threads,
             "resumed_from": resumed_from,
             "started_at": started_at,
-            "command": list(command if command is not None else sys.argv),
+            "command": redact_command(command if command is not None else sys.argv),
             "git_commit": git_commit(),
             "package_versions": package_versions(),
         },

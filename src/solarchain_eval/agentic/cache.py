@@ -16,7 +16,9 @@ Modes (``--llm-cache-mode``):
   recording replays without credentials or network.
 - ``replay``: never builds a client; a miss is a hard error.
 
-Only accepted responses (valid structured output) are recorded.
+Only accepted responses (valid structured output) are recorded. Entries are strict JSON
+(``NaN``/``Infinity`` are refused on write and on read) and never hold the API key: the client
+removes it from response bodies before they reach the cache.
 """
 
 from __future__ import annotations
@@ -44,6 +46,10 @@ def request_key(request: dict[str, Any]) -> str:
     return hashlib.sha256(canonical_json(request).encode("utf-8")).hexdigest()
 
 
+def _refuse_constant(name: str) -> Any:
+    raise ValueError(f"{name} is not strict JSON")
+
+
 class ResponseCache:
     """Entries under ``root``, one JSON file per request key."""
 
@@ -63,8 +69,8 @@ class ResponseCache:
         except OSError as error:
             raise LLMCacheError(f"cannot read cache entry {path}: {error}") from None
         try:
-            entry = json.loads(text)
-        except json.JSONDecodeError as error:
+            entry = json.loads(text, parse_constant=_refuse_constant)
+        except (json.JSONDecodeError, ValueError) as error:
             raise LLMCacheError(f"cache entry {path} is not valid JSON ({error}); delete it to re-record") from None
         if not isinstance(entry, dict) or entry.get("format") != ENTRY_FORMAT or entry.get("key") != key:
             raise LLMCacheError(f"cache entry {path} has an unknown format or the wrong key; delete it to re-record")
@@ -83,7 +89,7 @@ class ResponseCache:
         fd, tmp_name = tempfile.mkstemp(prefix=f".{key[:12]}.", suffix=".partial", dir=path.parent)
         try:
             with os.fdopen(fd, "w", encoding="utf-8") as handle:
-                handle.write(json.dumps(entry, indent=1, sort_keys=True, ensure_ascii=False) + "\n")
+                handle.write(json.dumps(entry, indent=1, sort_keys=True, ensure_ascii=False, allow_nan=False) + "\n")
                 handle.flush()
                 os.fsync(handle.fileno())
             os.chmod(tmp_name, 0o644)

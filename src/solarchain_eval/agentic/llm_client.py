@@ -6,7 +6,11 @@ other), an explicit timeout, retry count and output-token budget, and an optiona
 temperature (omitted unless given: reasoning models reject it). The response format is the
 strict JSON schema the SDK derives from the output model. Any failure raises a typed
 :class:`~solarchain_eval.agentic.errors.LLMError`; the API key is never logged, cached or
-shown in an error message.
+shown in an error message, even when the server echoes it (it is removed from the response
+body before anything reads or stores it). Each HTTP attempt is bounded in total time by
+:class:`~.deadline.DeadlineTransport`. Response bodies are stored as strict JSON: the
+non-standard constants ``NaN``/``Infinity`` a server may put in its envelope become ``null``
+(see docs/output_safety.md).
 """
 
 from __future__ import annotations
@@ -17,8 +21,8 @@ import time
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
 from pathlib import Path
-from typing import Any, Mapping, TypeVar
-from urllib.parse import urlsplit, urlunsplit
+from typing import Any, Callable, Mapping, TypeVar
+from urllib.parse import parse_qsl, urlsplit, urlunsplit
 
 from pydantic import BaseModel, SecretStr
 
@@ -61,7 +65,7 @@ class LLMSettings:
     temperature : float or None
         Sent only when given.
     timeout_s : float
-        Per-attempt timeout, seconds.
+        Total time of one attempt (connect, send, the whole answer), seconds.
     max_retries : int
         Retries of the SDK on connection errors, timeouts, 408/409/429 and 5xx answers.
     max_output_tokens : int
@@ -241,6 +245,12 @@ class StructuredLLM:
         key = self.settings.api_key
         return key.get_secret_value() if key is not None else None
 
+    def _hide(self, text: str) -> str:
+        """``text`` without the key or the credentials of the base URL (servers echo them)."""
+        for secret in (self._secret(), *_url_secrets(self.settings.base_url)):
+            text = redact(text, secret)
+        return text
+
     def _build_client(self) -> Any:
         secret = self._secret()
         if not secret:
@@ -250,11 +260,14 @@ class StructuredLLM:
             )
         import openai
 
+        from .deadline import DeadlineTransport
+
         return openai.OpenAI(
             api_key=secret,
             base_url=self.settings.base_url,
             timeout=self.settings.timeout_s,
             max_retries=self.settings.max_retries,
+            http_client=openai.DefaultHttpxClient(transport=DeadlineTransport(self.settings.timeout_s)),
         )
 
     def _call(self, request: dict[str, Any]) -> dict[str, Any]:
@@ -289,30 +302,54 @@ class StructuredLLM:
             ) from None
         except openai.APIStatusError as error:
             raise LLMTransportError(
-                f"HTTP {error.status_code} after {s.max_retries + 1} attempt(s): {redact(_short(error.message), self._secret())}"
+                f"HTTP {error.status_code} after {s.max_retries + 1} attempt(s): {self._hide(_short(error.message))}"
             ) from None
         except openai.APIConnectionError as error:
             raise LLMTransportError(
                 f"cannot connect to {safe_url(s.base_url) or 'the default endpoint'} after {s.max_retries + 1} "
-                f"attempt(s): {redact(_short(str(error.__cause__ or error)), self._secret())}"
+                f"attempt(s): {self._hide(_short(str(error.__cause__ or error)))}"
             ) from None
         except openai.OpenAIError as error:
-            raise LLMTransportError(redact(_short(str(error)), self._secret())) from None
+            raise LLMTransportError(self._hide(_short(str(error)))) from None
         latency_s = time.perf_counter() - started
         text = raw.http_response.text
         try:
-            body = json.loads(text)
-        except json.JSONDecodeError:
-            raise LLMSchemaError(f"the response body is not JSON: {redact(_short(text), self._secret())!r}") from None
+            # NaN/Infinity are not JSON (RFC 8259); stored as null so cache entries stay strict.
+            body = _redact_json(json.loads(text, parse_constant=lambda _name: None), self._hide)
+        except (json.JSONDecodeError, RecursionError):
+            raise LLMSchemaError(f"the response body is not JSON: {self._hide(_short(text))!r}") from None
         return {
             "request": request,
             "response": body,
             "latency_s": round(latency_s, 6),
-            "request_id": raw.request_id or (body.get("id") if isinstance(body, dict) else None),
+            "request_id": _redact_json(raw.request_id, self._hide) or (body.get("id") if isinstance(body, dict) else None),
             "retries": int(getattr(raw, "retries_taken", 0)),
             "model": body.get("model") if isinstance(body, dict) else None,
             "recorded_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         }
+
+
+def _redact_json(value: Any, hide: Callable[[str], str]) -> Any:
+    """``value`` with ``hide`` applied to every string in it (servers may echo the key)."""
+    if isinstance(value, str):
+        return hide(value)
+    if isinstance(value, list):
+        return [_redact_json(v, hide) for v in value]
+    if isinstance(value, dict):
+        return {hide(str(k)): _redact_json(v, hide) for k, v in value.items()}
+    return value
+
+
+def _url_secrets(url: str | None) -> list[str]:
+    """The password and query values of ``url`` (4+ characters: shorter ones are not secrets)."""
+    if not url:
+        return []
+    try:
+        parts = urlsplit(url)
+        values = [parts.password or "", *(v for _, v in parse_qsl(parts.query, keep_blank_values=True))]
+    except ValueError:
+        return []
+    return [v for v in values if len(v) >= 4]
 
 
 def _short(text: str, limit: int = 300) -> str:

@@ -143,4 +143,7 @@ def show_files(files: dict[str, Path], heading: str = "files") -> None:
 
 
 def invoked_command() -> list[str]:
-    return ["solarchain-eval", *sys.argv[1:]]
+    """The command line as it may be recorded: credentials redacted (see docs/output_safety.md)."""
+    from ..redaction import redact_command
+
+    return redact_command(["solarchain-eval", *sys.argv[1:]])

@@ -12,6 +12,7 @@ from ..config import BenchmarkConfig, load_config
 from ..data.default import default_dataset_dir
 from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, run_evaluation
 from ..experiments.records import summarize, metrics_frame
+from ..experiments.rundir import RunDirError, check_target
 from ..policies.registry import known_policies, parse_policy_list
 from . import app
 from . import agentic as agentic_cli
@@ -21,10 +22,16 @@ from .common import (
     invoked_command,
     parse_seeds,
     progress_bar,
+    register_user_error,
     reports_errors,
     results_table,
     say,
     show_files,
+)
+
+register_user_error(RunDirError)
+OVERWRITE = typer.Option(
+    False, "--overwrite", help="Replace an existing run directory as a whole (its old files are removed, never mixed in)."
 )
 
 _SEEDS = ",".join(str(s) for s in PAPER_SEEDS)
@@ -46,10 +53,12 @@ def _models(spec: Optional[list[str]]) -> dict[str, Path]:
     return models
 
 
-def _evaluate(spec: EvaluationSpec, out: Path, title: str) -> None:
+def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> None:
     total = len(spec.policies) * len(spec.run_seeds) * spec.episodes
     with progress_bar("evaluating", total) as advance:
-        outcome = run_evaluation(spec, out, on_episode=lambda _r: advance(1), command=invoked_command())
+        outcome = run_evaluation(
+            spec, out, on_episode=lambda _r: advance(1), command=invoked_command(), overwrite=overwrite
+        )
     summary = summarize(metrics_frame(outcome.results))
     console.print(results_table(summary, title))
     if spec.agentic is not None:
@@ -88,6 +97,7 @@ def evaluate(
     llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
     llm_cache: Optional[Path] = agentic_cli.LLM_CACHE,
     llm_cache_mode: Optional[str] = agentic_cli.LLM_CACHE_MODE,
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
 
@@ -101,6 +111,8 @@ def evaluate(
     and the run also writes agentic_logs.jsonl.
     """
     cfg = load_config(config) if config else BenchmarkConfig()
+    if out is not None:
+        check_target(out, overwrite=overwrite)  # before any work (checked again under the lock)
     try:
         names = parse_policy_list(policies)
     except ValueError as error:
@@ -124,7 +136,7 @@ def evaluate(
     except (ValueError, FileNotFoundError) as error:
         raise CliError(str(error)) from None
     label = "evaluate" if governance is None else f"evaluate-{spec.setting}"
-    _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation")
+    _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite)
 
 
 @app.command("run")
@@ -133,6 +145,7 @@ def run(
     out: Optional[Path] = typer.Option(None, "--out", help="Run directory (default: outputs/runs/<time>_baselines)."),
     episodes: int = typer.Option(PAPER_EPISODES, min=1, help="Episodes per run seed."),
     seeds: str = typer.Option(_SEEDS, help="Comma-separated run seeds."),
+    overwrite: bool = OVERWRITE,
 ) -> None:
     """The main job: evaluate the baselines on the embedded default dataset.
 
@@ -140,8 +153,10 @@ def run(
     into the user cache directory and reuses it afterwards; evaluates Static, Random and Myopic
     with the paper's protocol and prints the results table and the files written.
     """
-    dataset = default_dataset_dir()  # logs a one-line notice when it builds
     cfg = BenchmarkConfig()
+    out = out or _default_run_dir(cfg, "baselines")
+    check_target(out, overwrite=overwrite)
+    dataset = default_dataset_dir()  # logs a one-line notice when it builds
     spec = EvaluationSpec(
         policies=["static", "random", "myopic"],
         run_seeds=parse_seeds(seeds),
@@ -150,4 +165,4 @@ def run(
         config=cfg,
     )
     say(f"dataset: {dataset} (synthetic weather, the paper's cities and month)", err=False)
-    _evaluate(spec, out or _default_run_dir(cfg, "baselines"), "baselines on the embedded default dataset")
+    _evaluate(spec, out, "baselines on the embedded default dataset", overwrite)

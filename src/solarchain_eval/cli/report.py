@@ -41,6 +41,10 @@ def report(
     ),
     case: str = typer.Option("ppo:llm_no_physics", "--case", help="POLICY:SETTING searched first for the case-study audit trace."),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Draw the figures (PNG + SVG)."),
+    allow_unverified: bool = typer.Option(
+        False, "--allow-unverified",
+        help="Report files that their run metadata does not vouch for (sha256 mismatch, no metadata, left-overs), with a warning each.",
+    ),
 ) -> None:
     """Regenerate the paper's tables (Markdown, LaTeX booktabs, CSV) and figures (PNG, SVG) from a
     run, with cluster-bootstrap statistics, and write a self-contained ROOT/report/index.html.
@@ -63,7 +67,9 @@ def report(
         case_setting=case_setting,
     )
     with err_console.status("building the report..."):
-        outcome = build_report(root, out, formats=chosen, options=options, figures=figures)
+        outcome = build_report(
+            root, out, formats=chosen, options=options, figures=figures, allow_unverified=allow_unverified
+        )
     summary = Table(title=f"report for {root}", title_justify="left")
     summary.add_column("kind")
     summary.add_column("name")

@@ -1,14 +1,16 @@
 """The ``evaluate`` stage: policies × run seeds × episodes -> a run directory.
 
-Inputs are validated (dataset, policy names, config) before anything is written; every file
-is written atomically and ``run_metadata.json`` last, so a run directory with metadata is
-complete.
+Inputs and the run directory are validated (dataset, policy names, config, ``--out``) before
+any work; the files are staged beside the run directory, ``run_metadata.json`` (with the sha256
+of every other file) last, and the whole directory is published by a rename
+(:class:`~.rundir.RunDirWriter`, see docs/output_safety.md).
 """
 
 from __future__ import annotations
 
 import sys
 import time
+import uuid
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from datetime import datetime, timezone
@@ -17,13 +19,14 @@ from typing import Callable, Sequence
 
 from ..agentic.build import AgenticOptions, Governance
 from ..config import BenchmarkConfig
-from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.default import default_dataset_dir
+from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.table import HourlyTable, load_table
 from ..env import SolarChainEnv
 from ..io import atomic_write_json, sha256_file
 from ..policies.base import Policy
 from ..policies.registry import make_policy
+from ..redaction import redact_command
 from ..versions import git_commit, package_versions
 from .records import METADATA_FILE, write_records
 from .rollout import (
@@ -37,6 +40,7 @@ from .rollout import (
     setting_has_physics_penalty,
     setting_is_agentic,
 )
+from .rundir import RunDirWriter, kill_point
 
 PAPER_SEEDS = (20260511, 20260512, 20260513)
 PAPER_EPISODES = 30
@@ -95,7 +99,26 @@ def run_evaluation(
     *,
     on_episode: Callable[[EpisodeResult], None] | None = None,
     command: Sequence[str] | None = None,
+    overwrite: bool = False,
+    keep: Sequence[str] = (),
 ) -> EvaluationOutcome:
+    """Evaluate ``spec`` and publish the run directory ``run_dir`` as a whole.
+
+    Parameters
+    ----------
+    spec : EvaluationSpec
+    run_dir : Path
+        Must be absent or empty unless ``overwrite``; refused (``RunDirError``) before any work
+        if it is a file, unwritable, holds anything, or is being written by another live run.
+    on_episode : callable, optional
+        Called with each finished episode (progress bars).
+    command : sequence of str, optional
+        The command line to record (redacted of credentials); default ``sys.argv``.
+    overwrite : bool
+        Replace an existing run directory (its old files are removed, never mixed in).
+    keep : sequence of str
+        File names in ``run_dir`` owned by the caller (a grid unit's ``unit.json``), carried over.
+    """
     started = time.perf_counter()
     started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
@@ -107,6 +130,7 @@ def run_evaluation(
     envs: dict[str, SolarChainEnv] = {}
     results: list[EpisodeResult] = []
     with ExitStack() as stack:
+        writer = stack.enter_context(RunDirWriter(run_dir, overwrite=overwrite, keep=keep))
         if spec.agentic is not None:
             governance = stack.enter_context(Governance(spec.agentic, config.market))
             policies = [governance.wrap(policy) for policy in policies]
@@ -125,13 +149,34 @@ def run_evaluation(
                     on_episode=on_episode,
                 )
             )
+        assert writer.staging is not None
+        files = write_records(writer.staging, results, table.cities)
+        kill_point("staged")
+        wall_s = time.perf_counter() - started
+        metadata = _metadata(spec, config, table, results, files, command, started_at, wall_s, setting)
+        atomic_write_json(writer.staging / METADATA_FILE, metadata)
+        writer.publish()
+    files = {name: Path(run_dir) / name for name in [*files, METADATA_FILE]}
+    return EvaluationOutcome(run_dir=run_dir, results=results, files=files, wall_s=wall_s)
 
-    run_dir.mkdir(parents=True, exist_ok=True)
-    files = write_records(run_dir, results, table.cities)
-    wall_s = time.perf_counter() - started
-    metadata = {
+
+def _metadata(
+    spec: EvaluationSpec,
+    config: BenchmarkConfig,
+    table: HourlyTable,
+    results: list[EpisodeResult],
+    files: dict[str, Path],
+    command: Sequence[str] | None,
+    started_at: str,
+    wall_s: float,
+    setting: str,
+) -> dict:
+    return {
         "complete": True,
-        "command": list(command if command is not None else sys.argv),
+        "run_id": uuid.uuid4().hex,
+        # sha256 of every file this metadata vouches for; ``report`` verifies them.
+        "files": {name: sha256_file(path) for name, path in sorted(files.items())},
+        "command": redact_command(command if command is not None else sys.argv),
         "started_at": started_at,
         "wall_s": round(wall_s, 3),
         "git_commit": git_commit(),
@@ -147,8 +192,6 @@ def run_evaluation(
         "models": {k: str(v) for k, v in spec.models.items()},
         "config": config.model_dump(),
     }
-    files[METADATA_FILE] = atomic_write_json(run_dir / METADATA_FILE, metadata)
-    return EvaluationOutcome(run_dir=run_dir, results=results, files=files, wall_s=wall_s)
 
 
 def evaluate_agentic_unit(

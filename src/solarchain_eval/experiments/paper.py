@@ -25,6 +25,7 @@ from ..data.default import default_dataset_dir
 from ..data.table import load_table
 from ..io import atomic_write_json
 from ..training import ALGOS, MODEL_FILE, differences
+from ..redaction import redact_command
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
 from .evaluate import dataset_provenance
@@ -190,9 +191,21 @@ def run_paper(
             root / PAPER_METADATA_FILE,
             {**meta, "status": status, "complete": outcome.complete, "wall_s": round(outcome.wall_s, 3),
              "units": _unit_table(root, units, report), "combined": outcome.combined,
+             "combined_sha256": _combined_sha256(root, outcome.combined),
              "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed]},
         )
     return outcome
+
+
+def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str, str]]:
+    """sha256 of each combined file, so that ``report`` can tell they are this grid's."""
+    from ..io import sha256_file
+    from .layout import combined_dir
+
+    return {
+        s: {p.name: sha256_file(p) for p in sorted(combined_dir(root, s).iterdir()) if p.is_file() and not p.name.startswith(".")}
+        for s in settings
+    }
 
 
 def _task(spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit, command: list[str] | None) -> UnitTask:
@@ -242,7 +255,7 @@ def _metadata(spec: GridSpec, identity: dict, dataset: dict, data_dir: Path, com
         "data_dir": str(data_dir),
         "dataset": dataset,
         "execution": {"workers": workers, "ray_address": ray_address, "pid": os.getpid()},
-        "command": list(command or sys.argv),
+        "command": redact_command(command or sys.argv),
         "updated_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
         "git_commit": git_commit(),
         "package_versions": package_versions(),

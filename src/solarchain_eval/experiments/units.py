@@ -103,15 +103,15 @@ def model_digest(paths: dict[str, Path]) -> dict[str, str]:
 class _UnitLog:
     def __init__(self, path: Path) -> None:
         self.path = path
-        self._handle = open(path, "a", encoding="utf-8")
 
     def write(self, message: str) -> None:
         stamp = datetime.now().isoformat(timespec="seconds")
-        self._handle.write(f"{stamp} {message}\n")
-        self._handle.flush()
+        # Reopened per line: publishing an eval unit renames the directory under us.
+        with open(self.path, "a", encoding="utf-8") as handle:
+            handle.write(f"{stamp} {message}\n")
 
     def close(self) -> None:
-        self._handle.close()
+        return None
 
 
 def execute_unit(task: UnitTask, *, mark_done: bool = True) -> UnitResult:
@@ -196,7 +196,8 @@ def _evaluate_unit(task: UnitTask) -> None:
     )
     if spec.setting != unit.setting:
         raise ValueError(f"unit {unit.name}: the task evaluates setting {spec.setting!r}")
-    run_evaluation(spec, task.unit_dir, command=list(task.command))
+    # The unit directory is replaced as a whole; unit.json and unit.log are the grid's and carried over.
+    run_evaluation(spec, task.unit_dir, command=list(task.command), overwrite=True, keep=(UNIT_FILE, UNIT_LOG))
 
 
 def collect_files(unit_dir: Path) -> dict[str, bytes]:

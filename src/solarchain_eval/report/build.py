@@ -77,6 +77,7 @@ def build_report(
     formats: Sequence[str] = FORMATS,
     options: ReportOptions = ReportOptions(),
     figures: bool = True,
+    allow_unverified: bool = False,
 ) -> ReportOutcome:
     """Regenerate every table and figure the run at ``root`` supports.
 
@@ -92,18 +93,21 @@ def build_report(
         Resampling and selection options.
     figures
         Draw the figures (PNG + SVG); the HTML embeds them.
+    allow_unverified
+        Report files whose sha256 disagree with their metadata (or lack it), with a warning each.
 
     Raises
     ------
     ReportDataError
         The run's files are missing or malformed.
     """
-    data = load_report_data(Path(root))
+    data = load_report_data(Path(root), allow_unverified=allow_unverified)
     out = Path(out_dir) if out_dir is not None else Path(root) / REPORT_DIR
     tables = build_tables(data, options)
     drawn = build_figures(data, options, out / "figures") if figures else []
     warning = overlap_warning(data.metrics, options.cluster_by)
     outcome = ReportOutcome(out_dir=out, data=data, tables=tables, figures=drawn, warnings=[warning] if warning else [])
+    outcome.warnings[:0] = [f"UNVERIFIED INPUT: {problem}" for problem in data.unverified]
     outcome.files += [p for f in drawn if isinstance(f, FigureFile) for p in (f.png, f.svg)]
     for table in tables:
         if isinstance(table, ReportTable):

@@ -24,11 +24,14 @@ from ..experiments.layout import (
     METRICS_FILE,
     PAPER_METADATA_FILE,
     UNITS_DIR,
+    is_done,
     is_paper_root,
     run_table_paths,
 )
-from ..experiments.records import EPISODE_KEYS
+from ..experiments.records import EPISODE_KEYS, SUMMARY_FILE
+from ..experiments.rundir import verify_files, verify_run_dir
 from ..metrics import METRIC_NAMES
+from ..redaction import redact_command
 from .naming import SETTINGS
 
 #: Keys of one agentic log step that the report reads (the agentic contract has more).
@@ -79,6 +82,9 @@ class ReportData:
         ``run_metadata.json`` of every evaluation unit of a paper root, by unit name.
     sources
         The files read, by table name.
+    unverified
+        Why the files cannot be trusted as one run (see :func:`verify_report_inputs`); empty
+        unless loaded with ``allow_unverified``.
     """
 
     root: Path
@@ -90,6 +96,7 @@ class ReportData:
     metadata: dict[str, Any] = field(default_factory=dict)
     unit_metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
     sources: dict[str, list[Path]] = field(default_factory=dict)
+    unverified: list[str] = field(default_factory=list)
 
     @property
     def settings(self) -> list[str]:
@@ -198,11 +205,42 @@ def _read_json(path: Path) -> dict[str, Any]:
         raise ReportDataError(f"{path}: not valid JSON ({error.msg} at line {error.lineno})") from None
 
 
-def _unit_metadata(root: Path) -> dict[str, dict[str, Any]]:
+def _redacted(metadata: dict[str, Any]) -> dict[str, Any]:
+    """Metadata with its recorded command line redacted (older runs recorded it verbatim)."""
+    command = metadata.get("command") if isinstance(metadata, dict) else None
+    if isinstance(command, list):
+        return {**metadata, "command": redact_command(command)}
+    return metadata
+
+
+def _eval_units(root: Path) -> list[Path]:
     units = root / UNITS_DIR / "eval"
     if not units.is_dir():
-        return {}
-    return {unit.name: _read_json(unit / METADATA_FILE) for unit in sorted(units.iterdir()) if unit.is_dir()}
+        return []
+    # Dot-names are staging folders and locks of run directories being written.
+    return [unit for unit in sorted(units.iterdir()) if unit.is_dir() and not unit.name.startswith(".")]
+
+
+def _unit_metadata(root: Path) -> dict[str, dict[str, Any]]:
+    return {unit.name: _redacted(_read_json(unit / METADATA_FILE)) for unit in _eval_units(root)}
+
+
+def verify_report_inputs(root: Path, kind: str) -> list[str]:
+    """Why the files under ``root`` cannot be trusted as whole runs (empty when they can).
+
+    A run directory is checked against the sha256 of every file recorded in its
+    ``run_metadata.json``; a paper root checks each finished eval unit the same way and its
+    combined files against ``paper_metadata.json``'s ``combined_sha256``.
+    """
+    if kind == "run":
+        return verify_run_dir(root)
+    problems = [p for unit in _eval_units(root) if is_done(unit) for p in verify_run_dir(unit)]
+    meta_path = root / PAPER_METADATA_FILE
+    recorded = _read_json(meta_path).get("combined_sha256") or {}
+    names = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, SUMMARY_FILE)
+    for folder in sorted(p for p in (root / COMBINED_DIR).glob("*") if p.is_dir()):
+        problems += verify_files(folder, recorded.get(folder.name), meta_path, names)
+    return problems
 
 
 def _check_unique_rollouts(metrics: pd.DataFrame, paths: list[Path]) -> None:
@@ -216,13 +254,21 @@ def _check_unique_rollouts(metrics: pd.DataFrame, paths: list[Path]) -> None:
         )
 
 
-def load_report_data(root: Path) -> ReportData:
+def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportData:
     """Read and validate the run directory or paper root ``root``.
+
+    Parameters
+    ----------
+    root : Path
+    allow_unverified : bool
+        Load files that fail :func:`verify_report_inputs` anyway, listing the problems in
+        ``ReportData.unverified`` (the report shows them as warnings).
 
     Raises
     ------
     ReportDataError
-        ``root`` holds no metrics, or a file is malformed (the message says which and where).
+        ``root`` holds no metrics, a file is malformed (the message says which and where), or
+        (without ``allow_unverified``) the files are not vouched for as whole runs.
     """
     root = Path(root)
     if not root.is_dir():
@@ -243,6 +289,11 @@ def load_report_data(root: Path) -> ReportData:
     # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
     log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
     metadata_file = PAPER_METADATA_FILE if kind == "paper" else METADATA_FILE
+    # Checked after the files parse, so a malformed file gets the message naming its row.
+    unverified = verify_report_inputs(root, kind)
+    if unverified and not allow_unverified:
+        more = f" (and {len(unverified) - 1} more problem(s))" if len(unverified) > 1 else ""
+        raise ReportDataError(f"{unverified[0]}{more}; refusing to report (--allow-unverified reports anyway, with warnings)")
     return ReportData(
         root=root,
         kind=kind,
@@ -250,7 +301,7 @@ def load_report_data(root: Path) -> ReportData:
         actions=actions,
         city_hour=city_hour,
         logs=log_frame,
-        metadata=_read_json(root / metadata_file),
+        metadata=_redacted(_read_json(root / metadata_file)),
         unit_metadata=_unit_metadata(root) if kind == "paper" else {},
         sources={
             METRICS_FILE: metric_paths,
@@ -258,4 +309,5 @@ def load_report_data(root: Path) -> ReportData:
             CITY_HOUR_FILE: city_paths,
             AGENTIC_LOG_FILE: log_paths,
         },
+        unverified=unverified,
     )
