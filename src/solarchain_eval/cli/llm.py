@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import time
-from typing import Optional
 
 import typer
 from rich.table import Table
@@ -17,7 +16,7 @@ llm_app = typer.Typer(help="The local OpenAI-compatible model server (llama-cpp-
 app.add_typer(llm_app, name="llm")
 
 
-def _spec(model: Optional[str], port: int, parallel: int, threads: int) -> local_server.ServerSpec:
+def _spec(model: str | None, port: int, parallel: int, threads: int) -> local_server.ServerSpec:
     name, path = local_server.resolve_model(model)
     if path is None:
         path = local_server.default_model_path()  # raises with the install hint
@@ -27,7 +26,7 @@ def _spec(model: Optional[str], port: int, parallel: int, threads: int) -> local
 @llm_app.command("serve")
 @reports_errors
 def serve(
-    model: Optional[str] = typer.Option(None, "--model", help="A GGUF file (default: the bundled SmolLM2-135M-Instruct Q4_1)."),
+    model: str | None = typer.Option(None, "--model", help="A GGUF file (default: the bundled SmolLM2-135M-Instruct Q4_1)."),
     port: int = typer.Option(0, "--port", min=0, max=65535, help="Port on 127.0.0.1 (0: a free one)."),
     parallel: int = typer.Option(1, "--parallel", min=1, help="Requests in flight without interrupting each other."),
     threads: int = typer.Option(local_server.DEFAULT_THREADS, "--threads", min=1, help="CPU threads of the model."),
@@ -59,10 +58,10 @@ def serve(
 def bench_llm(
     calls: int = typer.Option(4, "--calls", min=1, help="Planner calls and auditor calls (each), alternating calm and risky situations."),
     llm_backend: str = agentic_cli.LLM_BACKEND,
-    llm_api: Optional[str] = agentic_cli.LLM_API,
-    llm_model: Optional[str] = agentic_cli.LLM_MODEL,
-    llm_base_url: Optional[str] = agentic_cli.LLM_BASE_URL,
-    llm_temperature: Optional[float] = agentic_cli.LLM_TEMPERATURE,
+    llm_api: str | None = agentic_cli.LLM_API,
+    llm_model: str | None = agentic_cli.LLM_MODEL,
+    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
+    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
     llm_timeout: float = agentic_cli.LLM_TIMEOUT,
     llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
 ) -> None:
