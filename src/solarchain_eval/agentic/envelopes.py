@@ -98,4 +98,5 @@ def read_responses(body: Any, output_type: type[T]) -> tuple[T, Usage]:
     return _validate(text, output_type), Usage(_tokens(usage, "input_tokens"), _tokens(usage, "output_tokens"))
 
 
-READERS = {"chat": read_chat, "responses": read_responses}
+#: ``chat-json-object`` answers in the Chat Completions envelope.
+READERS = {"chat": read_chat, "responses": read_responses, "chat-json-object": read_chat}

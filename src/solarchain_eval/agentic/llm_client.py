@@ -1,8 +1,9 @@
 """Structured calls to any OpenAI-compatible endpoint, with record/replay.
 
 Uses the official ``openai`` SDK (OpenAI, vLLM, Ollama, llama.cpp server, LM Studio, …) with
-an explicitly chosen API (``responses`` or ``chat``; never a silent fallback from one to the
-other), an explicit timeout, retry count and output-token budget, and an optional
+an explicitly chosen API (``responses``, ``chat`` with a ``json_schema`` response format, or
+``chat-json-object`` with a ``json_object`` format carrying the schema, for llama-cpp-python's
+server; never a silent fallback from one to another), an explicit timeout, retry count and output-token budget, and an optional
 temperature (omitted unless given: reasoning models reject it). The response format is the
 strict JSON schema the SDK derives from the output model. Any failure raises a typed
 :class:`~solarchain_eval.agentic.errors.LLMError`; the API key is never logged, cached or
@@ -41,7 +42,7 @@ from .schemas import response_format
 
 T = TypeVar("T", bound=BaseModel)
 
-LLM_APIS = ("responses", "chat")
+LLM_APIS = ("responses", "chat", "chat-json-object")
 DEFAULT_TIMEOUT_S = 60.0
 DEFAULT_MAX_RETRIES = 2
 DEFAULT_MAX_OUTPUT_TOKENS = 4096
@@ -56,7 +57,7 @@ class LLMSettings:
 
     Attributes
     ----------
-    api : {"responses", "chat"}
+    api : {"responses", "chat", "chat-json-object"}
     model : str
     base_url : str or None
         None selects the SDK's default endpoint (api.openai.com).
@@ -70,6 +71,9 @@ class LLMSettings:
         Retries of the SDK on connection errors, timeouts, 408/409/429 and 5xx answers.
     max_output_tokens : int
         Output-token budget per call (reasoning tokens included).
+    seed : int or None
+        Sampling seed, sent (and part of the cache key) only when given; llama.cpp servers
+        honour it.
     """
 
     api: str
@@ -80,6 +84,7 @@ class LLMSettings:
     timeout_s: float = DEFAULT_TIMEOUT_S
     max_retries: int = DEFAULT_MAX_RETRIES
     max_output_tokens: int = DEFAULT_MAX_OUTPUT_TOKENS
+    seed: int | None = None
 
     def describe(self) -> dict[str, Any]:
         """The settings for run metadata: no key, and no credentials inside the URL."""
@@ -91,6 +96,7 @@ class LLMSettings:
             "timeout_s": self.timeout_s,
             "max_retries": self.max_retries,
             "max_output_tokens": self.max_output_tokens,
+            "seed": self.seed,
         }
 
 
@@ -122,6 +128,7 @@ def resolve_llm_settings(
     max_retries: int = DEFAULT_MAX_RETRIES,
     max_output_tokens: int = DEFAULT_MAX_OUTPUT_TOKENS,
     environ: Mapping[str, str] | None = None,
+    seed: int | None = None,
 ) -> LLMSettings:
     """Settings from explicit values, else ``SOLARCHAIN_LLM_*``, else ``OPENAI_*`` variables.
 
@@ -134,7 +141,8 @@ def resolve_llm_settings(
     if api not in LLM_APIS:
         raise LLMConfigError(
             f"choose the API explicitly with --llm-api responses (OpenAI's Responses API) or "
-            f"--llm-api chat (Chat Completions, what most OpenAI-compatible servers speak); got {api!r}"
+            f"--llm-api chat (Chat Completions, what most OpenAI-compatible servers speak) or --llm-api "
+            f"chat-json-object (llama-cpp-python's server); got {api!r}"
         )
     model = model or _first_env(MODEL_VARS, env)
     if not model:
@@ -157,6 +165,7 @@ def resolve_llm_settings(
         timeout_s=float(timeout_s),
         max_retries=int(max_retries),
         max_output_tokens=int(max_output_tokens),
+        seed=None if seed is None else int(seed),
     )
 
 
@@ -207,12 +216,15 @@ class StructuredLLM:
 
     def canonical_request(self, messages: list[dict[str, str]], output_type: type[BaseModel]) -> dict[str, Any]:
         s = self.settings
+        parameters: dict[str, Any] = {"temperature": s.temperature, "max_output_tokens": s.max_output_tokens}
+        if s.seed is not None:  # only when set, so recordings made without a seed keep their keys
+            parameters["seed"] = s.seed
         return {
             "api": s.api,
             "model": s.model,
             "messages": messages,
             "schema": response_format(output_type, s.api),
-            "parameters": {"temperature": s.temperature, "max_output_tokens": s.max_output_tokens},
+            "parameters": parameters,
         }
 
     # --- internals --------------------------------------------------------------------------
@@ -278,9 +290,21 @@ class StructuredLLM:
         s = self.settings
         params = request["parameters"]
         optional = {} if params["temperature"] is None else {"temperature": params["temperature"]}
+        if "seed" in params:
+            optional["seed"] = params["seed"]
         started = time.perf_counter()
         try:
-            if s.api == "chat":
+            if s.api == "chat-json-object":
+                # llama-cpp-python reads max_tokens (not max_completion_tokens) and turns the
+                # json_object format's schema into a grammar.
+                raw = self._client.chat.completions.with_raw_response.create(
+                    model=request["model"],
+                    messages=request["messages"],
+                    response_format=request["schema"],
+                    max_tokens=params["max_output_tokens"],
+                    **optional,
+                )
+            elif s.api == "chat":
                 raw = self._client.chat.completions.with_raw_response.create(
                     model=request["model"],
                     messages=request["messages"],

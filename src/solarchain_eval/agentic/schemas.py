@@ -23,6 +23,9 @@ from .errors import LLMConfigError
 #: Maximum lengths of the free-text fields (characters); longer text is cut and logged.
 GOVERNANCE_MODE_MAX_CHARS = 64
 TEXT_MAX_CHARS = 2000
+#: ``maxLength`` of the free-text fields in the ``json_object`` schema: a grammar-constrained
+#: local model otherwise runs on in them until the token budget ends (see docs/llm.md).
+SCHEMA_TEXT_MAX_CHARS = {"governance_mode": 32, "rationale": 200, "reason": 160}
 
 #: Audit-policy ranges (docs/planner_auditor.md#schemas; the two integer ranges end at the episode length).
 VIOLATION_THRESHOLD_RANGE = (0.0, 1.0)
@@ -108,9 +111,12 @@ def response_format(output_type: type[BaseModel], api: str) -> dict[str, Any]:
     Parameters
     ----------
     output_type : PlannerOutput or AuditorOutput
-    api : {"chat", "responses"}
+    api : {"chat", "responses", "chat-json-object"}
         ``chat`` gives the ``response_format`` parameter of Chat Completions, ``responses`` the
-        ``text.format`` parameter of the Responses API (what ``.parse()`` would send).
+        ``text.format`` parameter of the Responses API (what ``.parse()`` would send), and
+        ``chat-json-object`` the ``{"type": "json_object", "schema": ...}`` form that
+        llama-cpp-python's server turns into a grammar (it refuses ``json_schema``), with
+        ``maxLength`` on the free-text fields.
     """
     try:
         from openai.lib._parsing._completions import type_to_response_format_param
@@ -121,7 +127,26 @@ def response_format(output_type: type[BaseModel], api: str) -> dict[str, Any]:
         return dict(type_to_response_format_param(output_type))
     if api == "responses":
         return dict(type_to_text_format_param(output_type))
-    raise LLMConfigError(f"unknown LLM API {api!r} (choose 'responses' or 'chat')")
+    if api == "chat-json-object":
+        schema = dict(type_to_response_format_param(output_type))["json_schema"]["schema"]
+        return {"type": "json_object", "schema": capped_schema(schema)}
+    raise LLMConfigError(f"unknown LLM API {api!r} (choose 'responses', 'chat' or 'chat-json-object')")
+
+
+def capped_schema(schema: Any) -> Any:
+    """A copy of ``schema`` with ``maxLength`` on the free-text fields of :data:`SCHEMA_TEXT_MAX_CHARS`."""
+    if isinstance(schema, list):
+        return [capped_schema(item) for item in schema]
+    if not isinstance(schema, dict):
+        return schema
+    out = {key: capped_schema(value) for key, value in schema.items()}
+    properties = out.get("properties")
+    if isinstance(properties, dict):
+        for name, limit in SCHEMA_TEXT_MAX_CHARS.items():
+            field_schema = properties.get(name)
+            if isinstance(field_schema, dict) and field_schema.get("type") == "string":
+                properties[name] = {**field_schema, "maxLength": limit}
+    return out
 
 
 # --- validated forms -------------------------------------------------------------------------

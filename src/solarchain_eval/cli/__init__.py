@@ -30,6 +30,7 @@ from . import paper as _paper  # noqa: E402
 from . import report as _report  # noqa: E402
 from . import bench as _bench  # noqa: E402
 from . import bench_train as _bench_train  # noqa: E402
+from . import llm as _llm  # noqa: E402
 
 
 def main() -> None:

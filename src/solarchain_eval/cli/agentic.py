@@ -17,6 +17,7 @@ from ..agentic import AgenticOptions, LLMError, LLMOptions, resolve_llm_settings
 from ..agentic.auditor import AUDITOR_KINDS
 from ..agentic.cache import CACHE_MODES
 from ..agentic.llm_client import DEFAULT_MAX_OUTPUT_TOKENS, DEFAULT_MAX_RETRIES, DEFAULT_TIMEOUT_S, LLM_APIS
+from ..agentic import local_server
 from ..agentic.planner import PLANNER_KINDS
 from .common import CliError, register_user_error
 
@@ -39,15 +40,29 @@ PLANNER = typer.Option(
 AUDITOR = typer.Option(
     None, "--auditor", help=f"Auditor: {' | '.join(AUDITOR_KINDS)} (default rule).", rich_help_panel=_PANEL
 )
+LLM_BACKEND_CHOICES = ("remote", "local")
+LLM_BACKEND = typer.Option(
+    "remote",
+    "--llm-backend",
+    help="remote: the endpoint of --llm-base-url. local: start llama-cpp-python's server with --llm-model "
+    "(default: the bundled SmolLM2-135M-Instruct; or a GGUF path) on 127.0.0.1 for the run and stop it after; "
+    "no key or network needed (needs solarchain-eval\\[llm]). See docs/llm.md.",
+    rich_help_panel=_PANEL,
+)
 LLM_API = typer.Option(
     None,
     "--llm-api",
-    help="responses (OpenAI's Responses API) or chat (Chat Completions: vLLM, Ollama, llama.cpp, LM Studio). "
-    "Required for an llm planner or auditor; never switched silently.",
+    help="responses (OpenAI's Responses API), chat (Chat Completions with a json_schema format: OpenAI, vLLM, "
+    "Ollama, llama-server) or chat-json-object (json_object format with the schema: llama-cpp-python's server; "
+    "the default with --llm-backend local). Required for a remote llm planner or auditor; never switched silently.",
     rich_help_panel=_PANEL,
 )
 LLM_MODEL = typer.Option(
-    None, "--llm-model", help="Model name (default: $SOLARCHAIN_LLM_MODEL, then $OPENAI_MODEL).", rich_help_panel=_PANEL
+    None,
+    "--llm-model",
+    help="Model name (default: $SOLARCHAIN_LLM_MODEL, then $OPENAI_MODEL); with --llm-backend local a GGUF path "
+    "(default: the bundled model).",
+    rich_help_panel=_PANEL,
 )
 LLM_BASE_URL = typer.Option(
     None,
@@ -81,6 +96,7 @@ LLM_CACHE_MODE = typer.Option(
 def agentic_options(
     *,
     agentic: str,
+    llm_backend: str = "remote",
     planner: Optional[str],
     auditor: Optional[str],
     llm_api: Optional[str],
@@ -114,8 +130,15 @@ def agentic_options(
         raise CliError(f"--llm-cache-mode must be one of {', '.join(CACHE_MODES)}, got '{mode}'")
     if llm_api is not None and llm_api not in LLM_APIS:
         raise CliError(f"--llm-api must be one of {', '.join(LLM_APIS)}, got '{llm_api}'")
+    if llm_backend not in LLM_BACKEND_CHOICES:
+        raise CliError(f"--llm-backend must be one of {', '.join(LLM_BACKEND_CHOICES)}, got '{llm_backend}'")
     llm = None
-    if uses_llm:
+    if uses_llm and llm_backend == "local":
+        settings = _local_settings(llm_api, llm_model, llm_base_url, llm_temperature, llm_timeout, llm_max_retries, llm_max_output_tokens)
+        if mode != "off" and llm_cache is None:
+            raise CliError(f"--llm-cache-mode {mode} needs --llm-cache DIR")
+        llm = LLMOptions(settings=settings, cache_dir=llm_cache, cache_mode=mode)
+    elif uses_llm:
         settings = resolve_llm_settings(
             api=llm_api,
             model=llm_model,
@@ -134,8 +157,44 @@ def agentic_options(
         raise CliError(str(error)) from None
 
 
+def _local_settings(api, model, base_url, temperature, timeout_s, max_retries, max_output_tokens):
+    """Settings for a server we start: its API, the model's name, temperature 0 and a fixed seed."""
+    if base_url is not None:
+        raise CliError("--llm-base-url is for --llm-backend remote; the local backend starts its own server")
+    api = api or local_server.LOCAL_API
+    if api != local_server.LOCAL_API:
+        raise CliError(f"--llm-backend local serves with llama-cpp-python, which needs --llm-api {local_server.LOCAL_API}")
+    name, _ = local_server.resolve_model(model)
+    port = local_server.free_port()
+    return resolve_llm_settings(
+        api=api,
+        model=name,
+        base_url=f"http://127.0.0.1:{port}/v1",
+        temperature=local_server.LOCAL_TEMPERATURE if temperature is None else temperature,
+        timeout_s=timeout_s,
+        max_retries=max_retries,
+        max_output_tokens=local_server.LOCAL_MAX_OUTPUT_TOKENS if max_output_tokens == DEFAULT_MAX_OUTPUT_TOKENS else max_output_tokens,
+        environ={"SOLARCHAIN_LLM_API_KEY": "none"},  # the local server takes no key
+        seed=local_server.LOCAL_SEED,
+    )
+
+
+def local_server_spec(params: dict[str, Any], options: AgenticOptions | None) -> "local_server.ServerSpec | None":
+    """The server to start for a command's parameters and options (None: remote backend, no
+    LLM component, or a pure replay, which needs no server)."""
+    if params["llm_backend"] != "local" or options is None or options.llm is None or options.llm.cache_mode == "replay":
+        return None
+    settings = options.llm.settings
+    _, path = local_server.resolve_model(params["llm_model"])
+    if path is None:
+        local_server.default_model_path()  # raises with the install hint
+    port = int(str(settings.base_url).rsplit(":", 1)[1].split("/", 1)[0])
+    return local_server.ServerSpec(model_path=path, model_name=settings.model, port=port)
+
+
 #: The command parameters :func:`agentic_options` takes besides ``agentic``.
 OPTION_NAMES = (
+    "llm_backend",
     "planner",
     "auditor",
     "llm_api",
@@ -153,6 +212,15 @@ OPTION_NAMES = (
 def options_from(params: dict[str, Any], agentic: str) -> AgenticOptions | None:
     """:func:`agentic_options` from a command's parameters (its ``locals()``)."""
     return agentic_options(agentic=agentic, **{name: params[name] for name in OPTION_NAMES})
+
+
+def serving(params: dict[str, Any], options: AgenticOptions | None):
+    """Context manager: the local model server the command needs, running (or nothing)."""
+    import tempfile
+
+    spec = local_server_spec(params, options)
+    log = Path(tempfile.gettempdir()) / f"solarchain-llm-server-{spec.port}.log" if spec is not None else None
+    return local_server.serving(spec, log_path=log)
 
 
 def agentic_table(summary: list[dict[str, Any]], title: str) -> Table:

