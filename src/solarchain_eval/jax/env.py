@@ -98,6 +98,7 @@ class EnvParams:
     city_share: jax.Array  # (H, C)
     city_trust: jax.Array  # (H, C)
     obs_template: jax.Array  # (H, 12) float32
+    hour_inputs: jax.Array  # (H, 5 + 2C): G_v, X, Q_c, G_r, ν, shares, trusts (one gather per step)
     start_hours: jax.Array  # admissible starts (midnights)
     discrete_actions: jax.Array  # (levels**3, 3) float32 executed actions
     action_lo: jax.Array  # (3,) sanitising bounds
@@ -145,6 +146,13 @@ def make_env_params(
         city_share=jnp.asarray(hours.city_share, f),
         city_trust=jnp.asarray(hours.city_trust, f),
         obs_template=jnp.asarray(template, jnp.float32),
+        hour_inputs=jnp.asarray(
+            np.column_stack([
+                table.verified_mwh, hours.unsafe_supply_mwh, hours.clearing_demand_mwh, table.reported_mwh,
+                table.raw_violation_rate, hours.city_share, hours.city_trust,
+            ]),
+            f,
+        ),
         start_hours=jnp.asarray(start_hours(table.hours, cfg.episode_steps), jnp.int32),
         discrete_actions=jnp.asarray(np.array(codec.discrete_table(cfg.discrete_levels), dtype=f32)),
         action_lo=jnp.asarray(codec.lo, f),
@@ -275,15 +283,17 @@ class SolarChainJaxEnv(environment.Environment[EnvState, EnvParams]):
         executed = (executed32[0].astype(f), executed32[1].astype(f), executed32[2].astype(f))
         k = jnp.minimum(state.time, params.episode_steps - 1)
         hour = jnp.minimum(state.start + k, params.verified_mwh.shape[0] - 1)
+        row = params.hour_inputs[hour]
+        n_cities = params.city_share.shape[1]
         # The same call as SolarChainEnv.step / SolarChainVectorEnv._advance.
         out = market_step(
             JAX_OPS,
             params.weights,
-            params.verified_mwh[hour],
-            params.unsafe_supply_mwh[hour],
-            params.clearing_demand_mwh[hour],
-            params.city_share[hour],
-            params.city_trust[hour],
+            row[0],
+            row[1],
+            row[2],
+            row[5 : 5 + n_cities],
+            row[5 + n_cities :],
             state.liquidity,
             state.peak_liquidity,
             state.token_price,
@@ -301,13 +311,7 @@ class SolarChainJaxEnv(environment.Environment[EnvState, EnvParams]):
             prev_action=executed32,
             city_totals=state.city_totals + out.city_rewards,
         )
-        inputs = (
-            params.verified_mwh[hour],
-            params.reported_mwh[hour],
-            params.unsafe_supply_mwh[hour],
-            params.raw_violation_rate[hour],
-            params.clearing_demand_mwh[hour],
-        )
+        inputs = (row[0], row[3], row[1], row[4], row[2])
         info = step_info(out, executed, hour, state.start, inputs, params.depth_scale)
         info["step"] = k
         info["city_rewards"] = out.city_rewards
