@@ -113,6 +113,11 @@ class EnvParams:
     initial_price: float = struct.field(pytree_node=False, default=1.0)
     depth_scale: float = struct.field(pytree_node=False, default=1.0)
 
+    @property
+    def max_steps_in_episode(self) -> int:
+        """gymnax's name for the episode length (rejax's evaluation reads it)."""
+        return self.episode_steps
+
 
 def float_dtype() -> Any:
     """float64 when ``jax_enable_x64`` is on, else float32."""
