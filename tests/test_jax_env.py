@@ -119,7 +119,7 @@ def test_float32_matches_numpy_env_on_paper_data(published_dir: Path) -> None:
 def test_x64_matches_numpy_env_per_element(tiny_dataset: Path) -> None:
     env = dict(os.environ, JAX_ENABLE_X64="1", JAX_PLATFORMS="cpu")
     done = subprocess.run(
-        [sys.executable, __file__, str(tiny_dataset)], env=env, capture_output=True, text=True, timeout=300
+        [sys.executable, __file__, str(tiny_dataset)], env=env, capture_output=True, text=True, timeout=300, check=False
     )
     assert done.returncode == 0, done.stderr[-2000:]
     results = json.loads(done.stdout.strip().splitlines()[-1])

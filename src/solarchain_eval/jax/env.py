@@ -30,7 +30,13 @@ from ..env import market_inputs, resolve_config, resolve_table, start_hours, ste
 from ..episodes import PRICE_NOISE_STD
 from ..market.actions import ActionCodec
 from ..market.dynamics import RewardWeights, market_step
-from ..market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE
+from ..market.observation import (
+    OBS_LIMIT,
+    OBS_LIQUIDITY,
+    OBS_PREV_ALPHA,
+    OBS_PREV_ELL,
+    OBS_PRICE,
+)
 
 
 class JaxOps:

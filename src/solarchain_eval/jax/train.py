@@ -4,7 +4,7 @@ Hyperparameters follow the SB3 reference (docs/training.md): learning rate, batc
 from the config (3e-4, 64, 0.98), SB3's default network sizes and other defaults where rejax
 has the same knob. The remaining differences between the libraries are listed in docs/jax.md.
 Each seed's acting network (actor, or Q-network for DQN) is written to ``OUT/seed_<seed>/jax_model.msgpack`` with a
-``train_config.json`` beside it; :mod:`.policy` loads it for ``evaluate``.
+``train_config.json`` beside it (a policy adapter for ``evaluate`` is still to come).
 """
 
 from __future__ import annotations
@@ -121,8 +121,8 @@ def train_jax(
     for i, seed in enumerate(seeds):
         network = states.q_ts.params if algo == "dqn" else states.actor_ts.params
         seed_dir = out_dir / f"seed_{seed}"
-        # Only the acting network's parameters: what evaluation needs (see .policy).
-        _write_atomic(seed_dir / JAX_MODEL_FILE, serialization.to_bytes(jax.tree.map(lambda x: np.asarray(x[i]), network)))
+        # Only the acting network's parameters: what a policy adapter needs to act.
+        _write_atomic(seed_dir / JAX_MODEL_FILE, serialization.to_bytes(jax.tree.map(lambda x, i=i: np.asarray(x[i]), network)))
         meta = {"identity": {"algo": algo, "backend": "jax", "seed": int(seed), "timesteps": int(timesteps),
                              "no_physics_penalty": bool(no_physics_penalty), "data_dir": str(data_dir) if data_dir else None},
                 "rejax": rejax_config(algo, cfg, timesteps)}
