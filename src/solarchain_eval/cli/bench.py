@@ -21,6 +21,10 @@ def bench(
     calls: int = typer.Option(600, min=25, help="Vector-env step calls per repeat."),
     repeats: int = typer.Option(5, min=1, help="Repeats per figure (median and best are reported)."),
     skip_evaluation: bool = typer.Option(False, help="Skip timing the 1,620-episode baseline evaluation."),
+    backend: str = typer.Option(
+        "numpy", "--backend", help="numpy, or jax: also the jitted JAX env (4,096 envs by default) beside the numpy vector env."
+    ),
+    episodes: int = typer.Option(10, min=1, help="JAX backend: episodes per env per repeat."),
 ) -> None:
     """Throughput of the single env, the vector env and the evaluation runner.
 
@@ -32,9 +36,14 @@ def bench(
     from .. import bench as measure
     from ..data.default import default_dataset_dir
 
+    if backend not in ("numpy", "jax"):
+        raise typer.BadParameter(f"--backend must be numpy or jax, not {backend!r}")
     data_dir = data or default_dataset_dir()
     measure.warm_table(data_dir)
     results = []
+    if backend == "jax":
+        _bench_jax(data_dir, 4096 if num_envs == 1024 else num_envs, calls, episodes, repeats)
+        return
     err_console.print("measuring the single env...")
     results.append((measure.single_env_steps_per_s(data_dir, steps, repeats), 50_000, True))
     err_console.print("measuring the vector env...")
@@ -53,3 +62,22 @@ def bench(
         table.add_row(result.name, median, best, result.unit, goal)
     console.print(table)
 
+
+
+def _bench_jax(data_dir: Path, num_envs: int, calls: int, episodes: int, repeats: int) -> None:
+    """The numpy vector env and the JAX env at the same number of envs, and their ratio."""
+    from .. import bench as measure
+    from ..jax.bench import jax_env_steps_per_s
+
+    err_console.print(f"measuring the numpy vector env ({num_envs} envs)...")
+    numpy_result = measure.vector_env_steps_per_s(data_dir, num_envs, calls, repeats)
+    err_console.print(f"compiling and measuring the JAX env ({num_envs} envs)...")
+    jax_result = jax_env_steps_per_s(data_dir, num_envs, episodes, repeats)
+    table = Table(title=f"env throughput on {data_dir}", title_justify="left")
+    for column in ("measurement", "median", "best", "unit", "goal"):
+        table.add_column(column, justify="left" if column in ("measurement", "unit") else "right")
+    table.add_row(numpy_result.name, f"{numpy_result.median:,.0f}", f"{numpy_result.best:,.0f}", "env-steps/s", "")
+    table.add_row(jax_result.name, f"{jax_result.median:,.0f}", f"{jax_result.best:,.0f}", "env-steps/s", ">= 30,000,000")
+    ratio = jax_result.median / numpy_result.median
+    table.add_row("ratio JAX / numpy (medians)", f"{ratio:.2f}x", "", "", ">= 10x")
+    console.print(table)
