@@ -105,6 +105,9 @@ def check_target(run_dir: Path, *, overwrite: bool = False, keep: Sequence[str] 
 class RunDirWriter:
     """Context manager: lock ``run_dir``, stage outputs in :attr:`staging`, :meth:`publish` them.
 
+    Leaving the context without :meth:`publish` removes the staging folder and leaves
+    ``run_dir`` as it was.
+
     Parameters
     ----------
     run_dir : Path
@@ -114,9 +117,6 @@ class RunDirWriter:
     keep : sequence of str
         Names in ``run_dir`` that belong to the caller (e.g. a grid unit's ``unit.json``): they
         do not count as contents and are carried over into the published directory.
-
-    Leaving the context without :meth:`publish` removes the staging folder and leaves
-    ``run_dir`` as it was.
     """
 
     def __init__(self, run_dir: Path, *, overwrite: bool = False, keep: Sequence[str] = ()) -> None:
