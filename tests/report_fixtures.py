@@ -161,6 +161,11 @@ def make_paper_root(root: Path, seed: int = 5) -> Path:
         pd.DataFrame(city_rows).to_csv(folder / "city_hour_policy.csv", index=False)
         if logs:
             (folder / "agentic_logs.jsonl").write_text("".join(json.dumps(s) + "\n" for s in logs), encoding="utf-8")
+    return write_paper_metadata(root)
+
+
+def write_paper_metadata(root: Path) -> Path:
+    """(Re)write ``paper_metadata.json`` with the hashes of the combined files as they are now."""
     (root / "paper_metadata.json").write_text(
         json.dumps({
             "grid": {"settings": list(SETTINGS)},

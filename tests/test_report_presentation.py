@@ -8,7 +8,7 @@ from pathlib import Path
 import pandas as pd
 import pytest
 
-from report_fixtures import RUN_SEEDS, make_paper_root
+from report_fixtures import RUN_SEEDS, make_paper_root, write_paper_metadata
 from solarchain_eval.report import ReportOptions, build_report
 from solarchain_eval.report.figures import FigureFile
 
@@ -28,7 +28,7 @@ def one_seed_root(root: Path) -> Path:
         if logs.exists():
             rows = [line for line in logs.read_text(encoding="utf-8").splitlines() if json.loads(line)["run_seed"] == keep]
             logs.write_text("".join(r + "\n" for r in rows), encoding="utf-8")
-    return root
+    return write_paper_metadata(root)  # the cut files are this root's run, as the grid would record it
 
 
 def captions(report) -> dict[str, str]:

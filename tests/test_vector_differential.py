@@ -25,8 +25,9 @@ from solarchain_eval.env import STEP_INFO_KEYS, SolarChainEnv
 from solarchain_eval.vector import SolarChainVectorEnv
 
 F32 = np.float32
-# The tiny dataset has 96 hours: 200-step episodes draw no start and repeat the last hour.
-EPISODE_STEPS = (1, 2, 3, 5, 24, 200)
+# The tiny dataset has 96 hours: 96-step episodes have a single start (hour 0) and use every hour;
+# longer episodes are refused when the env is built (docs/input_validation.md).
+EPISODE_STEPS = (1, 2, 3, 5, 24, 95, 96)
 actions_f32 = st.floats(-0.5, 1.5, width=32) | st.floats(width=32, allow_nan=True, allow_infinity=True)
 
 

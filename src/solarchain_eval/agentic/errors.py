@@ -72,8 +72,12 @@ class LLMCacheError(LLMError):
 
 
 def redact(text: str, secret: str | None) -> str:
-    """``text`` with every occurrence of ``secret`` (and of its long prefixes) removed."""
-    if not secret:
+    """``text`` with every occurrence of ``secret`` (and of its long prefixes) removed.
+
+    Keys under 4 characters (placeholders such as ``"x"`` for servers that need none) are not
+    secrets and are left alone: replacing them would rewrite ordinary words of every reply.
+    """
+    if not secret or len(secret) < 4:
         return text
     out = text.replace(secret, "[redacted]")
     # Servers often echo a shortened key ("sk-abc...xyz"); hide any 8+ character prefix too.
