@@ -9,6 +9,7 @@ URLs are opened; the debugging port listens on 127.0.0.1 and is chosen by Chromi
 from __future__ import annotations
 
 import base64
+import contextlib
 import json
 import shutil
 import subprocess
@@ -115,7 +116,9 @@ def _errors(events: list[dict[str, Any]]) -> list[str]:
     for event in events:
         method, params = event.get("method"), event.get("params", {})
         if method == "Runtime.consoleAPICalled" and params.get("type") in ("error", "assert"):
-            errors.append("console: " + " ".join(str(a.get("value", a.get("description", ""))) for a in params.get("args", [])))
+            errors.append(
+                "console: " + " ".join(str(a.get("value", a.get("description", ""))) for a in params.get("args", []))
+            )
         elif method == "Runtime.exceptionThrown":
             errors.append("exception: " + params.get("exceptionDetails", {}).get("text", ""))
         elif method == "Log.entryAdded" and params.get("entry", {}).get("level") == "error":
@@ -176,8 +179,12 @@ def open_page(
             tools.call("Page.navigate", url=Path(html_file).resolve().as_uri())
             tools.wait_for("Page.loadEventFired", time.monotonic() + timeout_s)
             report = PageReport()
-            report.images = json.loads(tools.call("Runtime.evaluate", expression=IMAGES_JS, returnByValue=True)["result"]["value"])
-            report.title = tools.call("Runtime.evaluate", expression="document.title", returnByValue=True)["result"]["value"]
+            report.images = json.loads(
+                tools.call("Runtime.evaluate", expression=IMAGES_JS, returnByValue=True)["result"]["value"]
+            )
+            report.title = tools.call("Runtime.evaluate", expression="document.title", returnByValue=True)["result"][
+                "value"
+            ]
             for name, (x, y, w, h) in (screenshots or {}).items():
                 result = tools.call(
                     "Page.captureScreenshot",
@@ -188,12 +195,13 @@ def open_page(
                 shots[name] = base64.b64decode(result["data"])
             report.console_errors = _errors(tools.events)
             report.requests = [
-                e["params"]["request"]["url"][:80] for e in tools.events if e.get("method") == "Network.requestWillBeSent"
+                e["params"]["request"]["url"][:80]
+                for e in tools.events
+                if e.get("method") == "Network.requestWillBeSent"
             ]
-            try:
+            # the browser may close the socket before answering
+            with contextlib.suppress(Exception):
                 tools.call("Browser.close")
-            except Exception:  # the browser may close the socket before answering
-                pass
         finally:
             tools.close()
     finally:

@@ -10,9 +10,10 @@ from __future__ import annotations
 import json
 import threading
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from http.server import BaseHTTPRequestHandler, ThreadingHTTPServer
-from typing import Any, Callable
+from typing import Any
 
 VALID_PLAN = {
     "governance_mode": "llm_guarded",
@@ -70,7 +71,9 @@ def user_context(path: str, body: dict[str, Any]) -> dict[str, Any]:
     return json.loads(text.split("Context (JSON):\n", 1)[1])
 
 
-def chat_body(content: str | None, *, finish_reason: str = "stop", refusal: str | None = None, model: str = "fake-model") -> dict:
+def chat_body(
+    content: str | None, *, finish_reason: str = "stop", refusal: str | None = None, model: str = "fake-model"
+) -> dict:
     return {
         "id": "chatcmpl-1",
         "object": "chat.completion",
@@ -136,7 +139,9 @@ def default_responder(seen: Seen) -> Reply:
 class FakeOpenAI:
     """Run with ``with FakeOpenAI(...) as server:``; ``server.base_url`` ends in ``/v1``."""
 
-    def __init__(self, script: list[Reply] | None = None, responder: Callable[[Seen], Reply] = default_responder) -> None:
+    def __init__(
+        self, script: list[Reply] | None = None, responder: Callable[[Seen], Reply] = default_responder
+    ) -> None:
         self.script = list(script or [])
         self.responder = responder
         self.seen: list[Seen] = []
@@ -189,7 +194,7 @@ class FakeOpenAI:
         host, port = self._server.server_address[:2]
         return f"http://{host}:{port}/v1"
 
-    def __enter__(self) -> "FakeOpenAI":
+    def __enter__(self) -> FakeOpenAI:
         self._thread.start()
         return self
 

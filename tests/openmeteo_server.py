@@ -42,7 +42,9 @@ class ArchiveServer:
 
     def respond(self, query: dict[str, str]) -> dict:
         lat, lon = float(query["latitude"]), float(query["longitude"])
-        city = next(name for name, (clat, clon) in self.centres.items() if abs(clat - lat) < 1e-9 and abs(clon - lon) < 1e-9)
+        city = next(
+            name for name, (clat, clon) in self.centres.items() if abs(clat - lat) < 1e-9 and abs(clon - lon) < 1e-9
+        )
         data = self.payload[city]
         return {
             "latitude": data["latitude"],
@@ -64,7 +66,7 @@ class ArchiveServer:
     def url(self) -> str:
         return f"http://127.0.0.1:{self.server.server_address[1]}/v1/archive"
 
-    def __enter__(self) -> "ArchiveServer":
+    def __enter__(self) -> ArchiveServer:
         self.thread.start()
         return self
 

@@ -47,7 +47,7 @@ def _log_steps(rng: np.random.Generator, policy: str, setting: str, seed: int, e
         audited = (hard or soft) and bool(rng.random() < 0.8)
         revise = audited and bool(rng.random() < 0.85)
         final = [round(float(v), 6) for v in rng.uniform(0.0, 1.0, 3)] if revise else list(proposed)
-        delta = float(np.float32(sum(abs(a - b) for a, b in zip(final, proposed))))
+        delta = float(np.float32(sum(abs(a - b) for a, b in zip(final, proposed, strict=True))))
         steps.append(
             {
                 "policy": policy,
@@ -141,17 +141,33 @@ def make_paper_root(root: Path, seed: int = 5) -> Path:
                         row |= _agentic_metrics(rng, steps)
                     metrics.append(row)
                     for step in range(STEPS):
-                        action = {"reward_ratio": float(rng.uniform(0.05, 0.65)), "liquidity_ratio": float(rng.uniform(0.2, 0.95)), "burn_rate": float(rng.uniform(0, 0.2))}
+                        action = {
+                            "reward_ratio": float(rng.uniform(0.05, 0.65)),
+                            "liquidity_ratio": float(rng.uniform(0.2, 0.95)),
+                            "burn_rate": float(rng.uniform(0, 0.2)),
+                        }
                         hour = (row["start_hour"] + step) % 24
                         actions.append(
                             {k: row[k] for k in ("policy", "setting", "run_seed", "episode", "episode_seed")}
-                            | {"step": step, "reward": float(rng.normal()), "absolute_hour": row["start_hour"] + step, "episode_start_hour": row["start_hour"], "hour": hour}
+                            | {
+                                "step": step,
+                                "reward": float(rng.normal()),
+                                "absolute_hour": row["start_hour"] + step,
+                                "episode_start_hour": row["start_hour"],
+                                "hour": hour,
+                            }
                             | action
                         )
                         for city in CITIES:
                             city_rows.append(
                                 {k: row[k] for k in ("policy", "setting", "run_seed", "episode")}
-                                | {"step": step, "absolute_hour": row["start_hour"] + step, "hour": hour, "city": city, "city_reward": float(rng.uniform(0, 0.02))}
+                                | {
+                                    "step": step,
+                                    "absolute_hour": row["start_hour"] + step,
+                                    "hour": hour,
+                                    "city": city,
+                                    "city_reward": float(rng.uniform(0, 0.02)),
+                                }
                                 | action
                             )
         folder = root / "combined" / setting
@@ -167,14 +183,19 @@ def make_paper_root(root: Path, seed: int = 5) -> Path:
 def write_paper_metadata(root: Path) -> Path:
     """(Re)write ``paper_metadata.json`` with the hashes of the combined files as they are now."""
     (root / "paper_metadata.json").write_text(
-        json.dumps({
-            "grid": {"settings": list(SETTINGS)},
-            "dataset": {"data_dir": str(root / "no-such-data"), "files": {"market_liquidity.csv": "0" * 64}},
-            "combined_sha256": {  # as the grid records them, so that the report trusts these files
-                s: {p.name: hashlib.sha256(p.read_bytes()).hexdigest() for p in sorted((root / "combined" / s).iterdir())}
-                for s in SETTINGS
-            },
-        }),
+        json.dumps(
+            {
+                "grid": {"settings": list(SETTINGS)},
+                "dataset": {"data_dir": str(root / "no-such-data"), "files": {"market_liquidity.csv": "0" * 64}},
+                "combined_sha256": {  # as the grid records them, so that the report trusts these files
+                    s: {
+                        p.name: hashlib.sha256(p.read_bytes()).hexdigest()
+                        for p in sorted((root / "combined" / s).iterdir())
+                    }
+                    for s in SETTINGS
+                },
+            }
+        ),
         encoding="utf-8",
     )
     return root

@@ -7,26 +7,56 @@ import json
 
 import pandas as pd
 import pytest
-from fake_openai import FakeOpenAI, Reply, chat_body, default_responder, schema_name
 from typer.testing import CliRunner
 
+from fake_openai import FakeOpenAI, Reply, chat_body, default_responder, schema_name
 from solarchain_eval.agentic import AGENTIC_METRIC_NAMES
 from solarchain_eval.cli import app
 
 KEY = "sk-e2e-SECRET-9f8e7d6c5b4a"
 COMPARED_FILES = ("metrics.csv", "actions.csv", "city_hour_policy.csv", "agentic_logs.jsonl", "summary.json")
 LOG_KEYS = [
-    "policy", "setting", "run_seed", "episode", "episode_seed", "step", "absolute_hour", "hour",
-    "raw_violation_rate", "supply_gap", "static_slippage", "kappa", "hard_trigger", "soft_trigger",
-    "hard_reasons", "audited", "skip_reason", "plan", "proposed_action", "bounded_action", "final_action",
-    "executed_action", "decision", "action_delta", "reason", "audits_used", "audit_budget", "llm",
+    "policy",
+    "setting",
+    "run_seed",
+    "episode",
+    "episode_seed",
+    "step",
+    "absolute_hour",
+    "hour",
+    "raw_violation_rate",
+    "supply_gap",
+    "static_slippage",
+    "kappa",
+    "hard_trigger",
+    "soft_trigger",
+    "hard_reasons",
+    "audited",
+    "skip_reason",
+    "plan",
+    "proposed_action",
+    "bounded_action",
+    "final_action",
+    "executed_action",
+    "decision",
+    "action_delta",
+    "reason",
+    "audits_used",
+    "audit_budget",
+    "llm",
 ]
 
 
 @pytest.fixture
 def clean_env(monkeypatch):
-    for name in ("SOLARCHAIN_LLM_API_KEY", "SOLARCHAIN_LLM_BASE_URL", "SOLARCHAIN_LLM_MODEL",
-                 "OPENAI_API_KEY", "OPENAI_BASE_URL", "OPENAI_MODEL"):
+    for name in (
+        "SOLARCHAIN_LLM_API_KEY",
+        "SOLARCHAIN_LLM_BASE_URL",
+        "SOLARCHAIN_LLM_MODEL",
+        "OPENAI_API_KEY",
+        "OPENAI_BASE_URL",
+        "OPENAI_MODEL",
+    ):
         monkeypatch.delenv(name, raising=False)
     return monkeypatch
 
@@ -36,8 +66,22 @@ def invoke(args):
 
 
 def base_args(data, out, *extra):
-    return ["evaluate", "--data", str(data), "--policies", "myopic,random", "--seeds", "5", "--episodes", "2",
-            "--out", str(out), "--agentic", "planner_auditor", *extra]
+    return [
+        "evaluate",
+        "--data",
+        str(data),
+        "--policies",
+        "myopic,random",
+        "--seeds",
+        "5",
+        "--episodes",
+        "2",
+        "--out",
+        str(out),
+        "--agentic",
+        "planner_auditor",
+        *extra,
+    ]
 
 
 def test_rule_layer_run_writes_logs_and_metrics(tiny_dataset, tmp_path, clean_env):
@@ -46,7 +90,7 @@ def test_rule_layer_run_writes_logs_and_metrics(tiny_dataset, tmp_path, clean_en
     assert result.exit_code == 0, result.output
     metrics = pd.read_csv(out / "metrics.csv")
     assert set(metrics["setting"]) == {"llm_no_physics"} and list(metrics["policy"]) == ["myopic"] * 2 + ["random"] * 2
-    assert list(metrics.columns[-len(AGENTIC_METRIC_NAMES):]) == list(AGENTIC_METRIC_NAMES)
+    assert list(metrics.columns[-len(AGENTIC_METRIC_NAMES) :]) == list(AGENTIC_METRIC_NAMES)
     assert set(metrics["planner"]) == {"rule"} and set(metrics["auditor"]) == {"rule"}
     rows = [json.loads(line) for line in (out / "agentic_logs.jsonl").read_text().splitlines()]
     assert len(rows) == 4 * 24 and list(rows[0]) == LOG_KEYS
@@ -59,22 +103,41 @@ def test_rule_layer_run_writes_logs_and_metrics(tiny_dataset, tmp_path, clean_en
     actions = pd.read_csv(out / "actions.csv")
     assert list(actions["reward_ratio"]) == [r["executed_action"][0] for r in rows]
     meta = json.loads((out / "run_metadata.json").read_text())
-    assert meta["setting"] == "llm_no_physics" and meta["agentic"]["planner"] == "rule" and meta["agentic"]["llm"] is None
+    assert (
+        meta["setting"] == "llm_no_physics" and meta["agentic"]["planner"] == "rule" and meta["agentic"]["llm"] is None
+    )
     assert "Planner/Auditor" in result.output
 
 
 @pytest.mark.parametrize("api", ["chat", "responses"])
 def test_llm_run_records_then_replays_offline_with_identical_files(tiny_dataset, tmp_path, clean_env, api):
     cache = tmp_path / "cache"
-    llm = ["--planner", "llm", "--auditor", "llm", "--llm-api", api, "--llm-model", "fake-model", "--llm-cache", str(cache)]
+    llm = [
+        "--planner",
+        "llm",
+        "--auditor",
+        "llm",
+        "--llm-api",
+        api,
+        "--llm-model",
+        "fake-model",
+        "--llm-cache",
+        str(cache),
+    ]
     clean_env.setenv("SOLARCHAIN_LLM_API_KEY", KEY)
     with FakeOpenAI() as server:
-        recorded = invoke(base_args(tiny_dataset, tmp_path / "a", *llm, "--llm-base-url", server.base_url, "--llm-cache-mode", "record"))
+        recorded = invoke(
+            base_args(
+                tiny_dataset, tmp_path / "a", *llm, "--llm-base-url", server.base_url, "--llm-cache-mode", "record"
+            )
+        )
         calls = len(server.seen)
     assert recorded.exit_code == 0, recorded.output
     assert calls > 4  # 4 planner calls and the audits
     clean_env.delenv("SOLARCHAIN_LLM_API_KEY")  # replay needs neither key nor server
-    replayed = invoke(base_args(tiny_dataset, tmp_path / "b", *llm, "--llm-base-url", server.base_url, "--llm-cache-mode", "replay"))
+    replayed = invoke(
+        base_args(tiny_dataset, tmp_path / "b", *llm, "--llm-base-url", server.base_url, "--llm-cache-mode", "replay")
+    )
     assert replayed.exit_code == 0, replayed.output
     for name in COMPARED_FILES:
         assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
@@ -98,11 +161,27 @@ def test_llm_run_records_then_replays_offline_with_identical_files(tiny_dataset,
 
 def test_replay_miss_fails_the_run_without_output(tiny_dataset, tmp_path, clean_env):
     out = tmp_path / "run"
-    args = base_args(tiny_dataset, out, "--planner", "llm", "--llm-api", "chat", "--llm-model", "m",
-                     "--llm-cache", str(tmp_path / "empty"), "--llm-cache-mode", "replay")
+    args = base_args(
+        tiny_dataset,
+        out,
+        "--planner",
+        "llm",
+        "--llm-api",
+        "chat",
+        "--llm-model",
+        "m",
+        "--llm-cache",
+        str(tmp_path / "empty"),
+        "--llm-cache-mode",
+        "replay",
+    )
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 2
-    assert "no recorded response" in result.output and "policy 'myopic'" in result.output and "before step 0" in result.output
+    assert (
+        "no recorded response" in result.output
+        and "policy 'myopic'" in result.output
+        and "before step 0" in result.output
+    )
     assert not (out / "metrics.csv").exists()
 
 
@@ -116,8 +195,21 @@ def test_refusal_mid_run_fails_with_policy_episode_and_step(tiny_dataset, tmp_pa
 
     out = tmp_path / "run"
     with FakeOpenAI(responder=refuse_audits) as server:
-        result = CliRunner().invoke(app, base_args(
-            tiny_dataset, out, "--auditor", "llm", "--llm-api", "chat", "--llm-model", "m", "--llm-base-url", server.base_url))
+        result = CliRunner().invoke(
+            app,
+            base_args(
+                tiny_dataset,
+                out,
+                "--auditor",
+                "llm",
+                "--llm-api",
+                "chat",
+                "--llm-model",
+                "m",
+                "--llm-base-url",
+                server.base_url,
+            ),
+        )
     assert result.exit_code == 2
     text = " ".join(result.output.split())
     assert "the model refused: I won't audit markets." in text
@@ -141,6 +233,18 @@ def test_inconsistent_flags_are_one_line_errors(tiny_dataset, tmp_path, clean_en
 
 
 def test_planner_flag_needs_agentic(tiny_dataset, tmp_path, clean_env):
-    args = ["evaluate", "--data", str(tiny_dataset), "--policies", "static", "--episodes", "1", "--out", str(tmp_path), "--planner", "rule"]
+    args = [
+        "evaluate",
+        "--data",
+        str(tiny_dataset),
+        "--policies",
+        "static",
+        "--episodes",
+        "1",
+        "--out",
+        str(tmp_path),
+        "--planner",
+        "rule",
+    ]
     result = CliRunner().invoke(app, args)
     assert result.exit_code == 2 and "--agentic planner_auditor" in result.output

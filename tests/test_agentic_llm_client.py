@@ -6,8 +6,8 @@ import json
 import math
 
 import pytest
-from fake_openai import VALID_AUDIT, VALID_PLAN, FakeOpenAI, Reply, chat_body, ok, responses_body
 
+from fake_openai import VALID_AUDIT, VALID_PLAN, FakeOpenAI, Reply, chat_body, ok, responses_body
 from solarchain_eval.agentic import (
     CallSite,
     LLMCacheMissError,
@@ -28,7 +28,7 @@ from solarchain_eval.market.actions import ActionCodec
 KEY = "sk-test-SECRET-0123456789abcdef"
 SITE = CallSite("auditor", "ppo", 20260511, 4, 7)
 PLANNER_SITE = CallSite("planner", "ppo", 20260511, 4, None)
-MESSAGES = [{"role": "system", "content": "s"}, {"role": "user", "content": "Context (JSON):\n{\"step\": 0}"}]
+MESSAGES = [{"role": "system", "content": "s"}, {"role": "user", "content": 'Context (JSON):\n{"step": 0}'}]
 CODEC = ActionCodec.from_config(MarketConfig())
 APIS = ("chat", "responses")
 
@@ -83,24 +83,55 @@ def test_temperature_is_sent_when_given(api):
     ("api", "reply", "error", "text"),
     [
         ("chat", Reply(200, chat_body(None, refusal="I cannot help with that.")), LLMRefusalError, "I cannot help"),
-        ("responses", Reply(200, responses_body(None, refusal="I cannot help with that.")), LLMRefusalError, "I cannot help"),
+        (
+            "responses",
+            Reply(200, responses_body(None, refusal="I cannot help with that.")),
+            LLMRefusalError,
+            "I cannot help",
+        ),
         ("chat", Reply(200, chat_body('{"decision": "appr', finish_reason="length")), LLMTruncatedError, "length"),
-        ("responses", Reply(200, responses_body('{"deci', status="incomplete", incomplete_reason="max_output_tokens")), LLMTruncatedError, "max_output_tokens"),
-        ("chat", Reply(200, chat_body(json.dumps({**VALID_AUDIT, "confidence": 0.9}))), LLMSchemaError, "confidence: Extra inputs are not permitted"),
-        ("responses", Reply(200, responses_body(json.dumps({k: v for k, v in VALID_AUDIT.items() if k != "reason"}))), LLMSchemaError, "reason: Field required"),
-        ("chat", Reply(200, chat_body(json.dumps(VALID_AUDIT).replace("0.2,", "NaN,", 1))), LLMSchemaError, "final_action.reward_ratio"),
-        ("responses", Reply(200, responses_body(json.dumps({**VALID_AUDIT, "decision": "maybe"}))), LLMSchemaError, "decision"),
+        (
+            "responses",
+            Reply(200, responses_body('{"deci', status="incomplete", incomplete_reason="max_output_tokens")),
+            LLMTruncatedError,
+            "max_output_tokens",
+        ),
+        (
+            "chat",
+            Reply(200, chat_body(json.dumps({**VALID_AUDIT, "confidence": 0.9}))),
+            LLMSchemaError,
+            "confidence: Extra inputs are not permitted",
+        ),
+        (
+            "responses",
+            Reply(200, responses_body(json.dumps({k: v for k, v in VALID_AUDIT.items() if k != "reason"}))),
+            LLMSchemaError,
+            "reason: Field required",
+        ),
+        (
+            "chat",
+            Reply(200, chat_body(json.dumps(VALID_AUDIT).replace("0.2,", "NaN,", 1))),
+            LLMSchemaError,
+            "final_action.reward_ratio",
+        ),
+        (
+            "responses",
+            Reply(200, responses_body(json.dumps({**VALID_AUDIT, "decision": "maybe"}))),
+            LLMSchemaError,
+            "decision",
+        ),
         ("chat", Reply(200, chat_body("not json at all")), LLMSchemaError, "Invalid JSON"),
         ("chat", Reply(200, "<html>gateway</html>"), LLMSchemaError, "not JSON"),
     ],
 )
 def test_invalid_outputs_raise_typed_errors_naming_the_call_site(api, reply, error, text):
-    with FakeOpenAI([reply]) as server:
-        with pytest.raises(error) as caught:
-            client(server, api).request(MESSAGES, AuditorOutput, SITE)
+    with FakeOpenAI([reply]) as server, pytest.raises(error) as caught:
+        client(server, api).request(MESSAGES, AuditorOutput, SITE)
     message = str(caught.value)
     assert text in message
-    assert "policy 'ppo'" in message and "episode 4" in message and "step 7" in message and "run seed 20260511" in message
+    assert (
+        "policy 'ppo'" in message and "episode 4" in message and "step 7" in message and "run seed 20260511" in message
+    )
     assert KEY not in message
 
 
@@ -115,17 +146,18 @@ def test_rate_limit_then_success_is_retried_and_counted(api):
 @pytest.mark.parametrize("api", APIS)
 def test_server_errors_until_retries_run_out(api):
     error = Reply(500, {"error": {"message": "boom"}}, {"retry-after-ms": "5"})
-    with FakeOpenAI([error] * 5) as server:
-        with pytest.raises(LLMTransportError) as caught:
-            client(server, api, max_retries=2).request(MESSAGES, AuditorOutput, SITE)
+    with FakeOpenAI([error] * 5) as server, pytest.raises(LLMTransportError) as caught:
+        client(server, api, max_retries=2).request(MESSAGES, AuditorOutput, SITE)
     assert len(server.seen) == 3
     assert "HTTP 500 after 3 attempt(s)" in str(caught.value) and "step 7" in str(caught.value)
 
 
 def test_timeout_is_a_transport_error():
-    with FakeOpenAI([Reply(200, chat_body("{}"), delay_s=2.0)]) as server:
-        with pytest.raises(LLMTransportError, match="no answer within 0.3 s"):
-            client(server, "chat", timeout_s=0.3, max_retries=0).request(MESSAGES, AuditorOutput, SITE)
+    with (
+        FakeOpenAI([Reply(200, chat_body("{}"), delay_s=2.0)]) as server,
+        pytest.raises(LLMTransportError, match="no answer within 0.3 s"),
+    ):
+        client(server, "chat", timeout_s=0.3, max_retries=0).request(MESSAGES, AuditorOutput, SITE)
 
 
 def test_unreachable_endpoint_is_a_transport_error():
@@ -138,9 +170,8 @@ def test_unreachable_endpoint_is_a_transport_error():
 
 def test_api_key_echoed_by_the_server_is_redacted():
     echo = Reply(401, {"error": {"message": f"Incorrect API key provided: {KEY} (also {KEY[:14]}...)"}})
-    with FakeOpenAI([echo]) as server:
-        with pytest.raises(LLMTransportError) as caught:
-            client(server, "chat").request(MESSAGES, AuditorOutput, SITE)
+    with FakeOpenAI([echo]) as server, pytest.raises(LLMTransportError) as caught:
+        client(server, "chat").request(MESSAGES, AuditorOutput, SITE)
     message = str(caught.value)
     assert "HTTP 401" in message and KEY not in message and KEY[:14] not in message
     assert "SECRET" not in repr(resolve_llm_settings(api="chat", model="m", environ={"SOLARCHAIN_LLM_API_KEY": KEY}))
@@ -161,7 +192,9 @@ def test_settings_resolution_order_and_explicit_api():
         resolve_llm_settings(api="chat", environ={})
     with pytest.raises(LLMConfigError, match="no API key"):
         StructuredLLM(resolve_llm_settings(api="chat", model="m", environ={}))
-    described = resolve_llm_settings(api="chat", model="m", base_url="http://user:pw@127.0.0.1:5/v1?token=t", environ={}).describe()
+    described = resolve_llm_settings(
+        api="chat", model="m", base_url="http://user:pw@127.0.0.1:5/v1?token=t", environ={}
+    ).describe()
     assert described["base_url"] == "http://127.0.0.1:5/v1"
 
 
@@ -202,16 +235,17 @@ def test_auto_mode_records_misses_and_reuses_entries(tmp_path):
 
 def test_failed_outputs_are_not_recorded(tmp_path):
     cache = tmp_path / "cache"
-    with FakeOpenAI([Reply(200, chat_body(None, refusal="no"))]) as server:
-        with pytest.raises(LLMRefusalError):
-            client(server, "chat", mode="record", cache=cache).request(MESSAGES, AuditorOutput, SITE)
+    with FakeOpenAI([Reply(200, chat_body(None, refusal="no"))]) as server, pytest.raises(LLMRefusalError):
+        client(server, "chat", mode="record", cache=cache).request(MESSAGES, AuditorOutput, SITE)
     assert not list(cache.rglob("*.json"))
 
 
 def test_out_of_range_plan_is_clipped_and_every_clip_logged():
     plan = json.loads(json.dumps(VALID_PLAN))
     plan["action_bounds"]["reward_ratio"] = {"low": 0.9, "high": -1.0}  # swapped and outside
-    plan["audit_policy"].update(violation_threshold=3.0, gap_threshold=0.4, max_audits_per_episode=99, cooldown_steps=-2)
+    plan["audit_policy"].update(
+        violation_threshold=3.0, gap_threshold=0.4, max_audits_per_episode=99, cooldown_steps=-2
+    )
     plan["rationale"] = "x" * 5000
     context = EpisodeContext(0, 24, True, 0.1, -0.2, 0.5, {"max_violation_rate": 0.1})
     with FakeOpenAI([ok("/v1/responses", plan)]) as server:
@@ -239,7 +273,9 @@ def test_out_of_range_audit_action_is_sanitised_and_logged():
 
     plan = validate_plan(PlannerOutput.model_validate(VALID_PLAN), CODEC, 24)[0]
     audit = dict(VALID_AUDIT, final_action={"reward_ratio": 0.7, "liquidity_ratio": 0.9, "burn_rate": -1.0})
-    context = StepContext(3, 3, {}, 0.2, 0.0, 0.1, (0.3, 0.5, 0.1), (0.25, 0.75, 0.02), 0.3, plan, ("violation",), True, None)
+    context = StepContext(
+        3, 3, {}, 0.2, 0.0, 0.1, (0.3, 0.5, 0.1), (0.25, 0.75, 0.02), 0.3, plan, ("violation",), True, None
+    )
     with FakeOpenAI([ok("/v1/chat/completions", audit)]) as server:
         outcome = LLMAuditor(client(server, "chat"), CODEC).audit(context, SITE)
     alpha, ell = 0.65, 0.9
@@ -248,4 +284,8 @@ def test_out_of_range_audit_action_is_sanitised_and_logged():
     assert outcome.final_action == CODEC.sanitize(0.7, 0.9, -1.0)
     assert math.isclose(outcome.final_action[0], alpha * scale, rel_tol=1e-7) and outcome.final_action[2] == 0.0
     fields = [event["field"] for event in outcome.llm["clipped"]]
-    assert fields == ["final_action.reward_ratio", "final_action.burn_rate", "final_action.reward_ratio+liquidity_ratio"]
+    assert fields == [
+        "final_action.reward_ratio",
+        "final_action.burn_rate",
+        "final_action.reward_ratio+liquidity_ratio",
+    ]

@@ -59,7 +59,11 @@ def test_discrete_base_policy_is_decoded_with_the_grid_and_hooks_are_forwarded(t
         assert result.policy == "dqn" and result.extras["base_extra"] == 1
         for row in result.extras["agentic_log"]:
             assert row["proposed_action"] == [float(v) for v in table[124]]
-    assert base.calls[:3] == ["run", "begin", "observe"] and base.calls.count("observe") == 48 and base.calls.count("end") == 2
+    assert (
+        base.calls[:3] == ["run", "begin", "observe"]
+        and base.calls.count("observe") == 48
+        and base.calls.count("end") == 2
+    )
 
 
 def test_executed_action_is_the_reencoded_final_action(tiny_dataset):
@@ -72,7 +76,9 @@ def test_executed_action_is_the_reencoded_final_action(tiny_dataset):
 
 
 def test_approve_only_auditor_keeps_the_bounded_action(tiny_dataset):
-    _, results = run(tiny_dataset, make_baseline("random"), AgenticOptions(planner="rule", auditor="approve-only"), episodes=4)
+    _, results = run(
+        tiny_dataset, make_baseline("random"), AgenticOptions(planner="rule", auditor="approve-only"), episodes=4
+    )
     audited = [r for result in results for r in result.extras["agentic_log"] if r["audited"]]
     assert audited
     for result in results:
@@ -128,7 +134,9 @@ def test_neutral_layer_reproduces_the_plain_run(tiny_dataset, name):
     config = BenchmarkConfig()
     env = SolarChainEnv(tiny_dataset, config=config)
     plain = list(run_policy(env, make_baseline(name), setting="main", run_seeds=[4], episodes=4))
-    _, governed = run(tiny_dataset, make_baseline(name), AgenticOptions(planner="default", auditor="approve-only"), episodes=4, seed=4)
-    for a, b in zip(plain, governed):
+    _, governed = run(
+        tiny_dataset, make_baseline(name), AgenticOptions(planner="default", auditor="approve-only"), episodes=4, seed=4
+    )
+    for a, b in zip(plain, governed, strict=True):
         assert a.steps == b.steps and a.metrics == b.metrics
         assert b.extras["agentic_metrics"]["modification_rate"] == 0.0

@@ -58,7 +58,9 @@ def ref_plan(table, start: int):
             rate=0.25,
             cooldown=2,
         )
-    return dict(mode="rule_balanced", lo=LO, hi=HI, tv=0.01, tg=-0.10, tj=0.25, ts=0.75, max_audits=6, rate=0.25, cooldown=2)
+    return dict(
+        mode="rule_balanced", lo=LO, hi=HI, tv=0.01, tg=-0.10, tj=0.25, ts=0.75, max_audits=6, rate=0.25, cooldown=2
+    )
 
 
 #: A plan with rarer hard triggers, a small budget and a long cooldown (exercises soft audits,
@@ -124,7 +126,11 @@ def ref_episode(env, policy, seed: int, fixed_plan: dict | None = None) -> tuple
         # Triggers: the float32 signals against float32 thresholds (numpy 2 semantics of the
         # original's float32 arrays against Python-float thresholds).
         nu, gap, sigma = obs[8], obs[5], obs[9]
-        hits = (("violation", nu > F32(plan["tv"])), ("gap", gap < F32(plan["tg"])), ("slippage", sigma > F32(plan["ts"])))
+        hits = (
+            ("violation", nu > F32(plan["tv"])),
+            ("gap", gap < F32(plan["tg"])),
+            ("slippage", sigma > F32(plan["ts"])),
+        )
         reasons = [name for name, hit in hits if hit]
         hard, soft = bool(reasons), bool(kappa32 > F32(plan["tj"]))
         # The rule auditor's risks: the same signals widened to float64 against float64 thresholds.
@@ -216,8 +222,16 @@ COMPARED = (
 def compare_with_reference(data_dir, seeds, episodes, fixed_plan: dict | None = None) -> dict[str, int]:
     config = BenchmarkConfig()
     table = load_table(data_dir)
-    counts = {"steps": 0, "audits": 0, "hard_audits": 0, "soft_audits": 0, "revisions": 0, "approvals": 0,
-              "budget_skips": 0, "cooldown_skips": 0}
+    counts = {
+        "steps": 0,
+        "audits": 0,
+        "hard_audits": 0,
+        "soft_audits": 0,
+        "revisions": 0,
+        "approvals": 0,
+        "budget_skips": 0,
+        "cooldown_skips": 0,
+    }
     governance = Governance(AgenticOptions(planner="rule", auditor="rule"), config.market)
     for name in ("myopic", "random"):
         env = SolarChainEnv(config=config, table=table)
@@ -237,7 +251,7 @@ def compare_with_reference(data_dir, seeds, episodes, fixed_plan: dict | None = 
                 ref_rows, ref_metrics = ref_episode(ref_env, ref_policy, seed + e, fixed_plan)
                 log = result.extras["agentic_log"]
                 assert len(log) == 24
-                for ours, ref in zip(log, ref_rows):
+                for ours, ref in zip(log, ref_rows, strict=True):
                     for key in COMPARED:
                         assert ours[key] == ref[key], (name, seed, e, ours["step"], key, ours[key], ref[key])
                 assert result.steps["reward"] == [r["reward"] for r in ref_rows]

@@ -143,5 +143,9 @@ def test_hard_reasons_compare_at_float32_precision():
     plan = _plan(violation_threshold=0.1, gap_threshold=-0.1, slippage_threshold=0.75)
     nu = float(np.float32(5 / 50))  # 0.10000000149…: equal to the threshold in float32
     assert hard_reasons(nu, 0.0, 0.0, plan) == []
-    assert hard_reasons(float(np.float32(6 / 50)), float(np.float32(-0.2)), 0.8, plan) == ["violation", "gap", "slippage"]
+    assert hard_reasons(float(np.float32(6 / 50)), float(np.float32(-0.2)), 0.8, plan) == [
+        "violation",
+        "gap",
+        "slippage",
+    ]
     assert hard_reasons(0.0, float(np.float32(-0.1)), float(np.float32(0.75)), plan) == []

@@ -5,9 +5,9 @@ from __future__ import annotations
 import json
 
 import pytest
-from fake_openai import VALID_AUDIT, VALID_PLAN
 from pydantic import ValidationError
 
+from fake_openai import VALID_AUDIT, VALID_PLAN
 from solarchain_eval.agentic.errors import CallSite, redact
 from solarchain_eval.agentic.planner import EpisodeContext, RulePlanner
 from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput, validate_plan
@@ -34,7 +34,10 @@ def test_nested_extra_fields_and_wrong_types_are_rejected():
     with pytest.raises(ValidationError, match="physics"):
         AuditorOutput.model_validate_json(json.dumps(audit))
     # integers are valid numbers
-    assert PlannerOutput.model_validate_json(json.dumps(VALID_PLAN).replace("2.0", "2")).audit_policy.slippage_threshold == 2.0
+    assert (
+        PlannerOutput.model_validate_json(json.dumps(VALID_PLAN).replace("2.0", "2")).audit_policy.slippage_threshold
+        == 2.0
+    )
 
 
 def test_a_valid_plan_passes_unchanged():

@@ -10,9 +10,9 @@ the physics revision as well as the jitter smoothing (the Planner/Auditor page i
 from __future__ import annotations
 
 import numpy as np
-from fake_openai import VALID_PLAN, FakeOpenAI, Seen, ok
 from pydantic import SecretStr
 
+from fake_openai import VALID_PLAN, FakeOpenAI, Seen, ok
 from solarchain_eval.agentic import AgenticOptions, Governance
 from solarchain_eval.agentic.build import LLMOptions
 from solarchain_eval.agentic.llm_client import LLMSettings
@@ -67,7 +67,11 @@ def test_soft_audit_on_a_violation_tie_applies_the_physics_revision(published_di
         settings = LLMSettings(api="chat", model="fake-model", base_url=server.base_url, api_key=SecretStr("sk-test"))
         options = AgenticOptions(planner="llm", auditor="rule", llm=LLMOptions(settings))
         with Governance(options, config.market) as governance:
-            results = list(run_policy(env, governance.wrap(make_baseline("random")), setting="llm", run_seeds=[20260511], episodes=8))
+            results = list(
+                run_policy(
+                    env, governance.wrap(make_baseline("random")), setting="llm", run_seeds=[20260511], episodes=8
+                )
+            )
     rows = [row for result in results for row in result.extras["agentic_log"]]
     assert {row["plan"]["governance_mode"] for row in rows} == {"llm_tie_test"}
     ties = [row for row in rows if row["raw_violation_rate"] == float(F32(0.14))]
@@ -76,7 +80,9 @@ def test_soft_audit_on_a_violation_tie_applies_the_physics_revision(published_di
         assert row["raw_violation_rate"] > 0.14  # the float64 comparison holds ...
         assert not row["hard_trigger"] and row["hard_reasons"] == []  # ... the float32 one does not
         assert row["soft_trigger"] and row["audited"] and row["decision"] == "revise"
-        previous = rows[rows.index(row) - 1]["executed_action"] if row["step"] > 0 else [F32(0.25), F32(0.75), F32(0.02)]
+        previous = (
+            rows[rows.index(row) - 1]["executed_action"] if row["step"] > 0 else [F32(0.25), F32(0.75), F32(0.02)]
+        )
         assert row["final_action"] == expected_revision(row["bounded_action"], previous)
         assert "physics" in row["reason"] and "jitter" in row["reason"]
         # Physics revision lifts the burn rate to at least 0.6 b_prev + 0.4 · 0.12.

@@ -31,12 +31,32 @@ def test_evaluate_writes_every_file_with_the_documented_columns(tiny_dataset, tm
     out = tmp_path / "run"
     result = runner.invoke(
         app,
-        ["evaluate", "--data", str(tiny_dataset), "--policies", "static,myopic", "--seeds", "1,2", "--episodes", "3",
-         "--out", str(out), "--no-physics-penalty"],
+        [
+            "evaluate",
+            "--data",
+            str(tiny_dataset),
+            "--policies",
+            "static,myopic",
+            "--seeds",
+            "1,2",
+            "--episodes",
+            "3",
+            "--out",
+            str(out),
+            "--no-physics-penalty",
+        ],
     )
     assert result.exit_code == 0, result.output
     metrics = pd.read_csv(out / "metrics.csv")
-    assert list(metrics.columns) == ["policy", "setting", "run_seed", "episode", "episode_seed", "start_hour", *METRIC_NAMES]
+    assert list(metrics.columns) == [
+        "policy",
+        "setting",
+        "run_seed",
+        "episode",
+        "episode_seed",
+        "start_hour",
+        *METRIC_NAMES,
+    ]
     assert len(metrics) == 12 and set(metrics["setting"]) == {"no_physics"}
     assert metrics["episode_seed"].tolist()[:3] == [1, 2, 3]
     actions = pd.read_csv(out / "actions.csv")
@@ -49,24 +69,46 @@ def test_evaluate_writes_every_file_with_the_documented_columns(tiny_dataset, tm
     totals = first.groupby("city")["city_reward"].sum().to_numpy()
     assert metrics.loc[0, "spatial_fairness_index"] == pytest.approx(totals.var() / abs(totals).mean(), rel=1e-9)
     summary = json.loads((out / "summary.json").read_text())
-    assert {(s["policy"], s["setting"], s["episodes"]) for s in summary} == {("static", "no_physics", 6), ("myopic", "no_physics", 6)}
+    assert {(s["policy"], s["setting"], s["episodes"]) for s in summary} == {
+        ("static", "no_physics", 6),
+        ("myopic", "no_physics", 6),
+    }
     meta = json.loads((out / "run_metadata.json").read_text())
     assert meta["complete"] and meta["setting"] == "no_physics" and meta["rows"] == {"metrics": 12, "actions": 288}
     assert meta["config"]["no_physics_penalty"] is True
-    assert set(meta["dataset"]["files"]) == {"urban_energy_nodes.csv", "spatiotemporal_generation.csv", "market_liquidity.csv", "p2p_trades.csv"}
+    assert set(meta["dataset"]["files"]) == {
+        "urban_energy_nodes.csv",
+        "spatiotemporal_generation.csv",
+        "market_liquidity.csv",
+        "p2p_trades.csv",
+    }
     assert "numpy" in meta["package_versions"]
 
 
 def test_unknown_policy_exits_2_before_writing(tiny_dataset, tmp_path):
-    result = runner.invoke(app, ["evaluate", "--data", str(tiny_dataset), "--policies", "static,oracle", "--out", str(tmp_path / "r")])
+    result = runner.invoke(
+        app, ["evaluate", "--data", str(tiny_dataset), "--policies", "static,oracle", "--out", str(tmp_path / "r")]
+    )
     assert result.exit_code == 2
     assert "unknown policy 'oracle'" in result.output
     assert not (tmp_path / "r").exists()
 
 
 def test_data_build_refuses_to_overwrite_without_force(tmp_path):
-    args = ["data", "build", "--out", str(tmp_path / "ds"), "--city", "Wuhan:30.5928:114.3055", "--start", "2026-05-01",
-            "--end", "2026-05-03", "--nodes-per-city", "2"]
+    args = [
+        "data",
+        "build",
+        "--out",
+        str(tmp_path / "ds"),
+        "--city",
+        "Wuhan:30.5928:114.3055",
+        "--start",
+        "2026-05-01",
+        "--end",
+        "2026-05-03",
+        "--nodes-per-city",
+        "2",
+    ]
     assert runner.invoke(app, args).exit_code == 0
     again = runner.invoke(app, args)
     assert again.exit_code == 2 and "--force" in again.output

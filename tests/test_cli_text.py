@@ -8,15 +8,24 @@ import logging
 import re
 
 import pytest
-from fake_openai import FakeOpenAI, Reply
 from typer.main import get_command
 from typer.testing import CliRunner
 
+from fake_openai import FakeOpenAI, Reply
 from solarchain_eval.cli import app
 
 COMMANDS = [
-    [], ["data"], ["data", "build"], ["data", "check"], ["run"], ["evaluate"], ["train"], ["paper"],
-    ["report"], ["bench"], ["bench-train"],
+    [],
+    ["data"],
+    ["data", "build"],
+    ["data", "check"],
+    ["run"],
+    ["evaluate"],
+    ["train"],
+    ["paper"],
+    ["report"],
+    ["bench"],
+    ["bench-train"],
 ]
 
 
@@ -90,9 +99,31 @@ def test_server_error_with_markup_is_printed_verbatim(tiny_dataset, tmp_path, mo
     script = [Reply(404, {"error": {"message": message, "type": "invalid_request_error"}})] * 4
     with FakeOpenAI(script=script) as server:
         result = invoke(
-            ["evaluate", "--data", str(tiny_dataset), "--policies", "static", "--seeds", "1", "--episodes", "1",
-             "--out", str(tmp_path / "run"), "--agentic", "planner_auditor", "--planner", "llm", "--llm-api", "chat",
-             "--llm-model", "m", "--llm-base-url", server.base_url, "--llm-max-retries", "0"],
+            [
+                "evaluate",
+                "--data",
+                str(tiny_dataset),
+                "--policies",
+                "static",
+                "--seeds",
+                "1",
+                "--episodes",
+                "1",
+                "--out",
+                str(tmp_path / "run"),
+                "--agentic",
+                "planner_auditor",
+                "--planner",
+                "llm",
+                "--llm-api",
+                "chat",
+                "--llm-model",
+                "m",
+                "--llm-base-url",
+                server.base_url,
+                "--llm-max-retries",
+                "0",
+            ],
             SOLARCHAIN_LLM_API_KEY="sk-test-key",
         )
     assert result.exit_code == 2, result.output

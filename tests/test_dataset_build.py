@@ -16,7 +16,14 @@ from solarchain_eval.io import sha256_file
 
 
 def _build(weather, out, cities=PAPER_CITIES, **kw):
-    args = dict(seed=20260511, start="2026-04-01", end="2026-05-01", nodes_per_city=10, timezone="Asia/Shanghai", weather_source="test")
+    args = dict(
+        seed=20260511,
+        start="2026-04-01",
+        end="2026-05-01",
+        nodes_per_city=10,
+        timezone="Asia/Shanghai",
+        weather_source="test",
+    )
     args.update(kw)
     return build_dataset(weather, out, cities=cities, **args)
 
@@ -66,7 +73,9 @@ def test_synthetic_build_is_deterministic_and_seed_dependent(tmp_path):
 def test_synthetic_weather_of_a_city_does_not_depend_on_the_other_cities():
     wuhan = City("Wuhan", 30.5928, 114.3055)
     alone = synthesize_weather([wuhan], "2026-07-01", "2026-07-03", 5, "Asia/Shanghai")["Wuhan"]
-    together = synthesize_weather([City("Lhasa", 29.652, 91.1721), wuhan], "2026-07-01", "2026-07-03", 5, "Asia/Shanghai")["Wuhan"]
+    together = synthesize_weather(
+        [City("Lhasa", 29.652, 91.1721), wuhan], "2026-07-01", "2026-07-03", 5, "Asia/Shanghai"
+    )["Wuhan"]
     assert alone == together
     assert max(alone.shortwave_radiation_Wm2) > 300 and min(alone.shortwave_radiation_Wm2) == 0
 

@@ -9,8 +9,21 @@ from solarchain_eval.env import SolarChainEnv
 from solarchain_eval.vector import SolarChainVectorEnv
 
 ACCEPTED = [7, np.int64(7), np.int32(7), np.uint8(7), np.array(7), np.array(7, dtype=np.int16)]
-REFUSED = [3.7, -0.5, 7.0, np.float64(7.0), [3, 100], [7], np.array([7]), "5", True, np.True_, np.array(True),
-           np.zeros(3, dtype=np.float32), None]
+REFUSED = [
+    3.7,
+    -0.5,
+    7.0,
+    np.float64(7.0),
+    [3, 100],
+    [7],
+    np.array([7]),
+    "5",
+    True,
+    np.True_,
+    np.array(True),
+    np.zeros(3, dtype=np.float32),
+    None,
+]
 
 
 @pytest.fixture(scope="module")
@@ -48,7 +61,14 @@ def test_vector_env_takes_an_integer_array_of_one_action_per_sub_env(tiny_datase
     table = envs.codec.discrete_table(envs.config.discrete_levels)
     assert info["reward_ratio"].tolist() == pytest.approx([table[i][0] for i in (0, 7, 124)], abs=0)
     envs.step([1, 2, 3])  # a list of ints is an integer array too
-    for bad in (np.array([0.0, 7.0, 1.0]), np.array([[0], [7], [1]]), np.array([True, False, True]), [0, 7], ["1", "2", "3"], 5):
+    for bad in (
+        np.array([0.0, 7.0, 1.0]),
+        np.array([[0], [7], [1]]),
+        np.array([True, False, True]),
+        [0, 7],
+        ["1", "2", "3"],
+        5,
+    ):
         with pytest.raises(ValueError, match=r"expected 3 discrete actions as an integer array of shape \(3,\)"):
             envs.step(bad)
     with pytest.raises(ValueError, match=r"discrete actions must lie in 0\.\.124"):

@@ -113,8 +113,12 @@ def test_cutting_episodes_short_keeps_the_random_stream_of_sequential_drawing(ti
 def test_vector_sub_envs_equal_single_envs(tiny_dataset, autoreset, mode):
     n, calls = 4, 60
     vec = gym.make_vec(
-        "SolarChainEval-v0", num_envs=n, vectorization_mode="vector_entry_point", data_dir=str(tiny_dataset),
-        action_mode=mode, autoreset_mode=autoreset,
+        "SolarChainEval-v0",
+        num_envs=n,
+        vectorization_mode="vector_entry_point",
+        data_dir=str(tiny_dataset),
+        action_mode=mode,
+        autoreset_mode=autoreset,
     )
     rng = np.random.default_rng(11)
     if mode == "continuous":
@@ -130,7 +134,7 @@ def test_vector_sub_envs_equal_single_envs(tiny_dataset, autoreset, mode):
         env = SolarChainEnv(tiny_dataset, action_mode=mode)
         single_obs, _ = env.reset(seed=200 + i)
         assert np.array_equal(single_obs, obs[i])
-        for t, (v_obs, v_rew, v_term, v_trunc, v_info) in enumerate(history):
+        for t, (v_obs, v_rew, _v_term, v_trunc, v_info) in enumerate(history):
             if not v_info:  # NEXT_STEP reset call
                 single_obs, _ = env.reset()
                 assert np.array_equal(single_obs, v_obs[i]) and v_rew[i] == 0.0

@@ -11,10 +11,10 @@ import csv
 import datetime as dt
 import io
 import tempfile
+from collections.abc import Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass, fields
 from pathlib import Path
-from typing import Iterator
 
 import numpy as np
 import pandas as pd
@@ -53,7 +53,7 @@ class Csv:
     def column(self, name: str) -> int:
         return self.header.index(name)
 
-    def copy(self) -> "Csv":
+    def copy(self) -> Csv:
         return Csv(list(self.header), [list(row) for row in self.rows])
 
     def text(self, newline: str = "\n") -> str:
@@ -121,7 +121,7 @@ def harmless(draw, files: dict[str, Csv]):
         skip = 1 if name == GENERATION_FILE else 0  # the first record's offset is the data's local time
         stamps = pd.to_datetime(pd.Series([row[column] for row in table.rows[skip:]]), utc=True)
         rewritten = stamps.dt.tz_convert(offset).dt.strftime("%Y-%m-%dT%H:%M:%S%z")
-        for row, stamp in zip(table.rows[skip:], rewritten):
+        for row, stamp in zip(table.rows[skip:], rewritten, strict=True):
             row[column] = stamp
     crlf = frozenset(draw(st.sets(st.sampled_from(DATASET_FILES))))
     bom = frozenset(draw(st.sets(st.sampled_from(DATASET_FILES))))
@@ -152,7 +152,9 @@ def corruption(draw, files: dict[str, Csv], kind: str):
     if kind == "value":
         name = draw(st.sampled_from(sorted(NUMERIC)))
         column = draw(st.sampled_from(NUMERIC[name]))
-        value = draw(st.sampled_from(["abc", "1,5", "", "nan", "NaN", "inf", "-inf", "-1.5", "-0.001", "1e300", "1e10"]))
+        value = draw(
+            st.sampled_from(["abc", "1,5", "", "nan", "NaN", "inf", "-inf", "-1.5", "-0.001", "1e300", "1e10"])
+        )
         row = draw(st.integers(0, len(out[name].rows) - 1))
         return out, _set_cell(out, name, row, column, value)
     if kind in ("missing row", "duplicate row"):

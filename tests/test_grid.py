@@ -61,7 +61,9 @@ def test_plan_of_the_paper_preset_with_its_agentic_settings(monkeypatch):
     # 3 algorithms × 2 training settings × 3 seeds; 6 policies × 3 seeds in main and no_physics,
     # 3 learned policies × 3 seeds in llm and llm_no_physics (which reuse those models).
     assert (len(trains), len(evals)) == (18, 54)
-    assert [u.depends_on for u in evals if u.name == "eval/dqn-llm_no_physics-20260513"] == [("train/dqn-no_physics-20260513",)]
+    assert [u.depends_on for u in evals if u.name == "eval/dqn-llm_no_physics-20260513"] == [
+        ("train/dqn-no_physics-20260513",)
+    ]
     assert [u.depends_on for u in evals if u.name == "eval/sac-llm-20260511"] == [("train/sac-main-20260511",)]
     assert [u.policy for u in trains[:6]] == ["sac"] * 6  # the longest units first
     ppo_eval = next(u for u in evals if u.name == "eval/ppo-no_physics-20260512")
@@ -102,7 +104,9 @@ def test_smoke_preset_end_to_end_with_two_workers(smoke_root):
         assert list(metrics["episode_seed"][:2]) == [20260511, 20260512]  # paper protocol: s + e
         assert meta["combined"][setting] == {"metrics.csv": 12, "actions.csv": 288, "city_hour_policy.csv": 864}
         for name in TABLES:  # the combined file is the units' files concatenated in grid order
-            parts = [pd.read_csv(smoke_root / "units" / "eval" / f"{p}-{setting}-20260511" / name) for p in POLICY_ORDER]
+            parts = [
+                pd.read_csv(smoke_root / "units" / "eval" / f"{p}-{setting}-20260511" / name) for p in POLICY_ORDER
+            ]
             pd.testing.assert_frame_equal(pd.read_csv(combined / name), pd.concat(parts, ignore_index=True))
     # learned policies were evaluated with the models of their own setting (recorded by sha256)
     unit = json.loads((smoke_root / "units" / "eval" / "sac-no_physics-20260511" / "unit.json").read_text())
@@ -122,14 +126,18 @@ def test_smoke_preset_end_to_end_with_two_workers(smoke_root):
         assert len(logs) == len(metrics) * 24 and {row["setting"] for row in logs} == {setting}
     assert meta["combined"]["llm"]["agentic_logs.jsonl"] == 144
     unit = json.loads((smoke_root / "units" / "eval" / "dqn-llm_no_physics-20260511" / "unit.json").read_text())
-    assert unit["model_sha256"] == {"dqn": _digest(smoke_root / "units" / "train" / "dqn-no_physics-20260511" / "model.zip")}
+    assert unit["model_sha256"] == {
+        "dqn": _digest(smoke_root / "units" / "train" / "dqn-no_physics-20260511" / "model.zip")
+    }
     # a complete grid gets its report
     assert (smoke_root / "report" / "index.html").is_file() and (smoke_root / "report" / "tables").is_dir()
 
 
 def test_rerun_skips_done_units_and_a_different_grid_is_refused(smoke_root, tiny_dataset):
     stamps = {p: p.stat().st_mtime_ns for p in smoke_root.glob("units/*/*/*") if p.is_file()}
-    done = subprocess.run(_paper_cmd(smoke_root, tiny_dataset, "--workers", "2"), capture_output=True, text=True, timeout=300)
+    done = subprocess.run(
+        _paper_cmd(smoke_root, tiny_dataset, "--workers", "2"), capture_output=True, text=True, timeout=300
+    )
     assert done.returncode == 0 and "24 of 24 units already done: skipped" in done.stderr
     assert {p: p.stat().st_mtime_ns for p in stamps} == stamps
     with pytest.raises(GridError, match=r"holds a different grid \(episodes: 2 -> 3\)"):
@@ -155,8 +163,12 @@ def _alive(pid: int) -> bool:
 @pytest.mark.skipif(not sys.platform.startswith("linux"), reason="uses /proc and PR_SET_PDEATHSIG (Linux)")
 def test_sigkill_loses_no_finished_unit_and_rerun_gives_the_same_results(smoke_root, tiny_dataset, tmp_path):
     root = tmp_path / "root"
-    proc = subprocess.Popen(_paper_cmd(root, tiny_dataset, "--workers", "2"), stdout=subprocess.DEVNULL,
-                            stderr=subprocess.DEVNULL, start_new_session=True)
+    proc = subprocess.Popen(
+        _paper_cmd(root, tiny_dataset, "--workers", "2"),
+        stdout=subprocess.DEVNULL,
+        stderr=subprocess.DEVNULL,
+        start_new_session=True,
+    )
     deadline = time.monotonic() + 300
     while len(_done_units(root)) < 3 and proc.poll() is None and time.monotonic() < deadline:
         time.sleep(0.05)
@@ -175,7 +187,9 @@ def test_sigkill_loses_no_finished_unit_and_rerun_gives_the_same_results(smoke_r
     for unit in finished:  # every finished unit is whole: files parse and nothing is half-written
         assert not list(unit.rglob("*.partial"))
         if unit.parent.name == "train":
-            assert (unit / "model.zip").stat().st_size > 0 and json.loads((unit / "train_metadata.json").read_text())["complete"]
+            assert (unit / "model.zip").stat().st_size > 0 and json.loads((unit / "train_metadata.json").read_text())[
+                "complete"
+            ]
         else:
             assert len(pd.read_csv(unit / "metrics.csv")) == 2 and len(pd.read_csv(unit / "actions.csv")) == 48
             assert json.loads((unit / "run_metadata.json").read_text())["complete"]
@@ -188,7 +202,9 @@ def test_sigkill_loses_no_finished_unit_and_rerun_gives_the_same_results(smoke_r
     assert {p: _digest(p) for p in snapshot} == snapshot  # finished units were not redone
     for setting in ("main", "no_physics", "llm", "llm_no_physics"):  # equal to an uninterrupted run, byte for byte
         for name in TABLES:
-            assert _digest(root / "combined" / setting / name) == _digest(smoke_root / "combined" / setting / name), name
+            assert _digest(root / "combined" / setting / name) == _digest(smoke_root / "combined" / setting / name), (
+                name
+            )
 
 
 def test_failing_unit_stops_the_run_or_is_recorded_with_keep_going(tiny_dataset, tmp_path):
@@ -209,8 +225,9 @@ def test_failing_unit_stops_the_run_or_is_recorded_with_keep_going(tiny_dataset,
 
     root = tmp_path / "keep"
     unit = plant_damage(root)
-    kept = subprocess.run(_paper_cmd(root, tiny_dataset, "--workers", "2", "--keep-going"),
-                          capture_output=True, text=True, timeout=600)
+    kept = subprocess.run(
+        _paper_cmd(root, tiny_dataset, "--workers", "2", "--keep-going"), capture_output=True, text=True, timeout=600
+    )
     assert kept.returncode == 1 and "1 unit(s) failed" in kept.stderr
     meta = json.loads((root / "paper_metadata.json").read_text())
     assert meta["units"]["train/sac-main-20260511"]["status"] == "failed"
@@ -233,21 +250,30 @@ def test_smoke_preset_through_a_local_ray_instance(smoke_root, tiny_dataset, tmp
     try:
         root = tmp_path / "ray"
         # ship files through Ray as on a cluster without a shared filesystem
-        outcome = run_paper(GridSpec.from_preset("smoke", data_dir=tiny_dataset), root, ray_address="auto", ray_transfer="always")
+        outcome = run_paper(
+            GridSpec.from_preset("smoke", data_dir=tiny_dataset), root, ray_address="auto", ray_transfer="always"
+        )
     finally:
         ray.shutdown()
     assert outcome.complete and len(outcome.report.finished) == 24
     assert not (root / ".grid-token").exists()
     for setting in ("main", "no_physics", "llm", "llm_no_physics"):
         for name in TABLES:
-            assert _digest(root / "combined" / setting / name) == _digest(smoke_root / "combined" / setting / name), name
+            assert _digest(root / "combined" / setting / name) == _digest(smoke_root / "combined" / setting / name), (
+                name
+            )
     for unit in ("train/ppo-main-20260511", "eval/ppo-main-20260511"):
         assert (root / "units" / unit / "DONE").is_file() and (root / "units" / unit / "unit.log").is_file()
 
 
 def test_independent_episode_seeds_reach_the_evaluation(tiny_dataset, tmp_path):
     spec = GridSpec.from_preset(
-        "smoke", episodes=3, seeds=(7, 8), settings=("main",), policies=("static",), episode_seed_protocol="independent",
+        "smoke",
+        episodes=3,
+        seeds=(7, 8),
+        settings=("main",),
+        policies=("static",),
+        episode_seed_protocol="independent",
         data_dir=tiny_dataset,
     )
     outcome = run_paper(spec, tmp_path / "root")

@@ -6,9 +6,9 @@ import json
 import os
 import shutil
 import tempfile
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator
 
 import pandas as pd
 import pytest
@@ -50,55 +50,68 @@ def _drop_first_hours(frame: pd.DataFrame) -> pd.DataFrame:
 # Tiny dataset: 12 nodes (Wuhan, Xian, Kunming; 4 each) × 96 hours, node-major, from 2026-06-01T00:00+08:00.
 DATASET_CASES = {
     "naive timestamp is blamed on its own row": (
-        GEN, _set(5, "timestamp", "2026-06-01T05:00:00"),
+        GEN,
+        _set(5, "timestamp", "2026-06-01T05:00:00"),
         r"column 'timestamp', row 6 \(line 7\): '2026-06-01T05:00:00' has no UTC offset",
     ),
     "naive first timestamp": (
-        GEN, _set(0, "timestamp", "2026-06-01T00:00:00"),
+        GEN,
+        _set(0, "timestamp", "2026-06-01T00:00:00"),
         r"column 'timestamp', row 1 \(line 2\): '2026-06-01T00:00:00' has no UTC offset",
     ),
     "first hour not local midnight": (
-        GEN, _drop_first_hours,
+        GEN,
+        _drop_first_hours,
         r"column 'timestamp', row 1 \(line 2\): the data starts at 2026-06-01T06:00:00\+08:00, not at local midnight",
     ),
     "node missing one hour": (
-        GEN, lambda f: f.drop(index=96 + 17),
+        GEN,
+        lambda f: f.drop(index=96 + 17),
         r"column 'timestamp': node 'WUH-002' has no records at 2026-06-01T17:00:00\+08:00",
     ),
     "generation city contradicts its node": (
-        GEN, _set(40, "city", "Xian"),
+        GEN,
+        _set(40, "city", "Xian"),
         r"spatiotemporal_generation.csv, column 'city', row 41 \(line 42\): city 'Xian' contradicts node 'WUH-001'",
     ),
     "nodes-file city contradicts the generation file": (
-        NODES, _set(1, "city", "Kunming"),
+        NODES,
+        _set(1, "city", "Kunming"),
         r"urban_energy_nodes.csv, column 'city', row 2 \(line 3\): node 'WUH-002' is in city 'Kunming' here but in 'Wuhan'",
     ),
     "node without records": (
-        NODES, lambda f: pd.concat([f, f.iloc[[0]].assign(node_id="WUH-999")], ignore_index=True),
+        NODES,
+        lambda f: pd.concat([f, f.iloc[[0]].assign(node_id="WUH-999")], ignore_index=True),
         r"urban_energy_nodes.csv, column 'node_id', row 13 \(line 14\): node 'WUH-999' has no records",
     ),
     "trade not on the hour": (
-        TRADES, _set(1, "timestamp", "2026-06-01T07:30:00+08:00"),
+        TRADES,
+        _set(1, "timestamp", "2026-06-01T07:30:00+08:00"),
         r"p2p_trades.csv, column 'timestamp', row 2 \(line 3\): '2026-06-01T07:30:00\+08:00' is not on the hour",
     ),
     "trade before the window": (
-        TRADES, _set(0, "timestamp", "2026-05-31T23:00:00+08:00"),
+        TRADES,
+        _set(0, "timestamp", "2026-05-31T23:00:00+08:00"),
         r"p2p_trades.csv, column 'timestamp', row 1 \(line 2\): trade at 2026-05-31T23:00:00\+08:00 is outside",
     ),
     "trade a few minutes before the window": (
-        TRADES, _set(0, "timestamp", "2026-05-31T23:40:00+08:00"),
+        TRADES,
+        _set(0, "timestamp", "2026-05-31T23:40:00+08:00"),
         r"p2p_trades.csv, column 'timestamp', row 1 \(line 2\): '2026-05-31T23:40:00\+08:00' is not on the hour",
     ),
     "market row not on the hour": (
-        MARKET, _set(3, "timestamp", "2026-06-01T03:15:00+08:00"),
+        MARKET,
+        _set(3, "timestamp", "2026-06-01T03:15:00+08:00"),
         r"market_liquidity.csv, column 'timestamp', row 4 \(line 5\): '2026-06-01T03:15:00\+08:00' is not on the hour",
     ),
     "reading of 1e300": (
-        GEN, _set(30, "P_reported_W", "1e300"),
+        GEN,
+        _set(30, "P_reported_W", "1e300"),
         r"column 'P_reported_W', row 31 \(line 32\): value 1e\+300 is implausibly large",
     ),
     "demand of 1e300": (
-        TRADES, _set(2, "energy_purchased_MW", "1e300"),
+        TRADES,
+        _set(2, "energy_purchased_MW", "1e300"),
         r"column 'energy_purchased_MW', row 3 \(line 4\): value 1e\+300 is implausibly large",
     ),
 }
@@ -126,7 +139,9 @@ def _assert_refused(result, *needles: str) -> None:
         assert needle in message, message
 
 
-@pytest.mark.parametrize("case", ["naive timestamp is blamed on its own row", "node missing one hour", "reading of 1e300"])
+@pytest.mark.parametrize(
+    "case", ["naive timestamp is blamed on its own row", "node missing one hour", "reading of 1e300"]
+)
 def test_evaluate_refuses_bad_datasets_with_exit_2_and_writes_nothing(tiny_dataset, tmp_path, case):
     name, change, _ = DATASET_CASES[case]
     data = _copy(tiny_dataset, tmp_path / "ds", name, change)
@@ -210,12 +225,24 @@ CONFIG_CASES = {
     "NaN": ("reward:\n  drawdown_penalty: .nan\n", "reward.drawdown_penalty: Input should be a finite number"),
     "+inf": ("market:\n  initial_liquidity: .inf\n", "market.initial_liquidity: Input should be a finite number"),
     "-inf": ("reward:\n  physics_penalty: -.inf\n", "reward.physics_penalty: Input should be a finite number"),
-    "-1e308": ("reward:\n  unmet_demand_penalty: -1.0e+308\n", "reward.unmet_demand_penalty: Input should be greater than or equal to 0"),
+    "-1e308": (
+        "reward:\n  unmet_demand_penalty: -1.0e+308\n",
+        "reward.unmet_demand_penalty: Input should be greater than or equal to 0",
+    ),
     "huge discrete_levels": ("discrete_levels: 1000000\n", "discrete_levels: Input should be less than or equal to 50"),
-    "static ratio outside its range": ("market:\n  static_liquidity_ratio: 0.99\n", "market.static_liquidity_ratio = 0.99 is outside its range [0.2, 0.95]"),
-    "static burn above the maximum": ("market:\n  static_burn_rate: 0.5\n", "market.static_burn_rate = 0.5 is outside its range [0.0, 0.2]"),
+    "static ratio outside its range": (
+        "market:\n  static_liquidity_ratio: 0.99\n",
+        "market.static_liquidity_ratio = 0.99 is outside its range [0.2, 0.95]",
+    ),
+    "static burn above the maximum": (
+        "market:\n  static_burn_rate: 0.5\n",
+        "market.static_burn_rate = 0.5 is outside its range [0.0, 0.2]",
+    ),
     "negative seed": ("seed: -3\n", "seed: Input should be greater than or equal to 0"),
-    "duplicate key": ("seed: 1\nmarket:\n  max_burn_rate: 0.1\n  max_burn_rate: 0.3\n", "duplicate key 'max_burn_rate' (line 4, column 3)"),
+    "duplicate key": (
+        "seed: 1\nmarket:\n  max_burn_rate: 0.1\n  max_burn_rate: 0.3\n",
+        "duplicate key 'max_burn_rate' (line 4, column 3)",
+    ),
 }
 
 
@@ -255,7 +282,8 @@ def test_episode_longer_than_the_data_is_refused(tiny_dataset, tmp_path):
 )
 def test_bad_run_seeds(tiny_dataset, tmp_path, seeds, message):
     result = CliRunner().invoke(
-        app, ["evaluate", "--data", str(tiny_dataset), "--episodes", "1", "--seeds", seeds, "--out", str(tmp_path / "run")]
+        app,
+        ["evaluate", "--data", str(tiny_dataset), "--episodes", "1", "--seeds", seeds, "--out", str(tmp_path / "run")],
     )
     _assert_refused(result, message)
     assert not (tmp_path / "run").exists()

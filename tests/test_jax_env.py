@@ -82,8 +82,12 @@ def trajectory_errors(data_dir: Path, mode: str, no_physics: bool, episodes: int
             values["observation"] = obs
             values["reward_returned"] = reward
             reward_terms.append(
-                info["matched_energy_MWh"] + w.drawdown * info["max_drawdown"] + w.jitter * info["action_jitter"]
-                + w.unmet * info["unmet_demand_MWh"] + w.fairness * info["fairness_variance"] + w.physics * info["cost"]
+                info["matched_energy_MWh"]
+                + w.drawdown * info["max_drawdown"]
+                + w.jitter * info["action_jitter"]
+                + w.unmet * info["unmet_demand_MWh"]
+                + w.fairness * info["fairness_variance"]
+                + w.physics * info["cost"]
             )
             jax_values = {key: j_info[key][k] for key in values if key in j_info}
             jax_values["observation"], jax_values["reward_returned"] = j_obs[k], j_reward[k]

@@ -6,8 +6,8 @@ from __future__ import annotations
 import json
 
 import pytest
-from fake_openai import VALID_AUDIT, VALID_PLAN, FakeOpenAI, Reply, chat_body, ok
 
+from fake_openai import VALID_AUDIT, VALID_PLAN, FakeOpenAI, Reply, chat_body, ok
 from solarchain_eval.agentic import (
     CallSite,
     LLMSchemaError,
@@ -25,20 +25,26 @@ from solarchain_eval.cli import agentic as agentic_cli
 from solarchain_eval.cli.common import CliError
 
 SITE = CallSite("auditor", "sac", 7, 3, 11)
-MESSAGES = [{"role": "system", "content": "s"}, {"role": "user", "content": "Context (JSON):\n{\"step\": 11}"}]
+MESSAGES = [{"role": "system", "content": "s"}, {"role": "user", "content": 'Context (JSON):\n{"step": 11}'}]
 CHAT = "/v1/chat/completions"
 
 
 def json_object_client(server: FakeOpenAI, **kw) -> StructuredLLM:
     settings = resolve_llm_settings(
-        api="chat-json-object", model="local-model", base_url=server.base_url, environ={"SOLARCHAIN_LLM_API_KEY": "x"}, **kw
+        api="chat-json-object",
+        model="local-model",
+        base_url=server.base_url,
+        environ={"SOLARCHAIN_LLM_API_KEY": "x"},
+        **kw,
     )
     return StructuredLLM(settings)
 
 
 def test_json_object_request_carries_the_capped_schema_max_tokens_and_seed():
     with FakeOpenAI([ok(CHAT, VALID_PLAN)]) as server:
-        reply = json_object_client(server, max_output_tokens=321, temperature=0.0, seed=5).request(MESSAGES, PlannerOutput, SITE)
+        reply = json_object_client(server, max_output_tokens=321, temperature=0.0, seed=5).request(
+            MESSAGES, PlannerOutput, SITE
+        )
     assert reply.output == PlannerOutput.model_validate(VALID_PLAN)
     (seen,) = server.seen
     fmt = seen.body["response_format"]
@@ -46,7 +52,10 @@ def test_json_object_request_carries_the_capped_schema_max_tokens_and_seed():
     schema = fmt["schema"]
     # the same strict schema the chat mode sends, plus maxLength on the free text
     strict = response_format(PlannerOutput, "chat")["json_schema"]["schema"]
-    assert schema["properties"]["rationale"] == {**strict["properties"]["rationale"], "maxLength": SCHEMA_TEXT_MAX_CHARS["rationale"]}
+    assert schema["properties"]["rationale"] == {
+        **strict["properties"]["rationale"],
+        "maxLength": SCHEMA_TEXT_MAX_CHARS["rationale"],
+    }
     assert schema["properties"]["governance_mode"]["maxLength"] == SCHEMA_TEXT_MAX_CHARS["governance_mode"]
     assert schema["$defs"] == strict["$defs"] and schema["required"] == strict["required"]
     assert seen.body["max_tokens"] == 321 and "max_completion_tokens" not in seen.body
@@ -74,18 +83,27 @@ def test_seed_is_part_of_the_cache_key_only_when_set():
     ],
 )
 def test_a_server_that_ignores_the_schema_is_a_typed_failure_naming_episode_and_step(content, text):
-    with FakeOpenAI([Reply(200, chat_body(content))]) as server:
-        with pytest.raises(LLMSchemaError) as caught:
-            json_object_client(server).request(MESSAGES, AuditorOutput, SITE)
+    with FakeOpenAI([Reply(200, chat_body(content))]) as server, pytest.raises(LLMSchemaError) as caught:
+        json_object_client(server).request(MESSAGES, AuditorOutput, SITE)
     message = str(caught.value)
     assert text in message and "episode 3" in message and "step 11" in message and "policy 'sac'" in message
 
 
 def local_params(**overrides):
     params = dict(
-        agentic="planner_auditor", llm_backend="local", planner="llm", auditor="rule", llm_api=None, llm_model=None,
-        llm_base_url=None, llm_temperature=None, llm_timeout=30.0, llm_max_retries=0, llm_max_output_tokens=4096,
-        llm_cache=None, llm_cache_mode=None,
+        agentic="planner_auditor",
+        llm_backend="local",
+        planner="llm",
+        auditor="rule",
+        llm_api=None,
+        llm_model=None,
+        llm_base_url=None,
+        llm_temperature=None,
+        llm_timeout=30.0,
+        llm_max_retries=0,
+        llm_max_output_tokens=4096,
+        llm_cache=None,
+        llm_cache_mode=None,
     )
     params.update(overrides)
     return params
@@ -103,7 +121,9 @@ def test_local_backend_settings_need_no_key_and_pin_api_temperature_seed(tmp_pat
     assert s.max_output_tokens == local_server.LOCAL_MAX_OUTPUT_TOKENS
     assert s.base_url.startswith("http://127.0.0.1:") and s.base_url.endswith("/v1")
     spec = agentic_cli.local_server_spec(params, options)
-    assert spec.model_path == gguf and spec.model_name == "tiny-model" and s.base_url == f"http://127.0.0.1:{spec.port}/v1"
+    assert (
+        spec.model_path == gguf and spec.model_name == "tiny-model" and s.base_url == f"http://127.0.0.1:{spec.port}/v1"
+    )
     # a replay starts no server; the remote backend never does
     replay = local_params(llm_model=str(gguf), llm_cache=tmp_path / "c", llm_cache_mode="replay")
     assert agentic_cli.local_server_spec(replay, agentic_cli.agentic_options(**replay)) is None

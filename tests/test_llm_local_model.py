@@ -63,14 +63,25 @@ def server():
 
 def test_planner_and_auditor_answers_of_the_real_model_validate(server):
     settings = resolve_llm_settings(
-        api=local_server.LOCAL_API, model=server.spec.model_name, base_url=server.base_url, temperature=0.0,
-        max_output_tokens=local_server.LOCAL_MAX_OUTPUT_TOKENS, seed=0, environ={"SOLARCHAIN_LLM_API_KEY": "none"},
+        api=local_server.LOCAL_API,
+        model=server.spec.model_name,
+        base_url=server.base_url,
+        temperature=0.0,
+        max_output_tokens=local_server.LOCAL_MAX_OUTPUT_TOKENS,
+        seed=0,
+        environ={"SOLARCHAIN_LLM_API_KEY": "none"},
     )
     client = StructuredLLM(settings)
     codec = ActionCodec.from_config(MarketConfig())
     try:
-        plan = client.request(planner_messages(episode_situation("risky").to_prompt(codec)), PlannerOutput, CallSite("planner", "t", 0, 0))
-        audit = client.request(auditor_messages(step_situation("risky", codec).to_prompt(codec)), AuditorOutput, CallSite("auditor", "t", 0, 0, 6))
+        plan = client.request(
+            planner_messages(episode_situation("risky").to_prompt(codec)), PlannerOutput, CallSite("planner", "t", 0, 0)
+        )
+        audit = client.request(
+            auditor_messages(step_situation("risky", codec).to_prompt(codec)),
+            AuditorOutput,
+            CallSite("auditor", "t", 0, 0, 6),
+        )
     finally:
         client.close()
     assert isinstance(plan.output, PlannerOutput) and isinstance(audit.output, AuditorOutput)
@@ -80,9 +91,30 @@ def test_planner_and_auditor_answers_of_the_real_model_validate(server):
 
 
 def _evaluate_args(data, out, cache, *extra):
-    return ["evaluate", "--data", str(data), "--policies", "static", "--seeds", "3", "--episodes", "1", "--out", str(out),
-            "--agentic", "planner_auditor", "--planner", "llm", "--auditor", "rule", "--llm-backend", "local",
-            "--llm-cache", str(cache), *extra]
+    return [
+        "evaluate",
+        "--data",
+        str(data),
+        "--policies",
+        "static",
+        "--seeds",
+        "3",
+        "--episodes",
+        "1",
+        "--out",
+        str(out),
+        "--agentic",
+        "planner_auditor",
+        "--planner",
+        "llm",
+        "--auditor",
+        "rule",
+        "--llm-backend",
+        "local",
+        "--llm-cache",
+        str(cache),
+        *extra,
+    ]
 
 
 COMPARED = ("metrics.csv", "actions.csv", "city_hour_policy.csv", "agentic_logs.jsonl", "summary.json")
@@ -90,7 +122,13 @@ COMPARED = ("metrics.csv", "actions.csv", "city_hour_policy.csv", "agentic_logs.
 
 def test_evaluate_local_then_replay_without_key_model_or_server(tiny_dataset, tmp_path, monkeypatch):
     _model_or_skip()
-    for name in ("SOLARCHAIN_LLM_API_KEY", "OPENAI_API_KEY", "SOLARCHAIN_LLM_MODEL", "OPENAI_MODEL", "SOLARCHAIN_LLM_BASE_URL"):
+    for name in (
+        "SOLARCHAIN_LLM_API_KEY",
+        "OPENAI_API_KEY",
+        "SOLARCHAIN_LLM_MODEL",
+        "OPENAI_MODEL",
+        "SOLARCHAIN_LLM_BASE_URL",
+    ):
         monkeypatch.delenv(name, raising=False)
     cache = tmp_path / "cache"
     before = set(_children(os.getpid()))
@@ -111,12 +149,20 @@ def test_sigterm_to_evaluate_leaves_no_server_and_no_output(tiny_dataset, tmp_pa
     out = tmp_path / "run"
     args = _evaluate_args(tiny_dataset, out, tmp_path / "cache", "--auditor", "llm", "--episodes", "3")
     env = {k: v for k, v in os.environ.items() if not k.endswith("API_KEY")}
-    proc = subprocess.Popen([sys.executable, "-c", "from solarchain_eval.cli import main; main()", *args], env=env,
-                            stdout=subprocess.PIPE, stderr=subprocess.STDOUT)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", "from solarchain_eval.cli import main; main()", *args],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.STDOUT,
+    )
     try:
         deadline, servers = time.monotonic() + 120, []
         while time.monotonic() < deadline and not servers:
-            servers = [c for c in _children(proc.pid) if "llama_cpp.server" in Path(f"/proc/{c}/cmdline").read_text(errors="replace")]
+            servers = [
+                c
+                for c in _children(proc.pid)
+                if "llama_cpp.server" in Path(f"/proc/{c}/cmdline").read_text(errors="replace")
+            ]
             time.sleep(0.2)
         assert servers, "the local server never started"
         time.sleep(3.0)  # let the run get going

@@ -10,6 +10,8 @@ import sys
 import time
 
 import pytest
+from typer.testing import CliRunner
+
 from fake_openai import (
     VALID_AUDIT,
     VALID_PLAN,
@@ -20,8 +22,6 @@ from fake_openai import (
     ok,
     schema_name,
 )
-from typer.testing import CliRunner
-
 from solarchain_eval.agentic import (
     CallSite,
     LLMSchemaError,
@@ -35,7 +35,7 @@ from solarchain_eval.cli import app
 KEY = "sk-echo-SECRET-5a4b3c2d1e0f"
 SITE = CallSite("auditor", "ppo", 20260511, 4, 7)
 PLANNER_SITE = CallSite("planner", "ppo", 20260511, 4, None)
-MESSAGES = [{"role": "system", "content": "s"}, {"role": "user", "content": "Context (JSON):\n{\"step\": 0}"}]
+MESSAGES = [{"role": "system", "content": "s"}, {"role": "user", "content": 'Context (JSON):\n{"step": 0}'}]
 
 
 def client(server: FakeOpenAI, *, mode: str = "off", cache=None, **kw) -> StructuredLLM:
@@ -85,9 +85,8 @@ def test_key_echoed_in_a_valid_reply_is_not_cached_or_returned(tmp_path):
 
 def test_key_echoed_in_an_invalid_reply_is_not_in_the_snippet():
     bad = {"decision": "maybe", "reason": f"echo {KEY}"}
-    with FakeOpenAI([ok("/v1/chat/completions", bad)]) as server:
-        with pytest.raises(LLMSchemaError) as caught:
-            client(server).request(MESSAGES, AuditorOutput, SITE)
+    with FakeOpenAI([ok("/v1/chat/completions", bad)]) as server, pytest.raises(LLMSchemaError) as caught:
+        client(server).request(MESSAGES, AuditorOutput, SITE)
     message = str(caught.value)
     assert "output began" in message and "[redacted]" in message and "SECRET" not in message
 
@@ -115,11 +114,19 @@ def test_a_non_strict_cache_entry_is_refused(tmp_path):
 
     settings = resolve_llm_settings(api="chat", model="fake-model", environ={})
     with pytest.raises(LLMError, match="not valid JSON"):
-        StructuredLLM(settings, cache_dir=tmp_path / "cache", cache_mode="replay").request(MESSAGES, AuditorOutput, SITE)
+        StructuredLLM(settings, cache_dir=tmp_path / "cache", cache_mode="replay").request(
+            MESSAGES, AuditorOutput, SITE
+        )
 
 
 def test_cli_run_with_an_echoing_server_stores_and_prints_no_key(tiny_dataset, tmp_path, monkeypatch):
-    for name in ("SOLARCHAIN_LLM_BASE_URL", "SOLARCHAIN_LLM_MODEL", "OPENAI_API_KEY", "OPENAI_BASE_URL", "OPENAI_MODEL"):
+    for name in (
+        "SOLARCHAIN_LLM_BASE_URL",
+        "SOLARCHAIN_LLM_MODEL",
+        "OPENAI_API_KEY",
+        "OPENAI_BASE_URL",
+        "OPENAI_MODEL",
+    ):
         monkeypatch.delenv(name, raising=False)
     monkeypatch.setenv("SOLARCHAIN_LLM_API_KEY", KEY)
 
@@ -134,10 +141,33 @@ def test_cli_run_with_an_echoing_server_stores_and_prints_no_key(tiny_dataset, t
     with FakeOpenAI(responder=echo) as server:
         url = server.base_url.replace("http://", "http://alice:pw-SECRET@")
         args = [
-            "evaluate", "--data", str(tiny_dataset), "--policies", "myopic", "--seeds", "5", "--episodes", "1",
-            "--out", str(out), "--agentic", "planner_auditor", "--planner", "llm", "--auditor", "llm",
-            "--llm-api", "chat", "--llm-model", "fake-model", "--llm-base-url", url,
-            "--llm-cache", str(cache), "--llm-cache-mode", "record",
+            "evaluate",
+            "--data",
+            str(tiny_dataset),
+            "--policies",
+            "myopic",
+            "--seeds",
+            "5",
+            "--episodes",
+            "1",
+            "--out",
+            str(out),
+            "--agentic",
+            "planner_auditor",
+            "--planner",
+            "llm",
+            "--auditor",
+            "llm",
+            "--llm-api",
+            "chat",
+            "--llm-model",
+            "fake-model",
+            "--llm-base-url",
+            url,
+            "--llm-cache",
+            str(cache),
+            "--llm-cache-mode",
+            "record",
         ]
         monkeypatch.setattr(sys, "argv", ["solarchain-eval", *args])  # what the CLI records
         result = CliRunner().invoke(app, args, catch_exceptions=False)
@@ -154,7 +184,10 @@ def test_cli_run_with_an_echoing_server_stores_and_prints_no_key(tiny_dataset, t
 def test_a_server_echoing_the_url_token_in_an_error_gets_it_redacted():
     with FakeOpenAI() as server:  # its 404 message repeats the path, query included
         settings = resolve_llm_settings(
-            api="chat", model="m", base_url=server.base_url + "?token=tok-SECRET-77", environ={"SOLARCHAIN_LLM_API_KEY": KEY},
+            api="chat",
+            model="m",
+            base_url=server.base_url + "?token=tok-SECRET-77",
+            environ={"SOLARCHAIN_LLM_API_KEY": KEY},
             max_retries=0,
         )
         with pytest.raises(LLMTransportError) as caught:

@@ -131,8 +131,15 @@ def test_batch_step_equals_scalar_step_elementwise():
     batch = market_step(BATCH, WEIGHTS, *args, share, trust, *state, tuple(actions), jitter, noise)
     for i in range(n):
         single = market_step(
-            SCALAR, WEIGHTS, *(a[i] for a in args), tuple(share[:, i]), tuple(trust[:, i]), *(s[i] for s in state),
-            tuple(actions[:, i]), jitter[i], noise[i],
+            SCALAR,
+            WEIGHTS,
+            *(a[i] for a in args),
+            tuple(share[:, i]),
+            tuple(trust[:, i]),
+            *(s[i] for s in state),
+            tuple(actions[:, i]),
+            jitter[i],
+            noise[i],
         )
         for field in single._fields:
             if field == "city_rewards":
@@ -206,15 +213,26 @@ def test_hourly_table_and_observation_against_the_csvs(published_dir):
     for _ in range(11):
         obs, *_ = env.step(env.codec.encode(0.25, 0.75, 0.02))
     expected = [
-        np.sin(2 * np.pi * 11 / 24), np.cos(2 * np.pi * 11 / 24), verified, rows["P_reported_W"].sum() / 1e6,
-        rows["P_max_W"].sum() / 1e6, (verified - demand) / demand, env._liquidity, env._price, violation.mean(),
-        table.static_slippage[hour], 0.245, 0.735,
+        np.sin(2 * np.pi * 11 / 24),
+        np.cos(2 * np.pi * 11 / 24),
+        verified,
+        rows["P_reported_W"].sum() / 1e6,
+        rows["P_max_W"].sum() / 1e6,
+        (verified - demand) / demand,
+        env._liquidity,
+        env._price,
+        violation.mean(),
+        table.static_slippage[hour],
+        0.245,
+        0.735,
     ]
     assert obs == pytest.approx(np.array(expected, dtype=F32), rel=1e-6)
 
 
 @pytest.mark.parametrize("cities", [1, 3, 5, 7, 8, 9, 12])
 def test_batch_city_variance_equals_numpy_var_per_sub_env(cities):
-    values = np.random.default_rng(cities).normal(size=(cities, 257)) * 10.0 ** np.random.default_rng(1).uniform(-5, 5, (cities, 257))
+    values = np.random.default_rng(cities).normal(size=(cities, 257)) * 10.0 ** np.random.default_rng(1).uniform(
+        -5, 5, (cities, 257)
+    )
     expected = np.array([np.var(values[:, i]) for i in range(values.shape[1])])
     assert np.array_equal(BATCH.city_variance(values), expected)

@@ -9,14 +9,13 @@ import httpx
 import pytest
 from typer.testing import CliRunner
 
+from openmeteo_server import ArchiveServer
 from solarchain_eval.cli import app
 from solarchain_eval.data.cities import PAPER_CITIES
 from solarchain_eval.data.open_meteo import fetch_city, fetch_weather, parse_archive_response
 from solarchain_eval.data.published import PAPER_DATASET_SHA256
 from solarchain_eval.data.weather import WeatherError
 from solarchain_eval.io import sha256_file
-
-from openmeteo_server import ArchiveServer
 
 CENTRES = {c.name: (c.latitude, c.longitude) for c in PAPER_CITIES}
 
@@ -36,7 +35,8 @@ def _closed_port_url() -> str:
 def test_cli_builds_the_published_dataset_from_the_archive_api(tmp_path, payload, isolated_cache):
     with ArchiveServer(payload, CENTRES) as server:
         result = CliRunner().invoke(
-            app, ["data", "build", "--out", str(tmp_path / "ds"), "--weather", "open-meteo", "--open-meteo-url", server.url]
+            app,
+            ["data", "build", "--out", str(tmp_path / "ds"), "--weather", "open-meteo", "--open-meteo-url", server.url],
         )
     assert result.exit_code == 0, result.output
     assert "byte-identical to the paper's published dataset" in result.output
@@ -54,7 +54,17 @@ def test_cli_builds_the_published_dataset_from_the_archive_api(tmp_path, payload
     entry = json.loads(cached[0].read_text())["Beijing"]
     assert entry["time"] == payload["Beijing"]["time"] and entry["latitude"] == payload["Beijing"]["latitude"]
     again = CliRunner().invoke(
-        app, ["data", "build", "--out", str(tmp_path / "ds2"), "--weather", "open-meteo", "--open-meteo-url", _closed_port_url()]
+        app,
+        [
+            "data",
+            "build",
+            "--out",
+            str(tmp_path / "ds2"),
+            "--weather",
+            "open-meteo",
+            "--open-meteo-url",
+            _closed_port_url(),
+        ],
     )
     assert again.exit_code == 0, again.output
     assert sha256_file(tmp_path / "ds2" / "p2p_trades.csv") == PAPER_DATASET_SHA256["p2p_trades.csv"]
@@ -64,7 +74,14 @@ def test_transient_errors_are_retried(payload):
     slept: list[float] = []
     with ArchiveServer(payload, CENTRES, fail_first=2) as server, httpx.Client() as client:
         weather = fetch_city(
-            client, server.url, PAPER_CITIES[1], "2026-04-01", "2026-05-01", "Asia/Shanghai", retries=3, sleep=slept.append
+            client,
+            server.url,
+            PAPER_CITIES[1],
+            "2026-04-01",
+            "2026-05-01",
+            "Asia/Shanghai",
+            retries=3,
+            sleep=slept.append,
         )
     assert len(server.requests) == 3
     assert slept == [1.0, 2.0]  # exponential back-off
@@ -72,9 +89,21 @@ def test_transient_errors_are_retried(payload):
 
 
 def test_retries_exhausted_gives_a_clear_error(payload):
-    with ArchiveServer(payload, CENTRES, fail_first=10) as server, httpx.Client() as client:
-        with pytest.raises(WeatherError, match=r"Beijing.*after 3 attempts \(HTTP 503\)"):
-            fetch_city(client, server.url, PAPER_CITIES[0], "2026-04-01", "2026-05-01", "Asia/Shanghai", retries=2, sleep=lambda s: None)
+    with (
+        ArchiveServer(payload, CENTRES, fail_first=10) as server,
+        httpx.Client() as client,
+        pytest.raises(WeatherError, match=r"Beijing.*after 3 attempts \(HTTP 503\)"),
+    ):
+        fetch_city(
+            client,
+            server.url,
+            PAPER_CITIES[0],
+            "2026-04-01",
+            "2026-05-01",
+            "Asia/Shanghai",
+            retries=2,
+            sleep=lambda s: None,
+        )
 
 
 def test_offline_is_a_clear_error_and_the_cli_exits_2(tmp_path):
@@ -82,8 +111,20 @@ def test_offline_is_a_clear_error_and_the_cli_exits_2(tmp_path):
         fetch_weather(PAPER_CITIES[:1], "2026-04-01", "2026-05-01", "Asia/Shanghai", url=_closed_port_url(), retries=0)
     result = CliRunner().invoke(
         app,
-        ["data", "build", "--out", str(tmp_path / "x"), "--weather", "open-meteo", "--open-meteo-url", _closed_port_url(),
-         "--retries", "0", "--city", "Wuhan:30.5928:114.3055"],
+        [
+            "data",
+            "build",
+            "--out",
+            str(tmp_path / "x"),
+            "--weather",
+            "open-meteo",
+            "--open-meteo-url",
+            _closed_port_url(),
+            "--retries",
+            "0",
+            "--city",
+            "Wuhan:30.5928:114.3055",
+        ],
     )
     assert result.exit_code == 2
     assert "could not get weather for Wuhan" in result.output
@@ -92,7 +133,11 @@ def test_offline_is_a_clear_error_and_the_cli_exits_2(tmp_path):
 
 def test_missing_values_in_a_response_name_the_city_field_and_time(payload):
     response = ArchiveServer(payload, CENTRES).respond(
-        {"latitude": str(PAPER_CITIES[2].latitude), "longitude": str(PAPER_CITIES[2].longitude), "timezone": "Asia/Shanghai"}
+        {
+            "latitude": str(PAPER_CITIES[2].latitude),
+            "longitude": str(PAPER_CITIES[2].longitude),
+            "timezone": "Asia/Shanghai",
+        }
     )
     response["hourly"]["shortwave_radiation"][30] = None
     with pytest.raises(WeatherError, match=r"Chengdu: 'hourly.shortwave_radiation'\[30\] \(2026-04-02T06:00\) is None"):

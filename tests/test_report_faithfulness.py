@@ -67,10 +67,18 @@ def test_main_detail_equals_the_paper(report_dir: Path):
 def test_tables_not_supported_by_baselines_are_explained(report_dir: Path):
     text = (report_dir / "report.md").read_text(encoding="utf-8")
     assert "## Not produced for this run" in text
-    assert "**Four-setting summaries for learned policies** (`four_setting_learned`): the run has no learned policies" in text
-    assert "Rollouts overlap: a policy's 90 rollouts come from only 32 distinct episode seeds and 21 distinct start days" in text
+    assert (
+        "**Four-setting summaries for learned policies** (`four_setting_learned`): the run has no learned policies"
+        in text
+    )
+    assert (
+        "Rollouts overlap: a policy's 90 rollouts come from only 32 distinct episode seeds and 21 distinct start days"
+        in text
+    )
     csv_text = (report_dir / "tables" / "main_performance.csv").read_text(encoding="utf-8")
-    assert csv_text.splitlines()[0].startswith("policy,n,distinct_episode_seeds,distinct_start_days,cumulative_reward_mean")
+    assert csv_text.splitlines()[0].startswith(
+        "policy,n,distinct_episode_seeds,distinct_start_days,cumulative_reward_mean"
+    )
 
 
 def test_same_inputs_give_byte_identical_outputs(baseline_run: Path, report_dir: Path, tmp_path: Path):

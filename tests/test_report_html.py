@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import re
-from pathlib import Path
 
 import pytest
 from typer.testing import CliRunner
@@ -36,7 +35,14 @@ def test_every_figure_is_drawn_as_png_and_svg(full_report):
 
 def test_policy_colours_are_the_same_in_every_figure(full_report):
     by_key = {f.key: f.svg.read_text(encoding="utf-8").lower() for f in full_report.figures}
-    for key in ("reward_distribution", "utility_safety_frontier", "reward_trajectory", "trust_slippage", "jitter_change", "audit_step_delta"):
+    for key in (
+        "reward_distribution",
+        "utility_safety_frontier",
+        "reward_trajectory",
+        "trust_slippage",
+        "jitter_change",
+        "audit_step_delta",
+    ):
         assert POLICY_COLOURS["ppo"] in by_key[key], key
         assert POLICY_COLOURS["dqn"] in by_key[key], key
     assert POLICY_COLOURS["static"] in by_key["reward_distribution"]
@@ -75,7 +81,9 @@ def test_cli_report_formats_and_errors(full_report, tmp_path):
     runner = CliRunner()
     root = full_report.data.root
     out = tmp_path / "out"
-    result = runner.invoke(app, ["report", str(root), "--out", str(out), "--format", "md,csv", "--no-figures", "--resamples", "100"])
+    result = runner.invoke(
+        app, ["report", str(root), "--out", str(out), "--format", "md,csv", "--no-figures", "--resamples", "100"]
+    )
     assert result.exit_code == 0, result.output
     assert (out / "tables" / "main_performance.md").is_file() and (out / "tables" / "main_performance.csv").is_file()
     assert not list(out.rglob("*.tex")) and not (out / "index.html").exists() and not (out / "figures").exists()

@@ -26,7 +26,9 @@ def one_seed_root(root: Path) -> Path:
             frame[frame["run_seed"] == keep].to_csv(folder / name, index=False)
         logs = folder / "agentic_logs.jsonl"
         if logs.exists():
-            rows = [line for line in logs.read_text(encoding="utf-8").splitlines() if json.loads(line)["run_seed"] == keep]
+            rows = [
+                line for line in logs.read_text(encoding="utf-8").splitlines() if json.loads(line)["run_seed"] == keep
+            ]
             logs.write_text("".join(r + "\n" for r in rows), encoding="utf-8")
     return write_paper_metadata(root)  # the cut files are this root's run, as the grid would record it
 

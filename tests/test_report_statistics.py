@@ -39,7 +39,15 @@ def test_welch_by_hand():
 def _rollouts(setting, rows):
     return pd.DataFrame(
         [
-            {"setting": setting, "policy": p, "run_seed": s, "episode": e, "episode_seed": s + e, "start_hour": 24 * e, "r": r}
+            {
+                "setting": setting,
+                "policy": p,
+                "run_seed": s,
+                "episode": e,
+                "episode_seed": s + e,
+                "start_hour": 24 * e,
+                "r": r,
+            }
             for p, s, e, r in rows
         ]
     )
@@ -68,7 +76,9 @@ def test_interquartile_mean_by_hand():
     assert S.interquartile_mean([6.0, 1.0, 5.0, 2.0, 4.0, 3.0]) == pytest.approx((1.0 + 3 + 4 + 2.5) / 3.0)
     # weights act as multiplicities: [1, 1, 1, 10] -> mass [1, 3] lies on the 1s
     assert S.interquartile_mean([1.0, 10.0], np.array([3.0, 1.0])) == 1.0
-    assert S.interquartile_mean(np.arange(90.0)) == pytest.approx(stats.trim_mean(np.arange(90.0), 0.25) + 0.0, abs=1e-12)
+    assert S.interquartile_mean(np.arange(90.0)) == pytest.approx(
+        stats.trim_mean(np.arange(90.0), 0.25) + 0.0, abs=1e-12
+    )
 
 
 def test_probability_of_improvement_by_hand():

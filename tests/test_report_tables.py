@@ -6,7 +6,6 @@ from __future__ import annotations
 import csv
 import json
 import statistics
-from collections import defaultdict
 from pathlib import Path
 
 import numpy as np
@@ -64,7 +63,9 @@ def test_main_performance_is_mean_and_sample_std(paper_root, tables):
     latex_cell = cell.replace("±", r"$\pm$")
     assert f"SAC & {latex_cell} &" in to_latex(table)
     # n and the distinct episodes behind it: seeds 11..14 and 12..15 -> 5 seeds, 3 start days
-    assert table.basis.startswith("n = 8 rollouts per row, behind them 5 distinct episode seeds and 3 distinct start days")
+    assert table.basis.startswith(
+        "n = 8 rollouts per row, behind them 5 distinct episode seeds and 3 distinct start days"
+    )
     assert "rollouts overlap" in table.basis
 
 
@@ -85,7 +86,12 @@ def _paired(root: Path, base: str, treated: str, policy: str, column: str) -> li
 def test_physics_ablation_deltas_pair_rollouts(paper_root, tables):
     table = tables["physics_ablation_deltas"]
     assert [(r["comparison"], r["policy"]) for r in table.data.to_dict("records")] == [
-        ("RL", "PPO"), ("RL", "SAC"), ("RL", "DQN"), ("RL+LLM", "PPO"), ("RL+LLM", "SAC"), ("RL+LLM", "DQN")
+        ("RL", "PPO"),
+        ("RL", "SAC"),
+        ("RL", "DQN"),
+        ("RL+LLM", "PPO"),
+        ("RL+LLM", "SAC"),
+        ("RL+LLM", "DQN"),
     ]
     deltas = _paired(paper_root, "llm", "llm_no_physics", "dqn", "artificial_liquidity_MWh")
     row = _row(table, comparison="RL+LLM", policy="DQN")
@@ -100,7 +106,9 @@ def test_agentic_effects_rates_agree_with_the_logs(paper_root, tables):
     audited = [s for s in steps if s["audited"]]
     row = _row(table, policy="PPO")
     assert row["audit_rate"] == pytest.approx(len(audited) / len(steps), abs=1e-12)
-    assert row["revision_rate"] == pytest.approx(sum(s["decision"] == "revise" for s in audited) / len(audited), abs=1e-12)
+    assert row["revision_rate"] == pytest.approx(
+        sum(s["decision"] == "revise" for s in audited) / len(audited), abs=1e-12
+    )
     jitter = _paired(paper_root, "main", "llm", "ppo", "action_jitter")
     assert row["action_jitter_mean"] == pytest.approx(statistics.fmean(jitter), abs=1e-12)
     assert not table.notes  # baselines have no LLM run and are not counted as unmatched
@@ -108,7 +116,11 @@ def test_agentic_effects_rates_agree_with_the_logs(paper_root, tables):
 
 def test_llm_operations_and_triggers(paper_root, tables):
     ops = tables["llm_operations"]
-    assert [(r["setting"], r["policy"]) for r in ops.data.to_dict("records")][:3] == [("Main", "DQN"), ("Main", "PPO"), ("Main", "SAC")]
+    assert [(r["setting"], r["policy"]) for r in ops.data.to_dict("records")][:3] == [
+        ("Main", "DQN"),
+        ("Main", "PPO"),
+        ("Main", "SAC"),
+    ]
     steps = [s for s in _logs(paper_root, "llm_no_physics") if s["policy"] == "sac"]
     row = _row(ops, setting="No-physics", policy="SAC")
     assert row["steps"] == len(steps) == len(RUN_SEEDS) * EPISODES * STEPS
@@ -118,12 +130,19 @@ def test_llm_operations_and_triggers(paper_root, tables):
     assert "The LLM failure count is zero for every row and is therefore not shown." in ops.notes
     triggers = tables["llm_triggers"]
     thresholds = [float(r["plan_gap_threshold"]) for r in _metrics(paper_root, "llm") if r["policy"] == "dqn"]
-    assert _row(triggers, setting="Main", policy="DQN")["plan_gap_threshold"] == pytest.approx(statistics.fmean(thresholds))
+    assert _row(triggers, setting="Main", policy="DQN")["plan_gap_threshold"] == pytest.approx(
+        statistics.fmean(thresholds)
+    )
 
 
 def test_four_setting_tables(paper_root, tables):
     learned = tables["four_setting_learned"]
-    assert [r["setting"] for r in learned.data.to_dict("records")][::3] == ["RL", "RL+LLM", "RL no-physics", "RL+LLM no-physics"]
+    assert [r["setting"] for r in learned.data.to_dict("records")][::3] == [
+        "RL",
+        "RL+LLM",
+        "RL no-physics",
+        "RL+LLM no-physics",
+    ]
     aggregate = tables["four_setting_aggregate"]
     rows = [r for r in _metrics(paper_root, "no_physics") if r["policy"] in LEARNED]
     assert _row(aggregate, setting="RL no-physics")["mean_slippage"] == pytest.approx(
@@ -135,7 +154,9 @@ def test_four_setting_tables(paper_root, tables):
 def test_agentic_paired_deltas_cover_both_rewards(paper_root, tables):
     table = tables["agentic_paired_deltas"]
     slippage = _paired(paper_root, "no_physics", "llm_no_physics", "sac", "mean_slippage")
-    assert _row(table, comparison="No-physics", policy="SAC")["mean_slippage_mean"] == pytest.approx(statistics.fmean(slippage), abs=1e-12)
+    assert _row(table, comparison="No-physics", policy="SAC")["mean_slippage_mean"] == pytest.approx(
+        statistics.fmean(slippage), abs=1e-12
+    )
 
 
 def test_action_distributions_percentiles(paper_root, tables):
@@ -144,7 +165,9 @@ def test_action_distributions_percentiles(paper_root, tables):
     row = _row(tables["action_distributions"], setting="LLM Main", policy="PPO")
     assert row["liquidity_ratio_p05"] == pytest.approx(np.percentile(ell, 5))
     assert row["liquidity_ratio_p95"] == pytest.approx(np.percentile(ell, 95))
-    assert f"{ell.mean():.3f} ({np.percentile(ell, 5):.3f}–{np.percentile(ell, 95):.3f})" in to_markdown(tables["action_distributions"])
+    assert f"{ell.mean():.3f} ({np.percentile(ell, 5):.3f}–{np.percentile(ell, 95):.3f})" in to_markdown(
+        tables["action_distributions"]
+    )
 
 
 def test_case_study_picks_the_largest_revision(paper_root, tables):
@@ -224,7 +247,10 @@ def test_latex_tables_compile_with_booktabs(tables, tmp_path):
     )
     result = subprocess.run(
         ["pdflatex", "-interaction=nonstopmode", "-halt-on-error", source.name],
-        cwd=tmp_path, capture_output=True, text=True, timeout=120,
+        cwd=tmp_path,
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert result.returncode == 0, result.stdout[-2000:]
     assert (tmp_path / "tables.pdf").stat().st_size > 0

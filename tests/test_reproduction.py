@@ -7,8 +7,8 @@ from pathlib import Path
 
 import pandas as pd
 import pytest
-from conftest import shared_data_dir
 
+from conftest import shared_data_dir
 from solarchain_eval.env import SolarChainEnv
 from solarchain_eval.experiments.rollout import run_policy
 from solarchain_eval.metrics import METRIC_NAMES
@@ -111,7 +111,7 @@ def test_paper_main_table_baseline_rows(episodes):
         group = frame[frame["policy"] == policy]
         assert len(group) == 90
 
-        def cell(column: str, digits: int) -> str:
+        def cell(column: str, digits: int, group=group) -> str:
             mean, std = group[column].mean(), group[column].std(ddof=1)
             return f"{mean:.{digits}f} ± {std:.{digits}f}"
 

@@ -29,7 +29,20 @@ RUN_FILES = {"metrics.csv", "actions.csv", "city_hour_policy.csv", "summary.json
 
 
 def evaluate_args(data: Path, out: Path, *extra: str, seeds: str = "5") -> list[str]:
-    return ["evaluate", "--data", str(data), "--policies", "static", "--seeds", seeds, "--episodes", "1", "--out", str(out), *extra]
+    return [
+        "evaluate",
+        "--data",
+        str(data),
+        "--policies",
+        "static",
+        "--seeds",
+        seeds,
+        "--episodes",
+        "1",
+        "--out",
+        str(out),
+        *extra,
+    ]
 
 
 def invoke(args: list[str]):
@@ -117,9 +130,15 @@ def test_overwrite_replaces_the_whole_directory(tiny_dataset, tmp_path):
 def test_a_live_lock_refuses_a_second_writer_and_a_dead_ones_is_cleared(tiny_dataset, tmp_path):
     out = tmp_path / "run"
     holder = subprocess.Popen(
-        [sys.executable, "-c", "import sys, time\nfrom solarchain_eval.experiments.rundir import RunDirWriter\n"
-         "w = RunDirWriter(sys.argv[1]).__enter__()\nprint('locked', flush=True)\ntime.sleep(60)", str(out)],
-        stdout=subprocess.PIPE, text=True,
+        [
+            sys.executable,
+            "-c",
+            "import sys, time\nfrom solarchain_eval.experiments.rundir import RunDirWriter\n"
+            "w = RunDirWriter(sys.argv[1]).__enter__()\nprint('locked', flush=True)\ntime.sleep(60)",
+            str(out),
+        ],
+        stdout=subprocess.PIPE,
+        text=True,
     )
     try:
         assert holder.stdout.readline().strip() == "locked"
@@ -170,8 +189,10 @@ def test_a_kill_during_the_evaluation_leaves_the_previous_run(tiny_dataset, tmp_
 def test_concurrent_writers_leave_one_whole_run(tiny_dataset, tmp_path):
     for trial in range(3):
         out = tmp_path / f"run{trial}"
-        procs = [subprocess.Popen([*CLI, *evaluate_args(tiny_dataset, out, seeds=str(s))], stderr=subprocess.PIPE, text=True)
-                 for s in (5, 6)]
+        procs = [
+            subprocess.Popen([*CLI, *evaluate_args(tiny_dataset, out, seeds=str(s))], stderr=subprocess.PIPE, text=True)
+            for s in (5, 6)
+        ]
         codes = [p.wait(timeout=300) for p in procs]
         errors = [p.stderr.read() for p in procs]
         assert sorted(codes) == [0, 2], errors  # exactly one wins; the other is refused
@@ -213,8 +234,14 @@ def test_report_shows_no_credentials_of_an_old_verbatim_command(finished, tmp_pa
     run = tmp_path / "run"
     shutil.copytree(finished, run)
     meta = json.loads((run / "run_metadata.json").read_text())
-    meta["command"] = ["solarchain-eval", "evaluate", "--llm-base-url", "https://u:pw-SECRET@h/v1?token=tok-SECRET",
-                       "--api-key", "sk-SECRET"]
+    meta["command"] = [
+        "solarchain-eval",
+        "evaluate",
+        "--llm-base-url",
+        "https://u:pw-SECRET@h/v1?token=tok-SECRET",
+        "--api-key",
+        "sk-SECRET",
+    ]
     (run / "run_metadata.json").write_text(json.dumps(meta))
     result = invoke(["report", str(run), "--no-figures", "--format", "html", "--resamples", "100"])
     assert result.exit_code == 0, result.output
@@ -226,9 +253,31 @@ def test_command_lines_are_redacted_and_redaction_is_idempotent(monkeypatch):
     from solarchain_eval.redaction import redact_command
 
     monkeypatch.setenv("OPENAI_API_KEY", "sk-env-key-123")
-    argv = ["solarchain-eval", "evaluate", "--llm-base-url", "http://u:pw@h:8080/v1?token=t1&x=2#f", "--api-key", "k1",
-            "--hf-token=t2", "--llm-max-output-tokens", "512", "--note", "key is sk-env-key-123"]
-    expected = ["solarchain-eval", "evaluate", "--llm-base-url", "http://[redacted]@h:8080/v1?token=[redacted]&x=[redacted]#[redacted]",
-                "--api-key", "[redacted]", "--hf-token=[redacted]", "--llm-max-output-tokens", "512", "--note", "key is [redacted]"]
+    argv = [
+        "solarchain-eval",
+        "evaluate",
+        "--llm-base-url",
+        "http://u:pw@h:8080/v1?token=t1&x=2#f",
+        "--api-key",
+        "k1",
+        "--hf-token=t2",
+        "--llm-max-output-tokens",
+        "512",
+        "--note",
+        "key is sk-env-key-123",
+    ]
+    expected = [
+        "solarchain-eval",
+        "evaluate",
+        "--llm-base-url",
+        "http://[redacted]@h:8080/v1?token=[redacted]&x=[redacted]#[redacted]",
+        "--api-key",
+        "[redacted]",
+        "--hf-token=[redacted]",
+        "--llm-max-output-tokens",
+        "512",
+        "--note",
+        "key is [redacted]",
+    ]
     assert redact_command(argv) == expected
     assert redact_command(expected) == expected

@@ -45,7 +45,16 @@ def _observations(data_dir: Path, mode: str, n: int = 48) -> np.ndarray:
 
 
 def test_dqn_learning_starts_follows_the_original_rule():
-    assert [dqn_learning_starts(n) for n in (1, 9, 10, 300, 999, 1000, 1001, 300_000)] == [1, 1, 1, 30, 99, 100, 100, 100]
+    assert [dqn_learning_starts(n) for n in (1, 9, 10, 300, 999, 1000, 1001, 300_000)] == [
+        1,
+        1,
+        1,
+        30,
+        99,
+        100,
+        100,
+        100,
+    ]
 
 
 @pytest.fixture(scope="module")
@@ -78,7 +87,9 @@ def test_model_round_trip_through_plain_sb3_load(algo, trained, tiny_dataset):
     got = np.asarray([policy.act(obs) for obs in observations]).reshape(expected.shape)
     np.testing.assert_array_equal(got, expected)
     # deterministic: a second pass gives the same actions
-    np.testing.assert_array_equal(np.asarray([policy.act(obs) for obs in observations]).reshape(expected.shape), expected)
+    np.testing.assert_array_equal(
+        np.asarray([policy.act(obs) for obs in observations]).reshape(expected.shape), expected
+    )
 
 
 def test_training_outputs_and_episode_log(trained):
@@ -100,7 +111,7 @@ def test_training_is_reproducible_given_the_seed(trained, tiny_dataset, tmp_path
 
     again = train(TrainSpec(algo="dqn", seed=5, timesteps=300, data_dir=tiny_dataset), tmp_path / "dqn").model_path
     a, b = DQN.load(trained["dqn"]), DQN.load(again)
-    for (name, pa), (_, pb) in zip(a.policy.state_dict().items(), b.policy.state_dict().items()):
+    for (name, pa), (_, pb) in zip(a.policy.state_dict().items(), b.policy.state_dict().items(), strict=True):
         assert (pa == pb).all(), name
     logs = [pd.read_csv(p.parent / TRAIN_LOG_FILE)["episode_return"] for p in (trained["dqn"], again)]
     pd.testing.assert_series_equal(*logs)
@@ -135,8 +146,22 @@ def test_replay_buffer_checkpoint_round_trip(tiny_dataset, tmp_path):
 
 def test_killed_training_resumes_from_its_last_checkpoint(tiny_dataset, tmp_path):
     out = tmp_path / "sac"
-    cmd = [*CLI, "train", "--algo", "sac", "--seed", "3", "--timesteps", "600", "--checkpoint-every", "150",
-           "--data", str(tiny_dataset), "--out", str(out)]
+    cmd = [
+        *CLI,
+        "train",
+        "--algo",
+        "sac",
+        "--seed",
+        "3",
+        "--timesteps",
+        "600",
+        "--checkpoint-every",
+        "150",
+        "--data",
+        str(tiny_dataset),
+        "--out",
+        str(out),
+    ]
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.PIPE, start_new_session=True)
     state = out / "checkpoints" / "state.json"
     deadline = time.monotonic() + 120
@@ -146,7 +171,9 @@ def test_killed_training_resumes_from_its_last_checkpoint(tiny_dataset, tmp_path
     proc.wait()
     assert state.is_file(), "no checkpoint appeared before the kill"
     checkpoint = json.loads(state.read_text())
-    assert not (out / TRAIN_METADATA_FILE).exists() or not json.loads((out / TRAIN_METADATA_FILE).read_text())["complete"]
+    assert (
+        not (out / TRAIN_METADATA_FILE).exists() or not json.loads((out / TRAIN_METADATA_FILE).read_text())["complete"]
+    )
     for name in checkpoint["files"].values():
         assert (out / "checkpoints" / name).is_file()
     rows_before = pd.read_csv(out / "checkpoints" / checkpoint["files"]["log"])
@@ -167,14 +194,19 @@ def test_tensorboard_gets_per_episode_violation_and_artificial_liquidity(tiny_da
     pytest.importorskip("tensorboard")
     from tensorboard.backend.event_processing.event_accumulator import EventAccumulator
 
-    out = train(TrainSpec(algo="dqn", seed=1, timesteps=120, data_dir=tiny_dataset, tensorboard_dir=tmp_path / "tb"), tmp_path / "m")
+    out = train(
+        TrainSpec(algo="dqn", seed=1, timesteps=120, data_dir=tiny_dataset, tensorboard_dir=tmp_path / "tb"),
+        tmp_path / "m",
+    )
     runs = list((tmp_path / "tb").iterdir())
     assert [r.name for r in runs] == ["dqn-main-1_1"]
     events = EventAccumulator(str(runs[0]))
     events.Reload()
     log = pd.read_csv(out.out_dir / TRAIN_LOG_FILE)
-    for tag, column in (("episode/physics_violation_rate", "physics_violation_rate"),
-                        ("episode/artificial_liquidity_MWh", "artificial_liquidity_MWh")):
+    for tag, column in (
+        ("episode/physics_violation_rate", "physics_violation_rate"),
+        ("episode/artificial_liquidity_MWh", "artificial_liquidity_MWh"),
+    ):
         scalars = events.Scalars(tag)
         assert [s.step for s in scalars] == list(log["end_timestep"])
         np.testing.assert_allclose([s.value for s in scalars], log[column], rtol=1e-6)
@@ -187,7 +219,9 @@ def test_model_lookup_in_a_models_directory(tmp_path, trained):
     assert resolve_model_path("dqn", {"dqn": trained["dqn"].parent}) == trained["dqn"]
     # a training directory of another algorithm is not taken for this one
     assert trained["sac"].parent / "model.zip" not in model_candidates("ppo", {"*": trained["sac"].parent})
-    with pytest.raises(FileNotFoundError, match=r"no trained model for policy 'dqn': looked for .*dqn\.zip, .*dqn/model\.zip"):
+    with pytest.raises(
+        FileNotFoundError, match=r"no trained model for policy 'dqn': looked for .*dqn\.zip, .*dqn/model\.zip"
+    ):
         resolve_model_path("dqn", {"*": tmp_path})
     with pytest.raises(FileNotFoundError, match="needs a trained model: pass --models"):
         resolve_model_path("sac", {})
@@ -202,9 +236,25 @@ def test_evaluate_cli_runs_learned_policies(tmp_path, trained, tiny_dataset):
         (models / f"{algo}.zip").write_bytes(path.read_bytes())
     out = tmp_path / "run"
     done = subprocess.run(
-        [*CLI, "evaluate", "--policies", "ppo,sac,dqn", "--models", str(models), "--seeds", "4", "--episodes", "2",
-         "--data", str(tiny_dataset), "--out", str(out)],
-        capture_output=True, text=True, timeout=300,
+        [
+            *CLI,
+            "evaluate",
+            "--policies",
+            "ppo,sac,dqn",
+            "--models",
+            str(models),
+            "--seeds",
+            "4",
+            "--episodes",
+            "2",
+            "--data",
+            str(tiny_dataset),
+            "--out",
+            str(out),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=300,
     )
     assert done.returncode == 0, done.stderr
     actions = pd.read_csv(out / "actions.csv")
@@ -213,8 +263,20 @@ def test_evaluate_cli_runs_learned_policies(tmp_path, trained, tiny_dataset):
     dqn = actions[actions["policy"] == "dqn"]
     assert set(np.round(dqn["burn_rate"], 6)) <= {0.0, 0.05, 0.1, 0.15, 0.2}
     missing = subprocess.run(
-        [*CLI, "evaluate", "--policies", "sac", "--models", str(tmp_path / "nowhere"), "--data", str(tiny_dataset),
-         "--out", str(tmp_path / "x")],
-        capture_output=True, text=True, timeout=120,
+        [
+            *CLI,
+            "evaluate",
+            "--policies",
+            "sac",
+            "--models",
+            str(tmp_path / "nowhere"),
+            "--data",
+            str(tiny_dataset),
+            "--out",
+            str(tmp_path / "x"),
+        ],
+        capture_output=True,
+        text=True,
+        timeout=120,
     )
     assert missing.returncode == 2 and "no trained model for policy 'sac'" in missing.stderr

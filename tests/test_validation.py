@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 import shutil
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 import pandas as pd
 import pytest
@@ -32,13 +32,41 @@ def _set(row: int, column: str, value: str) -> Callable[[pd.DataFrame], pd.DataF
 
 
 CASES = {
-    "non-numeric power": (GEN, _set(40, "P_reported_W", "12,5"), r"column 'P_reported_W', row 41 \(line 42\): value is '12,5', not a finite number"),
-    "empty power": (GEN, _set(7, "P_max_W", ""), r"column 'P_max_W', row 8 \(line 9\): value is empty, not a finite number"),
-    "NaN power": (GEN, _set(9, "P_reported_W", "nan"), r"column 'P_reported_W', row 10 \(line 11\): value is 'nan', not a finite number"),
-    "negative power": (GEN, _set(3, "P_reported_W", "-5.0"), r"column 'P_reported_W', row 4 \(line 5\): negative value -5.0"),
-    "unknown status": (GEN, _set(11, "verification_status", "pending"), r"column 'verification_status', row 12 \(line 13\): unknown verification status 'pending'"),
-    "bad FDIA flag": (GEN, _set(2, "fdia_detected", "maybe"), r"column 'fdia_detected', row 3 \(line 4\): 'maybe' is not True or False"),
-    "bad timestamp": (GEN, _set(5, "timestamp", "yesterday"), r"column 'timestamp', row 6 \(line 7\): 'yesterday' is not an ISO timestamp"),
+    "non-numeric power": (
+        GEN,
+        _set(40, "P_reported_W", "12,5"),
+        r"column 'P_reported_W', row 41 \(line 42\): value is '12,5', not a finite number",
+    ),
+    "empty power": (
+        GEN,
+        _set(7, "P_max_W", ""),
+        r"column 'P_max_W', row 8 \(line 9\): value is empty, not a finite number",
+    ),
+    "NaN power": (
+        GEN,
+        _set(9, "P_reported_W", "nan"),
+        r"column 'P_reported_W', row 10 \(line 11\): value is 'nan', not a finite number",
+    ),
+    "negative power": (
+        GEN,
+        _set(3, "P_reported_W", "-5.0"),
+        r"column 'P_reported_W', row 4 \(line 5\): negative value -5.0",
+    ),
+    "unknown status": (
+        GEN,
+        _set(11, "verification_status", "pending"),
+        r"column 'verification_status', row 12 \(line 13\): unknown verification status 'pending'",
+    ),
+    "bad FDIA flag": (
+        GEN,
+        _set(2, "fdia_detected", "maybe"),
+        r"column 'fdia_detected', row 3 \(line 4\): 'maybe' is not True or False",
+    ),
+    "bad timestamp": (
+        GEN,
+        _set(5, "timestamp", "yesterday"),
+        r"column 'timestamp', row 6 \(line 7\): 'yesterday' is not an ISO timestamp",
+    ),
     "duplicate record": (
         GEN,
         lambda f: pd.concat([f, f.iloc[[20]]], ignore_index=True),
@@ -60,13 +88,21 @@ CASES = {
         _set(0, "timestamp", "2026-07-01T10:00:00+08:00"),
         r"p2p_trades.csv, column 'timestamp', row 1 \(line 2\): trade at 2026-07-01T10:00:00\+08:00 is outside the data window",
     ),
-    "negative demand": ("p2p_trades.csv", _set(2, "energy_purchased_MW", "-0.1"), r"column 'energy_purchased_MW', row 3 \(line 4\): negative value"),
+    "negative demand": (
+        "p2p_trades.csv",
+        _set(2, "energy_purchased_MW", "-0.1"),
+        r"column 'energy_purchased_MW', row 3 \(line 4\): negative value",
+    ),
     "market hour missing": (
         "market_liquidity.csv",
         lambda f: f.drop(index=30),
         r"market_liquidity.csv, column 'timestamp': missing hour 2026-06-02T06:00:00\+08:00",
     ),
-    "unknown node": (GEN, _set(0, "node_id", "ZZZ-999"), r"column 'node_id', row 1 \(line 2\): node 'ZZZ-999' is not in urban_energy_nodes.csv"),
+    "unknown node": (
+        GEN,
+        _set(0, "node_id", "ZZZ-999"),
+        r"column 'node_id', row 1 \(line 2\): node 'ZZZ-999' is not in urban_energy_nodes.csv",
+    ),
 }
 
 
@@ -93,7 +129,9 @@ def test_data_check_and_evaluate_exit_2_and_write_nothing(tiny_dataset, tmp_path
     assert check.exit_code == 2
     assert "column 'P_reported_W', row 10" in check.output
     run_dir = tmp_path / "run"
-    result = runner.invoke(app, ["evaluate", "--data", str(data), "--episodes", "1", "--seeds", "1", "--out", str(run_dir)])
+    result = runner.invoke(
+        app, ["evaluate", "--data", str(data), "--episodes", "1", "--seeds", "1", "--out", str(run_dir)]
+    )
     assert result.exit_code == 2
     assert "P_reported_W" in result.output
     assert not run_dir.exists()

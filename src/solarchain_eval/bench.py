@@ -58,7 +58,11 @@ def single_env_steps_per_s(data_dir: Path, steps: int, repeats: int) -> Throughp
 def vector_env_steps_per_s(data_dir: Path, num_envs: int, calls: int, repeats: int) -> Throughput:
     """The native vector env (SAME_STEP autoreset): every call is ``num_envs`` transitions."""
     envs = gym.make_vec(
-        ENV_ID, num_envs=num_envs, vectorization_mode="vector_entry_point", data_dir=str(data_dir), autoreset_mode="SameStep"
+        ENV_ID,
+        num_envs=num_envs,
+        vectorization_mode="vector_entry_point",
+        data_dir=str(data_dir),
+        autoreset_mode="SameStep",
     )
     actions = np.random.default_rng(1).random((8, num_envs, 3), dtype=np.float32)
     envs.reset(seed=0)
@@ -85,7 +89,10 @@ def evaluation_seconds(data_dir: Path, repeats: int) -> Throughput:
             start = time.perf_counter()
             for no_physics in (False, True):
                 spec = EvaluationSpec(
-                    policies=["static", "random", "myopic"], run_seeds=seeds, episodes=30, data_dir=data_dir,
+                    policies=["static", "random", "myopic"],
+                    run_seeds=seeds,
+                    episodes=30,
+                    data_dir=data_dir,
                     no_physics_penalty=no_physics,
                 )
                 run_evaluation(spec, Path(tmp) / str(no_physics), command=["bench"])

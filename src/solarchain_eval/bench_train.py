@@ -19,9 +19,10 @@ from __future__ import annotations
 import json
 import statistics
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import gymnasium as gym
 import numpy as np
@@ -182,7 +183,9 @@ def measured_unit_times(data_dir: Path, steps_per_s: dict[str, float], episodes:
                 model = algorithm_class(policy)("MlpPolicy", solarchain_env(policy, data_dir), seed=0, device="cpu")
                 models[policy] = Path(tmp) / f"{policy}.zip"
                 model.save(models[policy])
-            spec = EvaluationSpec(policies=[policy], run_seeds=[20260511], episodes=episodes, data_dir=data_dir, models=models)
+            spec = EvaluationSpec(
+                policies=[policy], run_seeds=[20260511], episodes=episodes, data_dir=data_dir, models=models
+            )
             start = time.perf_counter()
             run_evaluation(spec, Path(tmp) / policy, command=["bench-train"])
             evals[policy] = time.perf_counter() - start

@@ -47,7 +47,7 @@ class MarketConfig(_Section):
     static_burn_rate: float = Field(0.02, ge=0.0, le=1.0)
 
     @model_validator(mode="after")
-    def _ranges_ordered(self) -> "MarketConfig":
+    def _ranges_ordered(self) -> MarketConfig:
         if self.min_reward_ratio >= self.max_reward_ratio:
             raise ValueError("market.min_reward_ratio must be below market.max_reward_ratio")
         if self.min_liquidity_ratio >= self.max_liquidity_ratio:
@@ -93,9 +93,7 @@ class BenchmarkConfig(_Section):
 
     seed: int = Field(20260511, ge=0, le=MAX_SEED)
     episode_steps: int = Field(24, ge=1, le=10**6, description="Steps per episode; at most the dataset's hours.")
-    data_dir: str | None = Field(
-        None, description="Dataset directory; None selects the embedded default dataset."
-    )
+    data_dir: str | None = Field(None, description="Dataset directory; None selects the embedded default dataset.")
     output_dir: str = "outputs/runs"
     figures_dir: str = "figures"
     action_mode: Literal["continuous", "discrete"] = "continuous"
@@ -106,7 +104,7 @@ class BenchmarkConfig(_Section):
     training: TrainingConfig = Field(default_factory=TrainingConfig)
     evaluation: EvaluationConfig = Field(default_factory=EvaluationConfig)
 
-    def with_updates(self, **updates: Any) -> "BenchmarkConfig":
+    def with_updates(self, **updates: Any) -> BenchmarkConfig:
         """A validated copy with top-level fields replaced (``None`` values are ignored)."""
         payload = self.model_dump()
         payload.update({k: v for k, v in updates.items() if v is not None})
@@ -156,9 +154,7 @@ class _UniqueKeyLoader(yaml.SafeLoader):
         for key_node, _ in node.value:
             key = self.construct_object(key_node, deep=deep)
             if key in seen:
-                raise yaml.constructor.ConstructorError(
-                    None, None, f"duplicate key '{key}'", key_node.start_mark
-                )
+                raise yaml.constructor.ConstructorError(None, None, f"duplicate key '{key}'", key_node.start_mark)
             seen.add(key)
         return super().construct_mapping(node, deep=deep)
 

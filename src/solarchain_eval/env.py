@@ -299,7 +299,7 @@ class SolarChainEnv(gym.Env):
     @property
     def city_totals(self) -> dict[str, float]:
         """Each city's accumulated reward tokens this episode."""
-        return dict(zip(self.cities, self._city_totals))
+        return dict(zip(self.cities, self._city_totals, strict=True))
 
     # --- Gymnasium API ------------------------------------------------------------------------
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -371,5 +371,5 @@ class SolarChainEnv(gym.Env):
             self._depth_scale,
         )
         info["step"] = k - 1
-        info["city_rewards"] = dict(zip(self.cities, out.city_rewards))
+        info["city_rewards"] = dict(zip(self.cities, out.city_rewards, strict=True))
         return obs, out.reward, False, truncated, info

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 import re
-from typing import Iterable, Sequence
+from collections.abc import Iterable, Sequence
 
 REDACTED = "[redacted]"
 #: Words of an option name (split at - and _) that make its value a secret ("tokens" is a count).
@@ -32,7 +32,9 @@ def redact_url(url: str) -> str:
     rest, hash_, fragment = rest.partition("#")
     path, question, query = rest.partition("?")
     if query:
-        query = "&".join(f"{k}={REDACTED}" if eq else REDACTED for k, eq, _ in (part.partition("=") for part in query.split("&")))
+        query = "&".join(
+            f"{k}={REDACTED}" if eq else REDACTED for k, eq, _ in (part.partition("=") for part in query.split("&"))
+        )
     return f"{scheme}{netloc}{path}{question}{query}{hash_}{REDACTED if fragment else ''}"
 
 

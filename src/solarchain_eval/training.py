@@ -23,10 +23,11 @@ from __future__ import annotations
 import os
 import sys
 import time
+from collections.abc import Callable
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -258,20 +259,27 @@ def train(
         if not overwrite:
             _remove_tree(out_dir / CHECKPOINT_DIR)  # left over if a kill came right after the metadata
             return TrainOutcome(
-                out_dir, out_dir / MODEL_FILE, int(metadata["timesteps_done"]), float(metadata["wall_s"]),
-                float(metadata["steps_per_s"]), list(metadata.get("resumed_from", [])), already_complete=True,
+                out_dir,
+                out_dir / MODEL_FILE,
+                int(metadata["timesteps_done"]),
+                float(metadata["wall_s"]),
+                float(metadata["steps_per_s"]),
+                list(metadata.get("resumed_from", [])),
+                already_complete=True,
             )
         _clear_training_dir(out_dir)
     if spec.tensorboard_dir is not None:
         import importlib.util
 
         if importlib.util.find_spec("tensorboard") is None:
-            raise TrainingError("--tensorboard needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'")
+            raise TrainingError(
+                "--tensorboard needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'"
+            )
 
     set_torch_threads(spec.torch_threads)
     from .training_monitor import CheckpointStore, EpisodeLog, TrainingMonitor, load_replay_buffer
 
-    started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    started_at = datetime.now(UTC).isoformat(timespec="seconds")
     atomic_write_json(
         config_path,
         {"identity": identity, "data_dir": str(Path(data_dir).resolve()), "dataset": dataset, "written_at": started_at},
@@ -283,8 +291,15 @@ def train(
     tb_dir = str(spec.tensorboard_dir) if spec.tensorboard_dir is not None else None
     resumed_from = list((metadata or {}).get("resumed_from", []))
     if checkpoint is None:
-        model = cls("MlpPolicy", env, seed=spec.seed, verbose=0, tensorboard_log=tb_dir, device=spec.device,
-                    **identity["hyperparameters"])
+        model = cls(
+            "MlpPolicy",
+            env,
+            seed=spec.seed,
+            verbose=0,
+            tensorboard_log=tb_dir,
+            device=spec.device,
+            **identity["hyperparameters"],
+        )
         log, wall_before = EpisodeLog(env.num_envs), 0.0
     else:
         model = cls.load(checkpoint.model, env=env, device=spec.device, tensorboard_log=tb_dir)
@@ -304,7 +319,11 @@ def train(
         model.set_logger(Logger(folder=None, output_formats=[]))
     steps_before = int(model.num_timesteps)
     monitor = TrainingMonitor(
-        log, on_progress=on_progress, checkpoints=store, checkpoint_every=spec.checkpoint_every, wall_offset_s=wall_before
+        log,
+        on_progress=on_progress,
+        checkpoints=store,
+        checkpoint_every=spec.checkpoint_every,
+        wall_offset_s=wall_before,
     )
     learn_started = time.perf_counter()
     model.learn(

@@ -16,9 +16,10 @@ from __future__ import annotations
 
 import json
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -57,7 +58,9 @@ class EpisodeLog:
         self._acc = [[0.0, 0.0, 0.0, 0.0, 0.0, 0] for _ in range(n_envs)]
         self._start = time.perf_counter() - wall_offset_s
 
-    def add_step(self, env_index: int, info: dict[str, Any], reward: float, done: bool, timestep: int) -> dict[str, float] | None:
+    def add_step(
+        self, env_index: int, info: dict[str, Any], reward: float, done: bool, timestep: int
+    ) -> dict[str, float] | None:
         acc = self._acc[env_index]
         acc[0] += reward
         acc[1] += info["matched_energy_MWh"]
@@ -150,7 +153,9 @@ class CheckpointStore:
         for path in files.values():
             if path is not None and not path.is_file():
                 raise FileNotFoundError(f"checkpoint file {path} named in {state_path} is missing")
-        return Checkpoint(int(state["steps"]), files["model"], files["replay_buffer"], files["log"], float(state["wall_s"]))
+        return Checkpoint(
+            int(state["steps"]), files["model"], files["replay_buffer"], files["log"], float(state["wall_s"])
+        )
 
     def save(self, model: BaseAlgorithm, log: EpisodeLog, wall_s: float) -> Checkpoint:
         steps = int(model.num_timesteps)
@@ -163,7 +168,11 @@ class CheckpointStore:
                 self.directory / f"replay_buffer-{steps}.npz", lambda tmp: save_replay_buffer(buffer, tmp)
             )
         log_path = atomic_write_csv(self.directory / f"training_log-{steps}.csv", log.frame())
-        files = {"model": model_path.name, "replay_buffer": buffer_path.name if buffer_path else None, "log": log_path.name}
+        files = {
+            "model": model_path.name,
+            "replay_buffer": buffer_path.name if buffer_path else None,
+            "log": log_path.name,
+        }
         atomic_write_json(self.directory / STATE_FILE, {"steps": steps, "wall_s": round(wall_s, 3), "files": files})
         keep = {STATE_FILE, *[name for name in files.values() if name]}
         for path in self.directory.iterdir():  # older checkpoints and leftovers of a killed save
@@ -221,7 +230,11 @@ class TrainingMonitor(BaseCallback):
 
     def _on_rollout_start(self) -> None:
         steps = int(self.model.num_timesteps)
-        if self.checkpoints is not None and self.checkpoint_every > 0 and steps - self.checkpointed_at >= self.checkpoint_every:
+        if (
+            self.checkpoints is not None
+            and self.checkpoint_every > 0
+            and steps - self.checkpointed_at >= self.checkpoint_every
+        ):
             self.checkpoints.save(self.model, self.log, self.wall_s())
             self.checkpointed_at = steps
 

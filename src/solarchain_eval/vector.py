@@ -8,8 +8,9 @@ the same actions, bit for bit.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 from gymnasium import spaces
@@ -89,7 +90,15 @@ class SolarChainVectorEnv(VectorEnv):
         self._plain_starts = len(self._starts) if t.hours > self.episode_steps else 0
         # One gather per step: the hour's scalar inputs side by side, and the city columns.
         self._hour_inputs = np.ascontiguousarray(  # (5, H): gathers give contiguous (5, N) rows
-            np.vstack([t.verified_mwh, hours.unsafe_supply_mwh, hours.clearing_demand_mwh, t.reported_mwh, t.raw_violation_rate])
+            np.vstack(
+                [
+                    t.verified_mwh,
+                    hours.unsafe_supply_mwh,
+                    hours.clearing_demand_mwh,
+                    t.reported_mwh,
+                    t.raw_violation_rate,
+                ]
+            )
         )
         # (2C, H): one gather gives the (C, N) share and trust arrays with contiguous rows.
         self._n_cities = len(self.cities)
@@ -136,7 +145,10 @@ class SolarChainVectorEnv(VectorEnv):
         return stream
 
     def _reset_many(
-        self, mask: np.ndarray, seeds: Sequence[int | None] | None = None, start_hours: Sequence[int | None] | None = None
+        self,
+        mask: np.ndarray,
+        seeds: Sequence[int | None] | None = None,
+        start_hours: Sequence[int | None] | None = None,
     ) -> None:
         """Reset the sub-envs in ``mask``; ``seeds``/``start_hours`` None means none for any.
 

@@ -8,7 +8,17 @@ from functools import lru_cache
 from importlib import metadata
 from pathlib import Path
 
-_PACKAGES = ("solarchain-eval", "numpy", "pandas", "pvlib", "gymnasium", "stable-baselines3", "torch", "pydantic", "openai")
+_PACKAGES = (
+    "solarchain-eval",
+    "numpy",
+    "pandas",
+    "pvlib",
+    "gymnasium",
+    "stable-baselines3",
+    "torch",
+    "pydantic",
+    "openai",
+)
 
 
 @lru_cache(maxsize=1)
@@ -33,5 +43,7 @@ def git_commit() -> str | None:
     except (OSError, subprocess.SubprocessError):
         return None
     commit = out.stdout.strip()
-    dirty = subprocess.run(["git", "status", "--porcelain", "--untracked-files=no"], cwd=here, capture_output=True, text=True)
+    dirty = subprocess.run(
+        ["git", "status", "--porcelain", "--untracked-files=no"], cwd=here, capture_output=True, text=True
+    )
     return commit + ("-dirty" if dirty.returncode == 0 and dirty.stdout.strip() else "")

@@ -24,8 +24,8 @@ from ..market.actions import ActionCodec
 from .errors import CallSite
 from .llm_client import StructuredLLM
 from .prompts import auditor_messages
-from .schemas import ACTION_FIELDS, AuditorOutput, Plan, validate_audit
 from .scheduler import Action, action_delta
+from .schemas import ACTION_FIELDS, AuditorOutput, Plan, validate_audit
 
 AUDITOR_KINDS = ("rule", "llm", "approve-only")
 REVISION_TOLERANCE = 1e-6  # L1 distance below which a rule revision counts as "approve"
@@ -57,7 +57,7 @@ class StepContext:
 
     def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
         def named(action: Action) -> dict[str, float]:
-            return {name: round(float(v), 6) for name, v in zip(ACTION_FIELDS, action)}
+            return {name: round(float(v), 6) for name, v in zip(ACTION_FIELDS, action, strict=True)}
 
         return {
             "step": self.step,

@@ -59,17 +59,33 @@ def step_situation(risk: str, codec: ActionCodec) -> StepContext:
     observation = dict.fromkeys(OBSERVATION_NAMES, 0.0)
     violation, gap, slippage = (0.3, -0.4, 1.4) if risky else (0.0, 0.2, 0.2)
     observation.update(
-        hour_sin=1.0, verified_supply_MWh=80.0 if risky else 140.0, reported_supply_MWh=120.0 if risky else 140.0,
-        pmax_MWh=150.0, supply_gap=gap, liquidity=500.0, token_price=1.0, raw_physics_record_rate=violation,
-        static_slippage=slippage, prev_reward_ratio=0.3, prev_liquidity_ratio=0.5,
+        hour_sin=1.0,
+        verified_supply_MWh=80.0 if risky else 140.0,
+        reported_supply_MWh=120.0 if risky else 140.0,
+        pmax_MWh=150.0,
+        supply_gap=gap,
+        liquidity=500.0,
+        token_price=1.0,
+        raw_physics_record_rate=violation,
+        static_slippage=slippage,
+        prev_reward_ratio=0.3,
+        prev_liquidity_ratio=0.5,
     )
     bounded = codec.sanitize(0.6, 0.35, 0.0) if risky else codec.sanitize(0.3, 0.5, 0.05)
     previous = codec.sanitize(0.3, 0.5, 0.05) if risky else codec.sanitize(0.1, 0.8, 0.05)
     return StepContext(
-        step=6, hour=6, observation=observation, violation_rate=violation, supply_gap=gap, static_slippage=slippage,
-        bounded_action=bounded, previous_action=previous,
-        kappa=float(sum(abs(a - b) for a, b in zip(bounded, previous))),
-        plan=plan, hard_reasons=("violation", "gap", "slippage") if risky else (), soft_trigger=not risky,
+        step=6,
+        hour=6,
+        observation=observation,
+        violation_rate=violation,
+        supply_gap=gap,
+        static_slippage=slippage,
+        bounded_action=bounded,
+        previous_action=previous,
+        kappa=float(sum(abs(a - b) for a, b in zip(bounded, previous, strict=True))),
+        plan=plan,
+        hard_reasons=("violation", "gap", "slippage") if risky else (),
+        soft_trigger=not risky,
         recent=None,
     )
 
@@ -96,7 +112,9 @@ class KindFigures:
         }
 
 
-def run_llm_bench(client: StructuredLLM, calls: int, *, on_call: Callable[[], None] = lambda: None) -> dict[str, KindFigures]:
+def run_llm_bench(
+    client: StructuredLLM, calls: int, *, on_call: Callable[[], None] = lambda: None
+) -> dict[str, KindFigures]:
     """``calls`` planner and ``calls`` auditor calls, alternating calm and risky situations.
 
     A call whose output fails validation counts as a failure (its message is kept); transport

@@ -110,7 +110,7 @@ class Governance:
         if self.client is not None:
             self.client.close()
 
-    def __enter__(self) -> "Governance":
+    def __enter__(self) -> Governance:
         return self
 
     def __exit__(self, *exc: object) -> None:

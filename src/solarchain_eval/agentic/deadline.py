@@ -42,7 +42,7 @@ class DeadlineTransport:
         self._http = http if http is not None else sdk_http_module()
         self._inner = inner if inner is not None else self._http.HTTPTransport()
 
-    def __enter__(self) -> "DeadlineTransport":
+    def __enter__(self) -> DeadlineTransport:
         return self
 
     def __exit__(self, *exc: object) -> None:
@@ -79,7 +79,9 @@ class DeadlineTransport:
         status, headers, body, extensions = box["answer"]
         # The raw (still encoded) bytes with the original headers: httpx decodes them as usual.
         http = self._http
-        return http.Response(status, headers=headers, stream=http.ByteStream(body), request=request, extensions=extensions)
+        return http.Response(
+            status, headers=headers, stream=http.ByteStream(body), request=request, extensions=extensions
+        )
 
     def close(self) -> None:
         self._inner.close()

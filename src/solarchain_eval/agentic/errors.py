@@ -38,7 +38,7 @@ class LLMError(RuntimeError):
         prefix = f"{self.site.describe()}: " if self.site is not None else ""
         return f"{prefix}{self.what}: {self.detail}"
 
-    def at(self, site: CallSite) -> "LLMError":
+    def at(self, site: CallSite) -> LLMError:
         """The same error, located at ``site``."""
         return type(self)(self.detail, site)
 

@@ -19,10 +19,11 @@ from __future__ import annotations
 import json
 import os
 import time
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Any, Callable, Mapping, TypeVar
+from typing import Any, TypeVar
 from urllib.parse import parse_qsl, urlsplit, urlunsplit
 
 from pydantic import BaseModel, SecretStr
@@ -322,7 +323,8 @@ class StructuredLLM:
                 )
         except openai.APITimeoutError:
             raise LLMTransportError(
-                f"no answer within {s.timeout_s:g} s after {s.max_retries + 1} attempt(s) to {safe_url(s.base_url) or 'the default endpoint'}"
+                f"no answer within {s.timeout_s:g} s after {s.max_retries + 1} attempt(s) to "
+                f"{safe_url(s.base_url) or 'the default endpoint'}"
             ) from None
         except openai.APIStatusError as error:
             raise LLMTransportError(
@@ -346,10 +348,11 @@ class StructuredLLM:
             "request": request,
             "response": body,
             "latency_s": round(latency_s, 6),
-            "request_id": _redact_json(raw.request_id, self._hide) or (body.get("id") if isinstance(body, dict) else None),
+            "request_id": _redact_json(raw.request_id, self._hide)
+            or (body.get("id") if isinstance(body, dict) else None),
             "retries": int(getattr(raw, "retries_taken", 0)),
             "model": body.get("model") if isinstance(body, dict) else None,
-            "recorded_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+            "recorded_at": datetime.now(UTC).isoformat(timespec="seconds"),
         }
 
 

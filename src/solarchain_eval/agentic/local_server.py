@@ -161,17 +161,28 @@ class LocalServer:
     def command(self) -> list[str]:
         s = self.spec
         return [
-            sys.executable, "-m", "llama_cpp.server",
-            "--model", str(s.model_path),
-            "--model_alias", s.model_name,
-            "--host", "127.0.0.1",
-            "--port", str(self.port),
-            "--n_threads", str(s.threads),
-            "--n_threads_batch", str(s.threads),
-            "--n_ctx", str(s.context_tokens),
+            sys.executable,
+            "-m",
+            "llama_cpp.server",
+            "--model",
+            str(s.model_path),
+            "--model_alias",
+            s.model_name,
+            "--host",
+            "127.0.0.1",
+            "--port",
+            str(self.port),
+            "--n_threads",
+            str(s.threads),
+            "--n_threads_batch",
+            str(s.threads),
+            "--n_ctx",
+            str(s.context_tokens),
             # A new request must not cut off one in flight (concurrent episodes).
-            "--interrupt_requests", "False" if s.parallel > 1 else "True",
-            "--verbose", "False",
+            "--interrupt_requests",
+            "False" if s.parallel > 1 else "True",
+            "--verbose",
+            "False",
         ]
 
     def start(self, timeout_s: float = START_TIMEOUT_S) -> LocalServer:
@@ -179,10 +190,14 @@ class LocalServer:
             raise LLMConfigError("the local backend needs llama-cpp-python: pip install 'solarchain-eval[llm]'")
         if not Path(self.spec.model_path).is_file():
             raise LLMConfigError(f"model file {self.spec.model_path} does not exist")
-        log = open(self.log_path, "ab") if self.log_path is not None else subprocess.DEVNULL
+        # The handle outlives this block: the server child writes to it until stop().
+        log = open(self.log_path, "ab") if self.log_path is not None else subprocess.DEVNULL  # noqa: SIM115
         try:
             self.process = subprocess.Popen(
-                self.command(), stdin=subprocess.DEVNULL, stdout=log, stderr=log,
+                self.command(),
+                stdin=subprocess.DEVNULL,
+                stdout=log,
+                stderr=log,
                 preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,  # noqa: PLW1509 (only prctl)
             )
         finally:
@@ -202,7 +217,9 @@ class LocalServer:
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
                 where = f" (log: {self.log_path})" if self.log_path else ""
-                raise LLMTransportError(f"the local model server exited with status {self.process.returncode} while starting{where}")
+                raise LLMTransportError(
+                    f"the local model server exited with status {self.process.returncode} while starting{where}"
+                )
             try:
                 if httpx.get(f"{self.base_url}/models", timeout=2.0).status_code == 200:
                     return

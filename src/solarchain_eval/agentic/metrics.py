@@ -9,7 +9,8 @@ fraction with neither a hard nor a soft trigger).
 
 from __future__ import annotations
 
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 from .schemas import Plan
 

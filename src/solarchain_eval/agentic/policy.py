@@ -12,7 +12,8 @@ env's discrete table), as the original release did.
 
 from __future__ import annotations
 
-from typing import Any, Callable
+from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 
@@ -86,7 +87,9 @@ class GovernedPolicy:
         self._scheduler = AuditScheduler(self._budget, self._plan.cooldown_steps)
         m = env.config.market
         # a_prev at reset: the configured static action in float32, as the env starts from it.
-        self._previous = tuple(float(np.float32(v)) for v in (m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate))
+        self._previous = tuple(
+            float(np.float32(v)) for v in (m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate)
+        )
         self._recent: dict[str, float] | None = None
         self._step = 0
         self._rows = []
@@ -112,7 +115,7 @@ class GovernedPolicy:
             context = StepContext(
                 step=step,
                 hour=(self._env.episode_start_hour + step) % 24,
-                observation={name: float(v) for name, v in zip(OBSERVATION_NAMES, observation)},
+                observation={name: float(v) for name, v in zip(OBSERVATION_NAMES, observation, strict=True)},
                 violation_rate=violation,
                 supply_gap=gap,
                 static_slippage=slippage,

@@ -38,7 +38,7 @@ def bound_action(proposed: Action, plan: Plan, codec: ActionCodec) -> Action:
     The clipped values are rounded to float32 before sanitising, as the original release
     did with its float32 arrays (this decides the α + ℓ scaling to the last bit).
     """
-    clipped = [float(np.float32(min(max(x, lo), hi))) for x, (lo, hi) in zip(proposed, plan.bounds)]
+    clipped = [float(np.float32(min(max(x, lo), hi))) for x, (lo, hi) in zip(proposed, plan.bounds, strict=True)]
     return codec.sanitize(*clipped)
 
 

@@ -122,7 +122,9 @@ def response_format(output_type: type[BaseModel], api: str) -> dict[str, Any]:
         from openai.lib._parsing._completions import type_to_response_format_param
         from openai.lib._parsing._responses import type_to_text_format_param
     except ImportError as error:  # the helpers behind the SDK's .parse() methods
-        raise LLMConfigError(f"the installed openai package lacks its structured-output helpers ({error}); install openai>=1.66") from None
+        raise LLMConfigError(
+            f"the installed openai package lacks its structured-output helpers ({error}); install openai>=1.66"
+        ) from None
     if api == "chat":
         return dict(type_to_response_format_param(output_type))
     if api == "responses":
@@ -180,7 +182,7 @@ class Plan:
     def to_log(self) -> dict[str, Any]:
         return {
             "governance_mode": self.governance_mode,
-            "bounds": {name: list(pair) for name, pair in zip(ACTION_FIELDS, self.bounds)},
+            "bounds": {name: list(pair) for name, pair in zip(ACTION_FIELDS, self.bounds, strict=True)},
             "audit_policy": {
                 "violation_threshold": self.violation_threshold,
                 "gap_threshold": self.gap_threshold,
@@ -226,7 +228,9 @@ def validate_plan(output: PlannerOutput, codec: ActionCodec, episode_steps: int)
     """
     events: list[ClipEvent] = []
     bounds = []
-    for name, pair, low, high in zip(ACTION_FIELDS, _bound_pairs(output.action_bounds), codec.lo, codec.hi):
+    for name, pair, low, high in zip(
+        ACTION_FIELDS, _bound_pairs(output.action_bounds), codec.lo, codec.hi, strict=True
+    ):
         lo, hi = pair
         if lo > hi:
             events.append(ClipEvent(f"action_bounds.{name}", [lo, hi], [hi, lo]))
@@ -241,12 +245,20 @@ def validate_plan(output: PlannerOutput, codec: ActionCodec, episode_steps: int)
     plan = Plan(
         governance_mode=_cap_text("governance_mode", output.governance_mode, GOVERNANCE_MODE_MAX_CHARS, events),
         bounds=(bounds[0], bounds[1], bounds[2]),
-        violation_threshold=_clip("audit_policy.violation_threshold", p.violation_threshold, *VIOLATION_THRESHOLD_RANGE, events),
+        violation_threshold=_clip(
+            "audit_policy.violation_threshold", p.violation_threshold, *VIOLATION_THRESHOLD_RANGE, events
+        ),
         gap_threshold=_clip("audit_policy.gap_threshold", p.gap_threshold, *GAP_THRESHOLD_RANGE, events),
         jitter_threshold=_clip("audit_policy.jitter_threshold", p.jitter_threshold, *JITTER_THRESHOLD_RANGE, events),
-        slippage_threshold=_clip("audit_policy.slippage_threshold", p.slippage_threshold, *SLIPPAGE_THRESHOLD_RANGE, events),
-        max_audits_per_episode=int(_clip("audit_policy.max_audits_per_episode", p.max_audits_per_episode, 1, episode_steps, events)),
-        target_audit_rate=_clip("audit_policy.target_audit_rate", p.target_audit_rate, *TARGET_AUDIT_RATE_RANGE, events),
+        slippage_threshold=_clip(
+            "audit_policy.slippage_threshold", p.slippage_threshold, *SLIPPAGE_THRESHOLD_RANGE, events
+        ),
+        max_audits_per_episode=int(
+            _clip("audit_policy.max_audits_per_episode", p.max_audits_per_episode, 1, episode_steps, events)
+        ),
+        target_audit_rate=_clip(
+            "audit_policy.target_audit_rate", p.target_audit_rate, *TARGET_AUDIT_RATE_RANGE, events
+        ),
         cooldown_steps=int(_clip("audit_policy.cooldown_steps", p.cooldown_steps, 0, episode_steps, events)),
         rationale=_cap_text("rationale", output.rationale, TEXT_MAX_CHARS, events),
     )
@@ -263,7 +275,7 @@ def validate_audit(output: AuditorOutput, codec: ActionCodec) -> tuple[AuditVerd
     raw = (output.final_action.reward_ratio, output.final_action.liquidity_ratio, output.final_action.burn_rate)
     clipped = [
         _clip(f"final_action.{name}", value, low, high, events)
-        for name, value, low, high in zip(ACTION_FIELDS, raw, codec.lo, codec.hi)
+        for name, value, low, high in zip(ACTION_FIELDS, raw, codec.lo, codec.hi, strict=True)
     ]
     total = clipped[0] + clipped[1]
     if total > codec.max_total_allocation:

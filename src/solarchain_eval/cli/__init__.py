@@ -22,15 +22,18 @@ app = typer.Typer(
     pretty_exceptions_show_locals=False,
 )
 
-# Command modules register themselves on `app`, in the order of the pipeline.
-from . import data as _data  # noqa: E402
-from . import evaluate as _evaluate  # noqa: E402
-from . import train as _train  # noqa: E402
-from . import paper as _paper  # noqa: E402
-from . import report as _report  # noqa: E402
-from . import bench as _bench  # noqa: E402
-from . import bench_train as _bench_train  # noqa: E402
-from . import llm as _llm  # noqa: E402
+# Command modules register themselves on `app`, in the order of the pipeline (which is the order
+# `--help` lists them in, so the block is kept out of import sorting).
+# isort: off
+from . import data as _data  # noqa: E402, F401
+from . import evaluate as _evaluate  # noqa: E402, F401
+from . import train as _train  # noqa: E402, F401
+from . import paper as _paper  # noqa: E402, F401
+from . import report as _report  # noqa: E402, F401
+from . import bench as _bench  # noqa: E402, F401
+from . import bench_train as _bench_train  # noqa: E402, F401
+from . import llm as _llm  # noqa: E402, F401
+# isort: on
 
 
 def main() -> None:

@@ -8,16 +8,15 @@ way; :func:`agentic_options` turns their values into
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Any, Optional
+from typing import Any
 
 import typer
 from rich.table import Table
 
-from ..agentic import AgenticOptions, LLMError, LLMOptions, resolve_llm_settings
+from ..agentic import AgenticOptions, LLMError, LLMOptions, local_server, resolve_llm_settings
 from ..agentic.auditor import AUDITOR_KINDS
 from ..agentic.cache import CACHE_MODES
 from ..agentic.llm_client import DEFAULT_MAX_OUTPUT_TOKENS, DEFAULT_MAX_RETRIES, DEFAULT_TIMEOUT_S, LLM_APIS
-from ..agentic import local_server
 from ..agentic.planner import PLANNER_KINDS
 from .common import CliError, register_user_error
 
@@ -72,14 +71,23 @@ LLM_BASE_URL = typer.Option(
     rich_help_panel=_PANEL,
 )
 LLM_TEMPERATURE = typer.Option(
-    None, "--llm-temperature", help="Sampling temperature; omitted unless given (reasoning models reject it).", rich_help_panel=_PANEL
+    None,
+    "--llm-temperature",
+    help="Sampling temperature; omitted unless given (reasoning models reject it).",
+    rich_help_panel=_PANEL,
 )
 LLM_TIMEOUT = typer.Option(DEFAULT_TIMEOUT_S, "--llm-timeout", help="Seconds per attempt.", rich_help_panel=_PANEL)
 LLM_MAX_RETRIES = typer.Option(
-    DEFAULT_MAX_RETRIES, "--llm-max-retries", help="Retries on connection errors, timeouts, 429 and 5xx.", rich_help_panel=_PANEL
+    DEFAULT_MAX_RETRIES,
+    "--llm-max-retries",
+    help="Retries on connection errors, timeouts, 429 and 5xx.",
+    rich_help_panel=_PANEL,
 )
 LLM_MAX_OUTPUT_TOKENS = typer.Option(
-    DEFAULT_MAX_OUTPUT_TOKENS, "--llm-max-output-tokens", help="Output-token budget per call (reasoning included).", rich_help_panel=_PANEL
+    DEFAULT_MAX_OUTPUT_TOKENS,
+    "--llm-max-output-tokens",
+    help="Output-token budget per call (reasoning included).",
+    rich_help_panel=_PANEL,
 )
 LLM_CACHE = typer.Option(
     None, "--llm-cache", help="Directory of the record/replay response cache.", rich_help_panel=_PANEL
@@ -97,17 +105,17 @@ def agentic_options(
     *,
     agentic: str,
     llm_backend: str = "remote",
-    planner: Optional[str],
-    auditor: Optional[str],
-    llm_api: Optional[str],
-    llm_model: Optional[str],
-    llm_base_url: Optional[str],
-    llm_temperature: Optional[float],
+    planner: str | None,
+    auditor: str | None,
+    llm_api: str | None,
+    llm_model: str | None,
+    llm_base_url: str | None,
+    llm_temperature: float | None,
     llm_timeout: float,
     llm_max_retries: int,
     llm_max_output_tokens: int,
-    llm_cache: Optional[Path],
-    llm_cache_mode: Optional[str],
+    llm_cache: Path | None,
+    llm_cache_mode: str | None,
 ) -> AgenticOptions | None:
     """Validated options, or None when ``--agentic none``.
 
@@ -134,7 +142,9 @@ def agentic_options(
         raise CliError(f"--llm-backend must be one of {', '.join(LLM_BACKEND_CHOICES)}, got '{llm_backend}'")
     llm = None
     if uses_llm and llm_backend == "local":
-        settings = _local_settings(llm_api, llm_model, llm_base_url, llm_temperature, llm_timeout, llm_max_retries, llm_max_output_tokens)
+        settings = _local_settings(
+            llm_api, llm_model, llm_base_url, llm_temperature, llm_timeout, llm_max_retries, llm_max_output_tokens
+        )
         if mode != "off" and llm_cache is None:
             raise CliError(f"--llm-cache-mode {mode} needs --llm-cache DIR")
         llm = LLMOptions(settings=settings, cache_dir=llm_cache, cache_mode=mode)
@@ -163,7 +173,9 @@ def _local_settings(api, model, base_url, temperature, timeout_s, max_retries, m
         raise CliError("--llm-base-url is for --llm-backend remote; the local backend starts its own server")
     api = api or local_server.LOCAL_API
     if api != local_server.LOCAL_API:
-        raise CliError(f"--llm-backend local serves with llama-cpp-python, which needs --llm-api {local_server.LOCAL_API}")
+        raise CliError(
+            f"--llm-backend local serves with llama-cpp-python, which needs --llm-api {local_server.LOCAL_API}"
+        )
     name, _ = local_server.resolve_model(model)
     port = local_server.free_port()
     return resolve_llm_settings(
@@ -173,13 +185,15 @@ def _local_settings(api, model, base_url, temperature, timeout_s, max_retries, m
         temperature=local_server.LOCAL_TEMPERATURE if temperature is None else temperature,
         timeout_s=timeout_s,
         max_retries=max_retries,
-        max_output_tokens=local_server.LOCAL_MAX_OUTPUT_TOKENS if max_output_tokens == DEFAULT_MAX_OUTPUT_TOKENS else max_output_tokens,
+        max_output_tokens=local_server.LOCAL_MAX_OUTPUT_TOKENS
+        if max_output_tokens == DEFAULT_MAX_OUTPUT_TOKENS
+        else max_output_tokens,
         environ={"SOLARCHAIN_LLM_API_KEY": "none"},  # the local server takes no key
         seed=local_server.LOCAL_SEED,
     )
 
 
-def local_server_spec(params: dict[str, Any], options: AgenticOptions | None) -> "local_server.ServerSpec | None":
+def local_server_spec(params: dict[str, Any], options: AgenticOptions | None) -> local_server.ServerSpec | None:
     """The server to start for a command's parameters and options (None: remote backend, no
     LLM component, or a pure replay, which needs no server)."""
     if params["llm_backend"] != "local" or options is None or options.llm is None or options.llm.cache_mode == "replay":

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
@@ -15,14 +14,16 @@ from .common import console, err_console, reports_errors
 @app.command("bench")
 @reports_errors
 def bench(
-    data: Optional[Path] = typer.Option(None, "--data", help="Dataset directory (default: the embedded default dataset)."),
+    data: Path | None = typer.Option(None, "--data", help="Dataset directory (default: the embedded default dataset)."),
     steps: int = typer.Option(200_000, min=1000, help="Steps per repeat for the single env."),
     num_envs: int = typer.Option(1024, min=1, help="Sub-environments of the vector env."),
     calls: int = typer.Option(600, min=25, help="Vector-env step calls per repeat."),
     repeats: int = typer.Option(5, min=1, help="Repeats per figure (median and best are reported)."),
     skip_evaluation: bool = typer.Option(False, help="Skip timing the 1,620-episode baseline evaluation."),
     backend: str = typer.Option(
-        "numpy", "--backend", help="numpy, or jax: also the jitted JAX env (4,096 envs by default) beside the numpy vector env."
+        "numpy",
+        "--backend",
+        help="numpy, or jax: also the jitted JAX env (4,096 envs by default) beside the numpy vector env.",
     ),
     episodes: int = typer.Option(10, min=1, help="JAX backend: episodes per env per repeat."),
 ) -> None:
@@ -63,7 +64,6 @@ def bench(
     console.print(table)
 
 
-
 def _bench_jax(data_dir: Path, num_envs: int, calls: int, episodes: int, repeats: int) -> None:
     """The numpy vector env and the JAX env at the same number of envs, and their ratio."""
     from .. import bench as measure
@@ -77,7 +77,9 @@ def _bench_jax(data_dir: Path, num_envs: int, calls: int, episodes: int, repeats
     for column in ("measurement", "median", "best", "unit", "goal"):
         table.add_column(column, justify="left" if column in ("measurement", "unit") else "right")
     table.add_row(numpy_result.name, f"{numpy_result.median:,.0f}", f"{numpy_result.best:,.0f}", "env-steps/s", "")
-    table.add_row(jax_result.name, f"{jax_result.median:,.0f}", f"{jax_result.best:,.0f}", "env-steps/s", ">= 30,000,000")
+    table.add_row(
+        jax_result.name, f"{jax_result.median:,.0f}", f"{jax_result.best:,.0f}", "env-steps/s", ">= 30,000,000"
+    )
     ratio = jax_result.median / numpy_result.median
     table.add_row("ratio JAX / numpy (medians)", f"{ratio:.2f}x", "", "", ">= 10x")
     console.print(table)

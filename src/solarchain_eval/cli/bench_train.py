@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
@@ -19,12 +18,14 @@ PAPER_TARGET_H = 3.5
 @app.command("bench-train")
 @reports_errors
 def bench_train(
-    data: Optional[Path] = typer.Option(None, "--data", help="Dataset directory (default: the embedded default dataset)."),
+    data: Path | None = typer.Option(None, "--data", help="Dataset directory (default: the embedded default dataset)."),
     algos: str = typer.Option("ppo,sac,dqn", "--algos", help="Comma-separated algorithms to measure."),
     repeats: int = typer.Option(3, "--repeats", min=1, help="Repeats per figure (median and best are reported)."),
-    ceiling: bool = typer.Option(True, "--ceiling/--no-ceiling", help="Also measure SB3 on a trivial env (its own ceiling)."),
+    ceiling: bool = typer.Option(
+        True, "--ceiling/--no-ceiling", help="Also measure SB3 on a trivial env (its own ceiling)."
+    ),
     workers: int = typer.Option(2, "--workers", min=1, help="Workers for the paper-preset wall-time estimate."),
-    from_root: Optional[Path] = typer.Option(
+    from_root: Path | None = typer.Option(
         None, "--from-root", help="Estimate from the per-unit times of a finished grid run instead of measuring."
     ),
 ) -> None:
@@ -77,7 +78,8 @@ def bench_train(
     estimate = measure.estimate_paper_wall_time(times, workers)
     console.print(f"paper preset on {workers} worker(s), from {times.source}:")
     console.print(
-        "  steps/s used: " + ", ".join(f"{a.upper()} {r:,.0f}" for a, r in sorted(times.steps_per_s.items()))
+        "  steps/s used: "
+        + ", ".join(f"{a.upper()} {r:,.0f}" for a, r in sorted(times.steps_per_s.items()))
         + f"; train-unit overhead {times.train_overhead_s:.1f} s; eval units "
         + ", ".join(f"{p} {s:.1f} s" for p, s in sorted(times.eval_s.items()))
     )

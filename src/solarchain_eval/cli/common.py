@@ -4,9 +4,10 @@ from __future__ import annotations
 
 import functools
 import sys
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
-from typing import Callable, Iterator, TypeVar
+from typing import TypeVar
 
 import typer
 from rich.console import Console
@@ -115,7 +116,7 @@ def results_table(summary: list[dict], title: str) -> Table:
     for entry in summary:
         m = entry["metrics"]
 
-        def fmt(name: str, digits: int) -> str:
+        def fmt(name: str, digits: int, m: dict = m) -> str:
             return f"{m[name]['mean']:.{digits}f} ± {m[name]['std']:.{digits}f}"
 
         table.add_row(

@@ -3,14 +3,12 @@
 from __future__ import annotations
 
 import hashlib
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
 
-from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.cities import (
     DEFAULT_END,
     DEFAULT_NODES_PER_CITY,
@@ -22,24 +20,24 @@ from ..data.cities import (
     parse_city,
 )
 from ..data.default import cache_dir
-
+from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.published import matches_published
 from ..data.weather import read_weather_cache, write_weather_cache
 from ..io import sha256_file
 from . import app
-from .help import HelpGroup
 from .common import CliError, console, progress_bar, reports_errors, say
+from .help import HelpGroup
 
 data_app = typer.Typer(help="Build and validate datasets.", cls=HelpGroup, no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(data_app, name="data")
 
 
-class WeatherSource(str, Enum):
+class WeatherSource(StrEnum):
     synthetic = "synthetic"
     open_meteo = "open-meteo"
 
 
-def _cities(specs: Optional[list[str]]) -> tuple[City, ...]:
+def _cities(specs: list[str] | None) -> tuple[City, ...]:
     if not specs:
         return PAPER_CITIES
     try:
@@ -57,7 +55,7 @@ def _open_meteo_cache_path(cities: tuple[City, ...], start: str, end: str) -> Pa
 @reports_errors
 def build(
     out: Path = typer.Option(..., "--out", help="Directory to write the four CSVs and manifest.json into."),
-    weather_cache: Optional[Path] = typer.Option(
+    weather_cache: Path | None = typer.Option(
         None,
         "--weather-cache",
         help="A cached weather file in the paper's layout (e.g. the paper's cached Open-Meteo weather).",
@@ -72,11 +70,11 @@ def build(
     start: str = typer.Option(DEFAULT_START, help="First day (local time), YYYY-MM-DD."),
     end: str = typer.Option(DEFAULT_END, help="Day after the last one (exclusive), YYYY-MM-DD."),
     nodes_per_city: int = typer.Option(DEFAULT_NODES_PER_CITY, min=1, help="PV nodes per city."),
-    city: Optional[list[str]] = typer.Option(
+    city: list[str] | None = typer.Option(
         None, "--city", metavar="NAME:LAT:LON", help="A city; repeat for several. Default: the paper's five cities."
     ),
     timezone: str = typer.Option(DEFAULT_TIMEZONE, help="IANA time zone of the dataset's hours."),
-    open_meteo_url: Optional[str] = typer.Option(
+    open_meteo_url: str | None = typer.Option(
         None, help="Archive endpoint for --weather open-meteo (default: $SOLARCHAIN_OPEN_METEO_URL or the public API)."
     ),
     refresh_weather: bool = typer.Option(False, help="Re-download Open-Meteo weather even if it is cached."),
@@ -91,9 +89,8 @@ def build(
     byte-identical to the paper's published dataset.
     """
     cities = _cities(city)
-    if (out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES):
-        if not force:
-            raise CliError(f"{out} already holds a dataset; pass --force to overwrite it")
+    if not force and ((out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES)):
+        raise CliError(f"{out} already holds a dataset; pass --force to overwrite it")
     weather_sha = None
     if weather_cache is not None:
         payload = read_weather_cache(weather_cache, cities)

@@ -4,18 +4,17 @@ from __future__ import annotations
 
 from datetime import datetime
 from pathlib import Path
-from typing import Optional
 
 import typer
 
 from ..config import BenchmarkConfig, load_config
 from ..data.default import default_dataset_dir
 from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, run_evaluation
-from ..experiments.records import summarize, metrics_frame
+from ..experiments.records import metrics_frame, summarize
 from ..experiments.rundir import RunDirError, check_target
 from ..policies.registry import known_policies, parse_policy_list
-from . import app
 from . import agentic as agentic_cli
+from . import app
 from .common import (
     CliError,
     console,
@@ -31,7 +30,9 @@ from .common import (
 
 register_user_error(RunDirError)
 OVERWRITE = typer.Option(
-    False, "--overwrite", help="Replace an existing run directory as a whole (its old files are removed, never mixed in)."
+    False,
+    "--overwrite",
+    help="Replace an existing run directory as a whole (its old files are removed, never mixed in).",
 )
 
 _SEEDS = ",".join(str(s) for s in PAPER_SEEDS)
@@ -41,7 +42,7 @@ def _default_run_dir(config: BenchmarkConfig, label: str) -> Path:
     return Path(config.output_dir) / f"{datetime.now().strftime('%Y%m%d-%H%M%S')}_{label}"
 
 
-def _models(spec: Optional[list[str]]) -> dict[str, Path]:
+def _models(spec: list[str] | None) -> dict[str, Path]:
     """``--models DIR`` or ``--models ppo=PATH`` (repeatable)."""
     models: dict[str, Path] = {}
     for item in spec or []:
@@ -62,14 +63,18 @@ def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> N
     summary = summarize(metrics_frame(outcome.results))
     console.print(results_table(summary, title))
     if spec.agentic is not None:
-        console.print(agentic_cli.agentic_table(summary, f"Planner/Auditor ({spec.agentic.planner} planner, {spec.agentic.auditor} auditor)"))
+        console.print(
+            agentic_cli.agentic_table(
+                summary, f"Planner/Auditor ({spec.agentic.planner} planner, {spec.agentic.auditor} auditor)"
+            )
+        )
     show_files(outcome.files, f"wrote {len(outcome.results)} episodes in {outcome.wall_s:.1f} s to {out}")
 
 
 @app.command("evaluate")
 @reports_errors
 def evaluate(
-    data: Optional[Path] = typer.Option(
+    data: Path | None = typer.Option(
         None, "--data", help="Dataset directory (default: the config's data_dir, else the embedded default dataset)."
     ),
     policies: str = typer.Option(
@@ -77,27 +82,30 @@ def evaluate(
     ),
     seeds: str = typer.Option(_SEEDS, help="Comma-separated run seeds; episode e of seed s is reset with s + e."),
     episodes: int = typer.Option(PAPER_EPISODES, min=1, help="Episodes per run seed."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Run directory (default: <output_dir>/<time>_evaluate)."),
+    out: Path | None = typer.Option(None, "--out", help="Run directory (default: <output_dir>/<time>_evaluate)."),
     no_physics_penalty: bool = typer.Option(
         False, "--no-physics-penalty", help="The ablation: drop λp (V + A) from the reward; V and A are still recorded."
     ),
-    config: Optional[Path] = typer.Option(None, "--config", help="YAML config in the paper's layout."),
-    models: Optional[list[str]] = typer.Option(
-        None, "--models", metavar="DIR|NAME=PATH", help="Trained models: a directory, or NAME=PATH per learned policy (repeatable)."
+    config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
+    models: list[str] | None = typer.Option(
+        None,
+        "--models",
+        metavar="DIR|NAME=PATH",
+        help="Trained models: a directory, or NAME=PATH per learned policy (repeatable).",
     ),
     agentic: str = agentic_cli.AGENTIC,
     llm_backend: str = agentic_cli.LLM_BACKEND,
-    planner: Optional[str] = agentic_cli.PLANNER,
-    auditor: Optional[str] = agentic_cli.AUDITOR,
-    llm_api: Optional[str] = agentic_cli.LLM_API,
-    llm_model: Optional[str] = agentic_cli.LLM_MODEL,
-    llm_base_url: Optional[str] = agentic_cli.LLM_BASE_URL,
-    llm_temperature: Optional[float] = agentic_cli.LLM_TEMPERATURE,
+    planner: str | None = agentic_cli.PLANNER,
+    auditor: str | None = agentic_cli.AUDITOR,
+    llm_api: str | None = agentic_cli.LLM_API,
+    llm_model: str | None = agentic_cli.LLM_MODEL,
+    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
+    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
     llm_timeout: float = agentic_cli.LLM_TIMEOUT,
     llm_max_retries: int = agentic_cli.LLM_MAX_RETRIES,
     llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
-    llm_cache: Optional[Path] = agentic_cli.LLM_CACHE,
-    llm_cache_mode: Optional[str] = agentic_cli.LLM_CACHE_MODE,
+    llm_cache: Path | None = agentic_cli.LLM_CACHE,
+    llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
@@ -145,7 +153,7 @@ def evaluate(
 @app.command("run")
 @reports_errors
 def run(
-    out: Optional[Path] = typer.Option(None, "--out", help="Run directory (default: outputs/runs/<time>_baselines)."),
+    out: Path | None = typer.Option(None, "--out", help="Run directory (default: outputs/runs/<time>_baselines)."),
     episodes: int = typer.Option(PAPER_EPISODES, min=1, help="Episodes per run seed."),
     seeds: str = typer.Option(_SEEDS, help="Comma-separated run seeds."),
     overwrite: bool = OVERWRITE,

@@ -12,7 +12,9 @@ from . import agentic as agentic_cli
 from . import app
 from .common import CliError, console, err_console, progress_bar, reports_errors
 
-llm_app = typer.Typer(help="The local OpenAI-compatible model server (llama-cpp-python). See docs/llm.md.", no_args_is_help=True)
+llm_app = typer.Typer(
+    help="The local OpenAI-compatible model server (llama-cpp-python). See docs/llm.md.", no_args_is_help=True
+)
 app.add_typer(llm_app, name="llm")
 
 
@@ -26,7 +28,9 @@ def _spec(model: str | None, port: int, parallel: int, threads: int) -> local_se
 @llm_app.command("serve")
 @reports_errors
 def serve(
-    model: str | None = typer.Option(None, "--model", help="A GGUF file (default: the bundled SmolLM2-135M-Instruct Q4_1)."),
+    model: str | None = typer.Option(
+        None, "--model", help="A GGUF file (default: the bundled SmolLM2-135M-Instruct Q4_1)."
+    ),
     port: int = typer.Option(0, "--port", min=0, max=65535, help="Port on 127.0.0.1 (0: a free one)."),
     parallel: int = typer.Option(1, "--parallel", min=1, help="Requests in flight without interrupting each other."),
     threads: int = typer.Option(local_server.DEFAULT_THREADS, "--threads", min=1, help="CPU threads of the model."),
@@ -42,7 +46,8 @@ def serve(
         with local_server.LocalServer(spec) as server:
             console.print(server.base_url, highlight=False)
             err_console.print(
-                f"model '{spec.model_name}' ready; use --llm-base-url {server.base_url} --llm-api {local_server.LOCAL_API} "
+                f"model '{spec.model_name}' ready; use --llm-base-url {server.base_url} --llm-api "
+                f"{local_server.LOCAL_API} "
                 f"--llm-model {spec.model_name} (any API key). Ctrl-C stops it.",
                 highlight=False,
             )
@@ -56,7 +61,9 @@ def serve(
 @app.command("bench-llm")
 @reports_errors
 def bench_llm(
-    calls: int = typer.Option(4, "--calls", min=1, help="Planner calls and auditor calls (each), alternating calm and risky situations."),
+    calls: int = typer.Option(
+        4, "--calls", min=1, help="Planner calls and auditor calls (each), alternating calm and risky situations."
+    ),
     llm_backend: str = agentic_cli.LLM_BACKEND,
     llm_api: str | None = agentic_cli.LLM_API,
     llm_model: str | None = agentic_cli.LLM_MODEL,
@@ -84,8 +91,18 @@ def bench_llm(
                 figures = run_llm_bench(client, calls, on_call=lambda: advance(1))
         finally:
             client.close()
-    table = Table(title=f"bench-llm: {options.llm.settings.model} via --llm-api {options.llm.settings.api}", title_justify="left")
-    for column in ("call", "valid/calls", "median s", "p90 s", "tokens/s", "completion tokens", *(f"answers ({r})" for r in RISKS)):
+    table = Table(
+        title=f"bench-llm: {options.llm.settings.model} via --llm-api {options.llm.settings.api}", title_justify="left"
+    )
+    for column in (
+        "call",
+        "valid/calls",
+        "median s",
+        "p90 s",
+        "tokens/s",
+        "completion tokens",
+        *(f"answers ({r})" for r in RISKS),
+    ):
         table.add_column(column)
     for kind, fig in figures.items():
         s = fig.summary()
@@ -94,8 +111,13 @@ def bench_llm(
             return "-" if value is None else format(value, spec)
 
         table.add_row(
-            kind, f"{s['valid']}/{s['calls']}", fmt(s["median_s"]), fmt(s["p90_s"]), fmt(s["tokens_per_s"], ".1f"),
-            fmt(s["mean_completion_tokens"], ".0f"), *("; ".join(sorted(set(fig.answers[r]))) or "-" for r in RISKS),
+            kind,
+            f"{s['valid']}/{s['calls']}",
+            fmt(s["median_s"]),
+            fmt(s["p90_s"]),
+            fmt(s["tokens_per_s"], ".1f"),
+            fmt(s["mean_completion_tokens"], ".0f"),
+            *("; ".join(sorted(set(fig.answers[r]))) or "-" for r in RISKS),
         )
     console.print(table)
     for kind, fig in figures.items():

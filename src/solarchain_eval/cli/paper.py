@@ -3,9 +3,8 @@
 from __future__ import annotations
 
 import json
-from enum import Enum
+from enum import StrEnum
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.text import Text
@@ -34,17 +33,17 @@ from .common import (
 register_user_error(GridError)
 
 
-class Preset(str, Enum):
+class Preset(StrEnum):
     paper = "paper"
     smoke = "smoke"
 
 
-class EpisodeSeeds(str, Enum):
+class EpisodeSeeds(StrEnum):
     paper = "paper"
     independent = "independent"
 
 
-def _settings(text: Optional[str]) -> tuple[str, ...]:
+def _settings(text: str | None) -> tuple[str, ...]:
     if not text:
         return tuple(SETTING_REGISTRY)
     names = tuple(part.strip() for part in text.split(",") if part.strip())
@@ -58,49 +57,58 @@ def _settings(text: Optional[str]) -> tuple[str, ...]:
 @reports_errors
 def paper(
     out: Path = typer.Option(..., "--out", help="The paper root (created; re-run the same command to resume)."),
-    data: Optional[Path] = typer.Option(
-        None, "--data", help="Dataset directory (default: the embedded default dataset; the paper's numbers need the published one)."
+    data: Path | None = typer.Option(
+        None,
+        "--data",
+        help="Dataset directory (default: the embedded default dataset; the paper's numbers need the published one).",
     ),
     preset: Preset = typer.Option(
         Preset.paper, "--preset", help="paper: 300,000 steps, 30 episodes, seeds 20260511-13. smoke: tiny budgets."
     ),
-    timesteps: Optional[int] = typer.Option(None, "--timesteps", min=1, help="Training steps per model (overrides the preset)."),
-    episodes: Optional[int] = typer.Option(None, "--episodes", min=1, help="Evaluation episodes per run seed (overrides the preset)."),
-    seeds: Optional[str] = typer.Option(None, "--seeds", help="Comma-separated run seeds (overrides the preset)."),
-    settings: Optional[str] = typer.Option(
+    timesteps: int | None = typer.Option(
+        None, "--timesteps", min=1, help="Training steps per model (overrides the preset)."
+    ),
+    episodes: int | None = typer.Option(
+        None, "--episodes", min=1, help="Evaluation episodes per run seed (overrides the preset)."
+    ),
+    seeds: str | None = typer.Option(None, "--seeds", help="Comma-separated run seeds (overrides the preset)."),
+    settings: str | None = typer.Option(
         None, "--settings", help="Comma-separated settings (default: every registered one: main, no_physics, ...)."
     ),
-    policies: Optional[str] = typer.Option(
+    policies: str | None = typer.Option(
         None, "--policies", help="Comma-separated subset of the policies to run (default: all; train units follow)."
     ),
     workers: int = typer.Option(1, "--workers", min=1, help="Local worker processes (one torch thread each)."),
-    ray_address: Optional[str] = typer.Option(
-        None, "--ray-address", help="Run units as Ray tasks: auto, ray://host:port, or local (needs the ray extra: pip install solarchain-eval[ray])."
+    ray_address: str | None = typer.Option(
+        None,
+        "--ray-address",
+        help="Run units as Ray tasks: auto, ray://host:port, or local (needs the ray extra: pip install solarchain-eval[ray]).",
     ),
     episode_seeds: EpisodeSeeds = typer.Option(
-        EpisodeSeeds.paper, "--episode-seeds",
+        EpisodeSeeds.paper,
+        "--episode-seeds",
         help="paper: episode e of seed s uses s + e (seeds share episodes). independent: non-overlapping seeds from a SeedSequence.",
     ),
     keep_going: bool = typer.Option(False, "--keep-going", help="Record failing units and carry on with the others."),
-    checkpoint_every: Optional[int] = typer.Option(
+    checkpoint_every: int | None = typer.Option(
         None, "--checkpoint-every", min=0, help="Training steps between checkpoints (default 25,000; 0: none)."
     ),
-    config: Optional[Path] = typer.Option(None, "--config", help="YAML config in the paper's layout."),
+    config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
     write_report: bool = typer.Option(
         True, "--report/--no-report", help="Write ROOT/report (tables, figures, index.html) after a complete grid."
     ),
     llm_backend: str = agentic_cli.LLM_BACKEND,
-    planner: Optional[str] = agentic_cli.PLANNER,
-    auditor: Optional[str] = agentic_cli.AUDITOR,
-    llm_api: Optional[str] = agentic_cli.LLM_API,
-    llm_model: Optional[str] = agentic_cli.LLM_MODEL,
-    llm_base_url: Optional[str] = agentic_cli.LLM_BASE_URL,
-    llm_temperature: Optional[float] = agentic_cli.LLM_TEMPERATURE,
+    planner: str | None = agentic_cli.PLANNER,
+    auditor: str | None = agentic_cli.AUDITOR,
+    llm_api: str | None = agentic_cli.LLM_API,
+    llm_model: str | None = agentic_cli.LLM_MODEL,
+    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
+    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
     llm_timeout: float = agentic_cli.LLM_TIMEOUT,
     llm_max_retries: int = agentic_cli.LLM_MAX_RETRIES,
     llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
-    llm_cache: Optional[Path] = agentic_cli.LLM_CACHE,
-    llm_cache_mode: Optional[str] = agentic_cli.LLM_CACHE_MODE,
+    llm_cache: Path | None = agentic_cli.LLM_CACHE,
+    llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
 ) -> None:
     """The paper's experiment matrix: train, evaluate, combine, report.
 
@@ -154,14 +162,25 @@ def paper(
         def on_result(result: UnitResult) -> None:
             advance(1)
             if result.ok:
-                err_console.print(Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True)
+                err_console.print(
+                    Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True
+                )
             else:
-                err_console.print(Text.assemble(("FAILED", "bold red"), f" {result.unit}: {result.error}\n  log: {result.log}"), soft_wrap=True)
+                err_console.print(
+                    Text.assemble(("FAILED", "bold red"), f" {result.unit}: {result.error}\n  log: {result.log}"),
+                    soft_wrap=True,
+                )
 
         try:
             outcome = run_paper(
-                spec, out, workers=workers, ray_address=ray_address, keep_going=keep_going,
-                on_plan=on_plan, on_result=on_result, command=invoked_command(),
+                spec,
+                out,
+                workers=workers,
+                ray_address=ray_address,
+                keep_going=keep_going,
+                on_plan=on_plan,
+                on_result=on_result,
+                command=invoked_command(),
             )
         except RayUnavailableError as error:
             raise CliError(str(error)) from None
@@ -169,15 +188,24 @@ def paper(
     for setting in outcome.combined:
         summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
         console.print(results_table(summary, f"setting {setting}"))
-    console.print(f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)", soft_wrap=True)
+    console.print(
+        f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)",
+        soft_wrap=True,
+    )
     if report.failed:
         lines = [f"  {r.unit}: {r.error} (log: {r.log})" for r in report.failed]
         extra = ""
         if report.stopped:
-            extra = f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. Re-run to resume, or add --keep-going."
+            extra = (
+                f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. "
+                f"Re-run to resume, or add --keep-going."
+            )
         elif report.blocked:
             extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
-        err_console.print(Text.assemble((f"{len(report.failed)} unit(s) failed:", "bold red"), "\n" + "\n".join(lines) + extra), soft_wrap=True)
+        err_console.print(
+            Text.assemble((f"{len(report.failed)} unit(s) failed:", "bold red"), "\n" + "\n".join(lines) + extra),
+            soft_wrap=True,
+        )
         raise typer.Exit(1)
     if outcome.complete and write_report:
         from ..report import build_report

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from pathlib import Path
-from typing import Optional
 
 import typer
 from rich.table import Table
@@ -30,19 +29,36 @@ def _case(text: str) -> tuple[str, str]:
 @app.command("report")
 @reports_errors
 def report(
-    root: Path = typer.Argument(..., metavar="ROOT", help="A run directory (from `evaluate --out`) or a paper root (with combined/<setting>/)."),
-    out: Optional[Path] = typer.Option(None, "--out", help="Output folder (default: ROOT/report)."),
-    formats: str = typer.Option(",".join(FORMATS), "--format", help="Comma-separated: md, tex, csv (one file per table each), html (index.html)."),
-    resamples: int = typer.Option(DEFAULT_RESAMPLES, "--resamples", min=100, help="Bootstrap resamples per confidence interval."),
-    confidence: float = typer.Option(0.95, "--confidence", min=0.5, max=0.999, help="Confidence level of every interval."),
-    seed: int = typer.Option(DEFAULT_SEED, "--seed", help="Seed of the bootstrap and of plotted-point jitter (same seed, same bytes)."),
-    cluster_by: str = typer.Option(
-        "start_hour", "--cluster-by", help="Independent unit the bootstrap resamples: start_hour (start day) or episode_seed."
+    root: Path = typer.Argument(
+        ..., metavar="ROOT", help="A run directory (from `evaluate --out`) or a paper root (with combined/<setting>/)."
     ),
-    case: str = typer.Option("ppo:llm_no_physics", "--case", help="POLICY:SETTING searched first for the case-study audit trace."),
+    out: Path | None = typer.Option(None, "--out", help="Output folder (default: ROOT/report)."),
+    formats: str = typer.Option(
+        ",".join(FORMATS),
+        "--format",
+        help="Comma-separated: md, tex, csv (one file per table each), html (index.html).",
+    ),
+    resamples: int = typer.Option(
+        DEFAULT_RESAMPLES, "--resamples", min=100, help="Bootstrap resamples per confidence interval."
+    ),
+    confidence: float = typer.Option(
+        0.95, "--confidence", min=0.5, max=0.999, help="Confidence level of every interval."
+    ),
+    seed: int = typer.Option(
+        DEFAULT_SEED, "--seed", help="Seed of the bootstrap and of plotted-point jitter (same seed, same bytes)."
+    ),
+    cluster_by: str = typer.Option(
+        "start_hour",
+        "--cluster-by",
+        help="Independent unit the bootstrap resamples: start_hour (start day) or episode_seed.",
+    ),
+    case: str = typer.Option(
+        "ppo:llm_no_physics", "--case", help="POLICY:SETTING searched first for the case-study audit trace."
+    ),
     figures: bool = typer.Option(True, "--figures/--no-figures", help="Draw the figures (PNG + SVG)."),
     allow_unverified: bool = typer.Option(
-        False, "--allow-unverified",
+        False,
+        "--allow-unverified",
         help="Report files that their run metadata does not vouch for (sha256 mismatch, no metadata, left-overs), with a warning each.",
     ),
 ) -> None:

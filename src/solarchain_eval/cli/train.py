@@ -4,7 +4,6 @@ from __future__ import annotations
 
 from datetime import datetime
 from pathlib import Path
-from typing import Optional
 
 import typer
 
@@ -20,25 +19,32 @@ register_user_error(TrainingError)
 @reports_errors
 def train_command(
     algo: str = typer.Option(..., "--algo", help=f"Algorithm: {', '.join(ALGOS)} (DQN acts on the 125-point grid)."),
-    seed: Optional[int] = typer.Option(None, "--seed", help="Training seed (default: the config seed, 20260511)."),
-    timesteps: Optional[int] = typer.Option(
-        None, "--timesteps", min=1, help="Environment steps (default: the config's training.timesteps; the paper: 300000)."
+    seed: int | None = typer.Option(None, "--seed", help="Training seed (default: the config seed, 20260511)."),
+    timesteps: int | None = typer.Option(
+        None,
+        "--timesteps",
+        min=1,
+        help="Environment steps (default: the config's training.timesteps; the paper: 300000).",
     ),
     no_physics_penalty: bool = typer.Option(
         False, "--no-physics-penalty", help="Train on the ablation reward without λp (V + A)."
     ),
-    data: Optional[Path] = typer.Option(
+    data: Path | None = typer.Option(
         None, "--data", help="Dataset directory (default: the config's data_dir, else the embedded default dataset)."
     ),
-    out: Optional[Path] = typer.Option(None, "--out", help="Training directory (default: <output_dir>/<time>_train_<algo>)."),
-    tensorboard: Optional[Path] = typer.Option(
-        None, "--tensorboard", help="TensorBoard log directory (SB3 scalars + per-episode violation and artificial liquidity)."
+    out: Path | None = typer.Option(
+        None, "--out", help="Training directory (default: <output_dir>/<time>_train_<algo>)."
+    ),
+    tensorboard: Path | None = typer.Option(
+        None,
+        "--tensorboard",
+        help="TensorBoard log directory (SB3 scalars + per-episode violation and artificial liquidity).",
     ),
     checkpoint_every: int = typer.Option(
         DEFAULT_CHECKPOINT_EVERY, "--checkpoint-every", min=0, help="Timesteps between checkpoints (0: none)."
     ),
     torch_threads: int = typer.Option(1, "--torch-threads", min=1, help="torch threads (1 is fastest for these MLPs)."),
-    config: Optional[Path] = typer.Option(None, "--config", help="YAML config in the paper's layout."),
+    config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace a finished or different training in --out."),
 ) -> None:
     """Train one model with Stable-Baselines3 (MlpPolicy; learning rate, batch size and gamma from
@@ -73,7 +79,9 @@ def train_command(
 
         outcome = train(spec, out_dir, on_progress=report, overwrite=overwrite, command=invoked_command())
     if outcome.already_complete:
-        console.print(f"{out_dir} already holds this finished training (pass --overwrite to train again)", soft_wrap=True)
+        console.print(
+            f"{out_dir} already holds this finished training (pass --overwrite to train again)", soft_wrap=True
+        )
     elif outcome.resumed_from:
         console.print(f"resumed from the checkpoint(s) at step {', '.join(map(str, outcome.resumed_from))}")
     console.print(

@@ -8,9 +8,9 @@ byte-identical to the published ones.
 from __future__ import annotations
 
 import datetime as dt
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Callable, Mapping, Sequence
 
 import numpy as np
 import pandas as pd
@@ -18,10 +18,9 @@ import pandas as pd
 from ..io import atomic_write_csv, atomic_write_json, sha256_file
 from ..versions import package_versions
 from .cities import City, check_unique_prefixes, factories_for
+from .files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE  # noqa: F401
 from .pv import capped_irradiance_wm2, max_power_w, solar_geometry, temperature_factor
 from .weather import CityWeather, WeatherError
-
-from .files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE  # noqa: F401
 
 FDIA_FRACTION = 0.05
 FDIA_MULTIPLIERS = [0.42, 1.38, 1.55, 1.82]
@@ -64,7 +63,16 @@ def _build_nodes(rng: np.random.Generator, cities: Sequence[City], nodes_per_cit
                     install.isoformat(),
                 )
             )
-    columns = ["node_id", "city", "latitude", "longitude", "panel_area_m2", "efficiency", "temp_coefficient", "install_date"]
+    columns = [
+        "node_id",
+        "city",
+        "latitude",
+        "longitude",
+        "panel_area_m2",
+        "efficiency",
+        "temp_coefficient",
+        "install_date",
+    ]
     return pd.DataFrame(rows, columns=columns)
 
 
@@ -187,7 +195,13 @@ def _build_trades(rng: np.random.Generator, market: pd.DataFrame, cities: Sequen
     rows = []
     uniform = rng.uniform
     for i, (timestamp, hour, verified_mw, liquidity_mw) in enumerate(
-        zip(active["timestamp"], active["hour"], active["total_verified_MW"], active["solarchain_liquidity_MW"])
+        zip(
+            active["timestamp"],
+            active["hour"],
+            active["total_verified_MW"],
+            active["solarchain_liquidity_MW"],
+            strict=True,
+        )
     ):
         for slot in range(3):
             factory = factories[(i + slot) % len(factories)]
@@ -197,9 +211,27 @@ def _build_trades(rng: np.random.Generator, market: pd.DataFrame, cities: Sequen
             tokens = np.round(purchase * 1000 * uniform(0.93, 1.08), 4)
             exergy = np.round(purchase * 3600 * uniform(0.015, 0.038), 4)
             rows.append(
-                (f"TRD-{len(rows) + 1:05d}", timestamp, hour, factory.factory_id, factory.city, np.round(purchase, 6), tokens, exergy)
+                (
+                    f"TRD-{len(rows) + 1:05d}",
+                    timestamp,
+                    hour,
+                    factory.factory_id,
+                    factory.city,
+                    np.round(purchase, 6),
+                    tokens,
+                    exergy,
+                )
             )
-    columns = ["trade_id", "timestamp", "hour", "factory_id", "city", "energy_purchased_MW", "tokens_burned", "exergy_dissipated_MJ"]
+    columns = [
+        "trade_id",
+        "timestamp",
+        "hour",
+        "factory_id",
+        "city",
+        "energy_purchased_MW",
+        "tokens_burned",
+        "exergy_dissipated_MJ",
+    ]
     return pd.DataFrame(rows, columns=columns)
 
 
@@ -241,7 +273,12 @@ def build_dataset(
     trades = _build_trades(rng, market, cities)
 
     files = {}
-    for name, frame in ((NODES_FILE, nodes), (GENERATION_FILE, generation), (MARKET_FILE, market), (TRADES_FILE, trades)):
+    for name, frame in (
+        (NODES_FILE, nodes),
+        (GENERATION_FILE, generation),
+        (MARKET_FILE, market),
+        (TRADES_FILE, trades),
+    ):
         path = atomic_write_csv(out / name, frame)
         files[name] = {"rows": int(len(frame)), "sha256": sha256_file(path)}
     manifest = {

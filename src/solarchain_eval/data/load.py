@@ -26,7 +26,15 @@ VALID_STATUSES = ("verified", "rejected")
 
 REQUIRED_COLUMNS = {
     NODES_FILE: ("node_id", "city"),
-    GENERATION_FILE: ("timestamp", "node_id", "city", "P_max_W", "P_reported_W", "fdia_detected", "verification_status"),
+    GENERATION_FILE: (
+        "timestamp",
+        "node_id",
+        "city",
+        "P_max_W",
+        "P_reported_W",
+        "fdia_detected",
+        "verification_status",
+    ),
     MARKET_FILE: ("timestamp", "total_verified_MW", "slippage_solarchain_pct"),
     TRADES_FILE: ("timestamp", "energy_purchased_MW"),
 }
@@ -116,7 +124,10 @@ def _read(root: Path, name: str) -> pd.DataFrame:
         if len(row) != len(header):
             column = header[min(len(row), len(header) - 1)]
             raise DatasetError(
-                path, f"the row has {len(row)} fields, the header {len(header)} (a truncated or malformed line)", column, index
+                path,
+                f"the row has {len(row)} fields, the header {len(header)} (a truncated or malformed line)",
+                column,
+                index,
             )
     return pd.DataFrame(rows, columns=header, dtype=str)
 
@@ -141,7 +152,9 @@ def _numeric(frame: pd.DataFrame, path: Path, column: str, *, maximum: float, wh
         raise DatasetError(path, f"negative value {float(values[bad])!r} ({what} cannot be negative)", column, bad)
     bad = _first(values > maximum)
     if bad is not None:
-        raise DatasetError(path, f"value {float(values[bad])!r} is implausibly large ({what} above {maximum:g})", column, bad)
+        raise DatasetError(
+            path, f"value {float(values[bad])!r} is implausibly large ({what} above {maximum:g})", column, bad
+        )
     return values
 
 
@@ -201,7 +214,9 @@ def _check_nodes(nodes: pd.DataFrame, generation: pd.DataFrame, nodes_path: Path
     """Every generation row names a listed node in that node's city; every node has records."""
     duplicated = _first(nodes["node_id"].duplicated().to_numpy())
     if duplicated is not None:
-        raise DatasetError(nodes_path, f"node '{nodes['node_id'].iloc[duplicated]}' is listed twice", "node_id", duplicated)
+        raise DatasetError(
+            nodes_path, f"node '{nodes['node_id'].iloc[duplicated]}' is listed twice", "node_id", duplicated
+        )
     unknown = _first(~generation["node_id"].isin(nodes["node_id"]).to_numpy())
     if unknown is not None:
         raise DatasetError(
@@ -209,12 +224,16 @@ def _check_nodes(nodes: pd.DataFrame, generation: pd.DataFrame, nodes_path: Path
         )
     absent = _first(~nodes["node_id"].isin(generation["node_id"]).to_numpy())
     if absent is not None:
-        raise DatasetError(nodes_path, f"node '{nodes['node_id'].iloc[absent]}' has no records in {GENERATION_FILE}", "node_id", absent)
+        raise DatasetError(
+            nodes_path, f"node '{nodes['node_id'].iloc[absent]}' has no records in {GENERATION_FILE}", "node_id", absent
+        )
     listed_city = generation["node_id"].map(nodes.set_index("node_id")["city"])
     contradicts = (generation["city"] != listed_city).to_numpy()
     if not contradicts.any():
         return
-    by_node = pd.DataFrame({"node": generation["node_id"], "bad": contradicts, "city": generation["city"]}).groupby("node")
+    by_node = pd.DataFrame({"node": generation["node_id"], "bad": contradicts, "city": generation["city"]}).groupby(
+        "node"
+    )
     # A node whose rows all agree on another city: the nodes file is the one at fault.
     wrong_in_nodes_file = by_node["bad"].all() & (by_node["city"].nunique() == 1)
     blamed = _first(nodes["node_id"].map(wrong_in_nodes_file).fillna(False).to_numpy(dtype=bool))
@@ -371,4 +390,6 @@ def load_raw_dataset(data_dir: str | Path) -> RawDataset:
     hours = _check_coverage(generation, absolute_hour, first, gen_path)
     mkt = _market_table(market, first, hours, root / MARKET_FILE)
     trd = _trades_table(trades, first, hours, root / TRADES_FILE)
-    return RawDataset(root=root, nodes=nodes, generation=gen, market=mkt, trades=trd, first_timestamp=first, hours=hours)
+    return RawDataset(
+        root=root, nodes=nodes, generation=gen, market=mkt, trades=trd, first_timestamp=first, hours=hours
+    )

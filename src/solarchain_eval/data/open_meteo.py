@@ -11,7 +11,7 @@ import datetime as dt
 import math
 import os
 import time
-from typing import Callable, Sequence
+from collections.abc import Callable, Sequence
 
 import httpx
 

@@ -12,7 +12,7 @@ random stream derived from (seed, city name), so adding a city never changes ano
 from __future__ import annotations
 
 import zlib
-from typing import Sequence
+from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd

@@ -71,7 +71,7 @@ class HourlyTable:
         return int(self.verified_mwh.shape[0])
 
     def __post_init__(self) -> None:
-        for name, value in vars(self).items():
+        for value in vars(self).values():
             if isinstance(value, np.ndarray):
                 value.setflags(write=False)
 

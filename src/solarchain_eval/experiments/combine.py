@@ -9,8 +9,8 @@ some units) the union of columns is written by pandas with round-trip float pars
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Sequence
 
 import pandas as pd
 

@@ -11,11 +11,11 @@ from __future__ import annotations
 import sys
 import time
 import uuid
+from collections.abc import Callable, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
-from typing import Callable, Sequence
 
 from ..agentic.build import AgenticOptions, Governance
 from ..config import BenchmarkConfig
@@ -120,7 +120,7 @@ def run_evaluation(
         File names in ``run_dir`` owned by the caller (a grid unit's ``unit.json``), carried over.
     """
     started = time.perf_counter()
-    started_at = datetime.now(timezone.utc).isoformat(timespec="seconds")
+    started_at = datetime.now(UTC).isoformat(timespec="seconds")
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
     data_dir = spec.data_dir or (Path(config.data_dir) if config.data_dir else default_dataset_dir())
     table = load_table(data_dir)  # validates before anything is written
@@ -137,7 +137,9 @@ def run_evaluation(
         for policy in policies:
             env = envs.get(policy.action_mode)
             if env is None:
-                env = envs[policy.action_mode] = SolarChainEnv(config=config, table=table, action_mode=policy.action_mode)
+                env = envs[policy.action_mode] = SolarChainEnv(
+                    config=config, table=table, action_mode=policy.action_mode
+                )
             results.extend(
                 run_policy(
                     env,
@@ -227,7 +229,9 @@ def evaluate_agentic_unit(
         As for :func:`run_evaluation`.
     """
     if not setting_is_agentic(setting):
-        raise ValueError(f"setting {setting!r} is not an agentic setting ({SETTING_AGENTIC}, {SETTING_AGENTIC_NO_PHYSICS})")
+        raise ValueError(
+            f"setting {setting!r} is not an agentic setting ({SETTING_AGENTIC}, {SETTING_AGENTIC_NO_PHYSICS})"
+        )
     spec = EvaluationSpec(
         policies=[policy],
         run_seeds=[int(run_seed)],

@@ -17,9 +17,10 @@ auditor kinds are the grid's :class:`~solarchain_eval.agentic.AgenticOptions` (r
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -139,12 +140,15 @@ class GridSpec:
         return listed if self.policies is None else tuple(p for p in listed if p in self.policies)
 
     @classmethod
-    def from_preset(cls, name: str, **overrides: Any) -> "GridSpec":
+    def from_preset(cls, name: str, **overrides: Any) -> GridSpec:
         if name not in PRESETS:
             raise ValueError(f"unknown preset '{name}' (choose from {', '.join(PRESETS)})")
         p = PRESETS[name]
         values: dict[str, Any] = {
-            "timesteps": p.timesteps, "episodes": p.episodes, "seeds": p.seeds, "checkpoint_every": p.checkpoint_every,
+            "timesteps": p.timesteps,
+            "episodes": p.episodes,
+            "seeds": p.seeds,
+            "checkpoint_every": p.checkpoint_every,
         }
         values.update({k: v for k, v in overrides.items() if v is not None})
         return cls(preset=name, **values)
@@ -161,7 +165,9 @@ class GridSpec:
             offered = {p for s in self.settings for p in SETTING_REGISTRY[s].policies}
             unknown = [p for p in self.policies if p not in offered]
             if unknown or not self.policies:
-                raise ValueError(f"unknown or no policies {', '.join(unknown)} (the settings offer {', '.join(sorted(offered))})")
+                raise ValueError(
+                    f"unknown or no policies {', '.join(unknown)} (the settings offer {', '.join(sorted(offered))})"
+                )
         if self.episode_seed_protocol not in EPISODE_SEED_PROTOCOLS:
             raise ValueError(
                 f"unknown episode-seed protocol '{self.episode_seed_protocol}' (choose from {', '.join(EPISODE_SEED_PROTOCOLS)})"

@@ -15,17 +15,18 @@ import fcntl
 import os
 import sys
 import time
-from dataclasses import dataclass, field
-from datetime import datetime, timezone
-from pathlib import Path
+from collections.abc import Callable, Iterator
 from contextlib import contextmanager
-from typing import Any, Callable, Iterator
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
 
 from ..data.default import default_dataset_dir
 from ..data.table import load_table
 from ..io import atomic_write_json
-from ..training import ALGOS, MODEL_FILE, differences
 from ..redaction import redact_command
+from ..training import ALGOS, MODEL_FILE, differences
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
 from .evaluate import dataset_provenance
@@ -33,6 +34,7 @@ from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, p
 from .layout import PAPER_METADATA_FILE, UNITS_DIR
 from .scheduler import Executor, InlineExecutor, LocalPool, RunReport, run_units
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
+
 
 class GridError(ValueError):
     """The grid cannot run as asked (a different grid in ROOT, a busy ROOT, bad arguments)."""
@@ -74,7 +76,7 @@ def _agentic_identity(spec: GridSpec) -> dict[str, Any]:
 
 @contextmanager
 def _locked(root: Path) -> Iterator[None]:
-    handle = open(root / ".lock", "a+")
+    handle = open(root / ".lock", "a+")  # noqa: SIM115 - held open for the lock's lifetime
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
@@ -179,7 +181,9 @@ def run_paper(
             executor = LocalPool(workers)
         else:
             executor = InlineExecutor()
-        report = run_units(units, done, make_task, executor, keep_going=keep_going, on_result=on_result, on_start=on_start)
+        report = run_units(
+            units, done, make_task, executor, keep_going=keep_going, on_result=on_result, on_start=on_start
+        )
 
         outcome = PaperOutcome(root, units, already, report)
         for setting in spec.settings:
@@ -191,10 +195,16 @@ def run_paper(
         status = "complete" if outcome.complete else ("stopped" if report.stopped else "incomplete")
         atomic_write_json(
             root / PAPER_METADATA_FILE,
-            {**meta, "status": status, "complete": outcome.complete, "wall_s": round(outcome.wall_s, 3),
-             "units": _unit_table(root, units, report), "combined": outcome.combined,
-             "combined_sha256": _combined_sha256(root, outcome.combined),
-             "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed]},
+            {
+                **meta,
+                "status": status,
+                "complete": outcome.complete,
+                "wall_s": round(outcome.wall_s, 3),
+                "units": _unit_table(root, units, report),
+                "combined": outcome.combined,
+                "combined_sha256": _combined_sha256(root, outcome.combined),
+                "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed],
+            },
         )
     return outcome
 
@@ -205,16 +215,27 @@ def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str
     from .layout import combined_dir
 
     return {
-        s: {p.name: sha256_file(p) for p in sorted(combined_dir(root, s).iterdir()) if p.is_file() and not p.name.startswith(".")}
+        s: {
+            p.name: sha256_file(p)
+            for p in sorted(combined_dir(root, s).iterdir())
+            if p.is_file() and not p.name.startswith(".")
+        }
         for s in settings
     }
 
 
-def _task(spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit, command: list[str] | None) -> UnitTask:
+def _task(
+    spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit, command: list[str] | None
+) -> UnitTask:
     setting = SETTING_REGISTRY.get(unit.setting)
     no_physics = setting.no_physics_penalty if setting is not None else unit.setting == "no_physics"
     models: dict[str, Path] = {}
-    unit_identity: dict[str, Any] = {"grid": identity, "setting": unit.setting, "policy": unit.policy, "seed": unit.seed}
+    unit_identity: dict[str, Any] = {
+        "grid": identity,
+        "setting": unit.setting,
+        "policy": unit.policy,
+        "seed": unit.seed,
+    }
     if unit.kind == "eval" and unit.depends_on:
         models = {unit.policy: root / UNITS_DIR / unit.depends_on[0] / MODEL_FILE}
         unit_identity["model_sha256"] = model_digest(models)
@@ -235,8 +256,15 @@ def _task(spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit
     )
 
 
-def _metadata(spec: GridSpec, identity: dict, dataset: dict, data_dir: Path, command: list[str] | None,
-              workers: int, ray_address: str | None) -> dict[str, Any]:
+def _metadata(
+    spec: GridSpec,
+    identity: dict,
+    dataset: dict,
+    data_dir: Path,
+    command: list[str] | None,
+    workers: int,
+    ray_address: str | None,
+) -> dict[str, Any]:
     return {
         "identity": identity,
         "grid": {
@@ -258,7 +286,7 @@ def _metadata(spec: GridSpec, identity: dict, dataset: dict, data_dir: Path, com
         "dataset": dataset,
         "execution": {"workers": workers, "ray_address": ray_address, "pid": os.getpid()},
         "command": redact_command(command or sys.argv),
-        "updated_at": datetime.now(timezone.utc).isoformat(timespec="seconds"),
+        "updated_at": datetime.now(UTC).isoformat(timespec="seconds"),
         "git_commit": git_commit(),
         "package_versions": package_versions(),
     }

@@ -97,7 +97,9 @@ class RayExecutor:
     ``transfer="always"`` ships files even when the nodes share ROOT (used by the tests).
     """
 
-    def __init__(self, address: str, root: Path, data_dir: Path, *, transfer: str = "auto", workers: int | None = None) -> None:
+    def __init__(
+        self, address: str, root: Path, data_dir: Path, *, transfer: str = "auto", workers: int | None = None
+    ) -> None:
         ray = self._ray = _import_ray()
         if not ray.is_initialized():
             try:
@@ -131,7 +133,9 @@ class RayExecutor:
             try:
                 result, files = ray.get(ref)
             except Exception as error:  # the task's worker or node died
-                results.append(UnitResult(task.unit.name, False, 0.0, f"Ray task failed: {type(error).__name__}: {error}"))
+                results.append(
+                    UnitResult(task.unit.name, False, 0.0, f"Ray task failed: {type(error).__name__}: {error}")
+                )
                 continue
             if files is not None:
                 result = self._install(task, result, files)

@@ -3,8 +3,9 @@
 from __future__ import annotations
 
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 import numpy as np
 import pandas as pd
@@ -90,7 +91,13 @@ def agentic_log_text(results: Sequence[EpisodeResult]) -> str | None:
         return None
     lines = []
     for r in results:
-        ids = {"policy": r.policy, "setting": r.setting, "run_seed": r.run_seed, "episode": r.episode, "episode_seed": r.episode_seed}
+        ids = {
+            "policy": r.policy,
+            "setting": r.setting,
+            "run_seed": r.run_seed,
+            "episode": r.episode,
+            "episode_seed": r.episode_seed,
+        }
         for row in r.extras.get(EXTRA_LOG_KEY, ()):
             lines.append(json.dumps({**ids, **row}, ensure_ascii=False, allow_nan=False))
     return "".join(line + "\n" for line in lines)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Iterable, Sequence
+from typing import Any
 
 import numpy as np
 
@@ -74,7 +75,13 @@ def run_episode(
     obs, reset_info = env.reset(seed=episode_seed)
     begin = getattr(policy, "begin_episode", None)
     if begin is not None:
-        begin(env=env, episode=episode, run_seed=run_seed, episode_seed=episode_seed, start_hour=reset_info["episode_start_hour"])
+        begin(
+            env=env,
+            episode=episode,
+            run_seed=run_seed,
+            episode_seed=episode_seed,
+            start_hour=reset_info["episode_start_hour"],
+        )
     columns: dict[str, list] = {name: [] for name in STEP_FIELDS}
     appenders = [(columns[name].append, name) for name in STEP_FIELDS]
     city_rewards: list[tuple[float, ...]] = []
@@ -131,9 +138,7 @@ def run_policy(
 ) -> Iterable[EpisodeResult]:
     """Yield the episodes of ``policy`` for each run seed (episodes in protocol order)."""
     if env.action_mode != policy.action_mode:
-        raise ValueError(
-            f"policy '{policy.name}' acts in {policy.action_mode} mode but the env is {env.action_mode}"
-        )
+        raise ValueError(f"policy '{policy.name}' acts in {policy.action_mode} mode but the env is {env.action_mode}")
     for run_seed in run_seeds:
         policy.begin_run(run_seed)
         for episode, seed in enumerate(episode_seeds(run_seed, episodes)):

@@ -24,9 +24,9 @@ import os
 import shutil
 import signal
 import tempfile
+from collections.abc import Sequence
 from pathlib import Path
 from types import TracebackType
-from typing import Sequence
 
 from ..io import sha256_file
 from .records import (
@@ -99,7 +99,9 @@ def check_target(run_dir: Path, *, overwrite: bool = False, keep: Sequence[str] 
         raise RunDirError(f"--out {run_dir}: the folder {ancestor} is not writable")
     held = _describe(run_dir, keep)
     if held is not None and not overwrite:
-        raise RunDirError(f"--out {run_dir} already holds {held}; choose another --out or pass --overwrite to replace it")
+        raise RunDirError(
+            f"--out {run_dir} already holds {held}; choose another --out or pass --overwrite to replace it"
+        )
 
 
 class RunDirWriter:
@@ -128,7 +130,7 @@ class RunDirWriter:
         self._published = False
 
     # --- context ------------------------------------------------------------------------
-    def __enter__(self) -> "RunDirWriter":
+    def __enter__(self) -> RunDirWriter:
         check_target(self.run_dir, overwrite=self.overwrite, keep=self.keep)
         try:
             self.run_dir.parent.mkdir(parents=True, exist_ok=True)
@@ -142,14 +144,18 @@ class RunDirWriter:
             try:
                 self.staging = Path(tempfile.mkdtemp(prefix=f".{self.run_dir.name}.staging-", dir=self.run_dir.parent))
             except OSError as error:
-                raise RunDirError(f"--out {self.run_dir}: cannot write in {self.run_dir.parent} ({error.strerror})") from None
+                raise RunDirError(
+                    f"--out {self.run_dir}: cannot write in {self.run_dir.parent} ({error.strerror})"
+                ) from None
             os.chmod(self.staging, 0o777 & ~_umask())  # mkdtemp makes it owner-only
         except BaseException:
             self._unlock()
             raise
         return self
 
-    def __exit__(self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None) -> None:
+    def __exit__(
+        self, exc_type: type[BaseException] | None, exc: BaseException | None, tb: TracebackType | None
+    ) -> None:
         try:
             if not self._published and self.staging is not None:
                 shutil.rmtree(self.staging, ignore_errors=True)
@@ -187,7 +193,7 @@ class RunDirWriter:
         """Staging and old folders of writers that died (safe: we hold the lock)."""
         prefix = f".{self.run_dir.name}."
         for path in self.run_dir.parent.glob(f"{_glob_escape(prefix)}*"):
-            rest = path.name[len(prefix):]
+            rest = path.name[len(prefix) :]
             if path.is_dir() and (rest.startswith(("staging-", "old-"))):
                 shutil.rmtree(path, ignore_errors=True)
         if self.run_dir.is_dir():
@@ -200,14 +206,18 @@ class RunDirWriter:
             try:
                 fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666 & ~_umask())
             except OSError as error:
-                raise RunDirError(f"--out {self.run_dir}: cannot create the lock file {path} ({error.strerror})") from None
+                raise RunDirError(
+                    f"--out {self.run_dir}: cannot create the lock file {path} ({error.strerror})"
+                ) from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
             except OSError as error:
                 os.close(fd)
                 if error.errno not in (errno.EWOULDBLOCK, errno.EACCES):
                     raise
-                raise RunDirError(f"--out {self.run_dir} is being written by another run ({_holder(path)}); wait for it to finish") from None
+                raise RunDirError(
+                    f"--out {self.run_dir} is being written by another run ({_holder(path)}); wait for it to finish"
+                ) from None
             try:
                 same = os.fstat(fd).st_ino == os.stat(path).st_ino
             except FileNotFoundError:

@@ -13,13 +13,15 @@ driver stops them) and, on Linux, are killed by the kernel when the driver dies
 
 from __future__ import annotations
 
+import contextlib
 import multiprocessing as mp
 import os
 import signal
 import sys
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
-from typing import Callable, Protocol, Sequence
+from typing import Protocol
 
 from .grid import Unit
 from .units import UnitResult, UnitTask, execute_unit
@@ -147,10 +149,8 @@ class LocalPool:
         for worker in self._pool:
             if worker.process.is_alive():
                 if worker.task is None:
-                    try:
+                    with contextlib.suppress(BrokenPipeError, OSError):
                         worker.conn.send(None)
-                    except (BrokenPipeError, OSError):
-                        pass
                     worker.process.join(timeout=2)
                 if worker.process.is_alive():
                     worker.process.kill()

@@ -15,7 +15,7 @@ import shutil
 import time
 import traceback
 from dataclasses import dataclass, field
-from datetime import datetime, timezone
+from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
@@ -70,8 +70,10 @@ def read_done(unit_dir: Path) -> dict[str, Any] | None:
 
 
 def write_done(unit_dir: Path, unit: str, wall_s: float) -> Path:
-    finished = datetime.now(timezone.utc).isoformat(timespec="seconds")
-    return atomic_write_json(Path(unit_dir) / DONE_MARKER, {"unit": unit, "wall_s": round(wall_s, 3), "finished_at": finished})
+    finished = datetime.now(UTC).isoformat(timespec="seconds")
+    return atomic_write_json(
+        Path(unit_dir) / DONE_MARKER, {"unit": unit, "wall_s": round(wall_s, 3), "finished_at": finished}
+    )
 
 
 def undo(unit_dir: Path) -> None:

@@ -57,4 +57,6 @@ def jax_env_steps_per_s(data_dir: Path, num_envs: int, episodes: int, repeats: i
         run(jax.random.key(repeat + 1), actions).block_until_ready()
         samples.append(transitions / (time.perf_counter() - start))
     device = jax.devices()[0].platform
-    return Throughput(f"JAX env on {device}, {num_envs} envs (jit, vmap, lax.scan; resets included)", "env-steps/s", tuple(samples))
+    return Throughput(
+        f"JAX env on {device}, {num_envs} envs (jit, vmap, lax.scan; resets included)", "env-steps/s", tuple(samples)
+    )

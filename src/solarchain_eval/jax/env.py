@@ -158,10 +158,17 @@ def make_env_params(
         city_trust=jnp.asarray(hours.city_trust, f),
         obs_template=jnp.asarray(template, jnp.float32),
         hour_inputs=jnp.asarray(
-            np.column_stack([
-                table.verified_mwh, hours.unsafe_supply_mwh, hours.clearing_demand_mwh, table.reported_mwh,
-                table.raw_violation_rate, hours.city_share, hours.city_trust,
-            ]),
+            np.column_stack(
+                [
+                    table.verified_mwh,
+                    hours.unsafe_supply_mwh,
+                    hours.clearing_demand_mwh,
+                    table.reported_mwh,
+                    table.raw_violation_rate,
+                    hours.city_share,
+                    hours.city_trust,
+                ]
+            ),
             f,
         ),
         start_hours=jnp.asarray(start_hours(table.hours, cfg.episode_steps), jnp.int32),

@@ -32,29 +32,63 @@ JAX_TRAIN_CONFIG_FILE = "train_config.json"
 def rejax_config(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str, Any]:
     """rejax keyword arguments mirroring SB3's defaults plus the config's lr, batch and γ."""
     t = config.training
-    common = {"learning_rate": t.learning_rate, "gamma": t.gamma, "total_timesteps": int(timesteps),
-              "eval_freq": int(timesteps), "skip_initial_evaluation": True}
+    common = {
+        "learning_rate": t.learning_rate,
+        "gamma": t.gamma,
+        "total_timesteps": int(timesteps),
+        "eval_freq": int(timesteps),
+        "skip_initial_evaluation": True,
+    }
     if algo == "ppo":
         # SB3 PPO: n_steps 2048, n_epochs 10, minibatches of batch_size, ent 0, clip 0.2, grad norm 0.5,
         # separate 64x64 tanh actor and critic.
         n_steps = min(2048, int(timesteps))
-        return {**common, "num_envs": 1, "num_steps": n_steps, "num_epochs": 10,
-                "num_minibatches": max(1, n_steps // t.batch_size), "gae_lambda": 0.95, "clip_eps": 0.2,
-                "vf_coef": 0.5, "ent_coef": 0.0, "max_grad_norm": 0.5,
-                "agent_kwargs": {"activation": "tanh", "hidden_layer_sizes": (64, 64)}}  # rejax PPO reads sizes here
+        return {
+            **common,
+            "num_envs": 1,
+            "num_steps": n_steps,
+            "num_epochs": 10,
+            "num_minibatches": max(1, n_steps // t.batch_size),
+            "gae_lambda": 0.95,
+            "clip_eps": 0.2,
+            "vf_coef": 0.5,
+            "ent_coef": 0.0,
+            "max_grad_norm": 0.5,
+            "agent_kwargs": {"activation": "tanh", "hidden_layer_sizes": (64, 64)},
+        }  # rejax PPO reads sizes here
     if algo == "sac":
         # SB3 SAC: 256x256 ReLU, buffer 1e6, learning_starts 100, tau 0.005, one update per step.
-        return {**common, "num_envs": 1, "batch_size": t.batch_size, "buffer_size": min(1_000_000, int(timesteps)),
-                "fill_buffer": 100, "polyak": 0.995, "target_update_freq": 1, "num_epochs": 1,
-                "hidden_layer_sizes": (256, 256), "agent_kwargs": {"activation": "relu"}}
+        return {
+            **common,
+            "num_envs": 1,
+            "batch_size": t.batch_size,
+            "buffer_size": min(1_000_000, int(timesteps)),
+            "fill_buffer": 100,
+            "polyak": 0.995,
+            "target_update_freq": 1,
+            "num_epochs": 1,
+            "hidden_layer_sizes": (256, 256),
+            "agent_kwargs": {"activation": "relu"},
+        }
     if algo == "dqn":
         # SB3 DQN: 64x64 ReLU, train_freq 4 (here: 4 envs per iteration, one update), hard target
         # update every 10,000 steps, eps 1 -> 0.05 over 10 %, grad norm 10, no double DQN.
-        return {**common, "num_envs": 4, "batch_size": t.batch_size, "buffer_size": min(1_000_000, int(timesteps)),
-                "fill_buffer": max(dqn_learning_starts(timesteps), t.batch_size), "polyak": 0.0,
-                "target_update_freq": 10_000, "num_epochs": 1, "eps_start": 1.0, "eps_end": 0.05,
-                "exploration_fraction": 0.1, "max_grad_norm": 10.0, "ddqn": False,
-                "agent_kwargs": {"activation": "relu"}}  # rejax fixes DQN at 64x64, SB3's size
+        return {
+            **common,
+            "num_envs": 4,
+            "batch_size": t.batch_size,
+            "buffer_size": min(1_000_000, int(timesteps)),
+            "fill_buffer": max(dqn_learning_starts(timesteps), t.batch_size),
+            "polyak": 0.0,
+            "target_update_freq": 10_000,
+            "num_epochs": 1,
+            "eps_start": 1.0,
+            "eps_end": 0.05,
+            "exploration_fraction": 0.1,
+            "max_grad_norm": 10.0,
+            "ddqn": False,
+            "agent_kwargs": {"activation": "relu"},
+        }  # rejax fixes DQN at 64x64, SB3's size
     raise ValueError(f"unknown algorithm {algo!r} (choose from ppo, sac, dqn)")
 
 
@@ -115,17 +149,29 @@ def train_jax(
     cfg = config or BenchmarkConfig()
     if algo not in ACTION_MODES:
         raise ValueError(f"unknown algorithm {algo!r} (choose from ppo, sac, dqn)")
-    params = make_env_params(data_dir, config=cfg, action_mode=ACTION_MODES[algo], no_physics_penalty=no_physics_penalty)
+    params = make_env_params(
+        data_dir, config=cfg, action_mode=ACTION_MODES[algo], no_physics_penalty=no_physics_penalty
+    )
     _, states, compile_s, train_s = train_seeds(algo, seeds, timesteps, params, cfg)
     paths = []
     for i, seed in enumerate(seeds):
         network = states.q_ts.params if algo == "dqn" else states.actor_ts.params
         seed_dir = out_dir / f"seed_{seed}"
         # Only the acting network's parameters: what a policy adapter needs to act.
-        _write_atomic(seed_dir / JAX_MODEL_FILE, serialization.to_bytes(jax.tree.map(lambda x, i=i: np.asarray(x[i]), network)))
-        meta = {"identity": {"algo": algo, "backend": "jax", "seed": int(seed), "timesteps": int(timesteps),
-                             "no_physics_penalty": bool(no_physics_penalty), "data_dir": str(data_dir) if data_dir else None},
-                "rejax": rejax_config(algo, cfg, timesteps)}
+        _write_atomic(
+            seed_dir / JAX_MODEL_FILE, serialization.to_bytes(jax.tree.map(lambda x, i=i: np.asarray(x[i]), network))
+        )
+        meta = {
+            "identity": {
+                "algo": algo,
+                "backend": "jax",
+                "seed": int(seed),
+                "timesteps": int(timesteps),
+                "no_physics_penalty": bool(no_physics_penalty),
+                "data_dir": str(data_dir) if data_dir else None,
+            },
+            "rejax": rejax_config(algo, cfg, timesteps),
+        }
         _write_atomic(seed_dir / JAX_TRAIN_CONFIG_FILE, json.dumps(meta, indent=2, default=list).encode())
         paths.append(seed_dir / JAX_MODEL_FILE)
     return JaxTrainOutcome(algo, tuple(seeds), int(timesteps), compile_s, train_s, tuple(paths))

@@ -41,7 +41,7 @@ class ActionCodec:
         object.__setattr__(self, "_lo32", tuple(_F32(v) for v in self.lo32))
 
     @classmethod
-    def from_config(cls, market: MarketConfig) -> "ActionCodec":
+    def from_config(cls, market: MarketConfig) -> ActionCodec:
         lo = (market.min_reward_ratio, market.min_liquidity_ratio, 0.0)
         hi = (market.max_reward_ratio, market.max_liquidity_ratio, market.max_burn_rate)
         widths = (hi[0] - lo[0], hi[1] - lo[1], hi[2])
@@ -99,8 +99,8 @@ class ActionCodec:
 
     def encode(self, alpha: float, ell: float, burn: float) -> np.ndarray:
         """Market-unit target -> normalised float32 action (sanitised first, then clipped)."""
-        a, l, b = self.sanitize(alpha, ell, burn)
-        u = _F3.unpack(_F3.pack(a - self.lo32[0], l - self.lo32[1], b))
+        a, ell_, b = self.sanitize(alpha, ell, burn)
+        u = _F3.unpack(_F3.pack(a - self.lo32[0], ell_ - self.lo32[1], b))
         u = _F3.unpack(_F3.pack(u[0] / self.width32[0], u[1] / self.width32[1], u[2] / self.width32[2]))
         return np.clip(np.array(u, dtype=_F32), 0.0, 1.0)
 

@@ -42,7 +42,7 @@ class RewardWeights:
     max_total_allocation: float
 
     @classmethod
-    def from_config(cls, config: BenchmarkConfig, no_physics_penalty: bool | None = None) -> "RewardWeights":
+    def from_config(cls, config: BenchmarkConfig, no_physics_penalty: bool | None = None) -> RewardWeights:
         off = config.no_physics_penalty if no_physics_penalty is None else no_physics_penalty
         r = config.reward
         return cls(
@@ -75,7 +75,7 @@ class MarketHours:
     city_trust: np.ndarray
 
     @classmethod
-    def from_table(cls, table: HourlyTable) -> "MarketHours":
+    def from_table(cls, table: HourlyTable) -> MarketHours:
         t = table
         unsafe = np.maximum(np.maximum(t.rejected_mwh, t.excess_mwh), np.maximum(t.reported_mwh - t.pmax_mwh, 0.0))
         demand = np.where(t.demand_mwh > 0, t.demand_mwh, np.maximum(t.total_verified_mw, FALLBACK_MIN_DEMAND_MWH))

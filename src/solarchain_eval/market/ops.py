@@ -14,7 +14,8 @@ innocuous for +, -, ×, ÷).
 from __future__ import annotations
 
 import struct
-from typing import Any, Sequence
+from collections.abc import Sequence
+from typing import Any
 
 import numpy as np
 
@@ -38,7 +39,7 @@ class ScalarOps:
         """``formula(a, b, share, trust)`` for each city; a list of floats."""
         a, b = per_env
         shares, trusts = city_columns
-        return [formula(a, b, share, trust) for share, trust in zip(shares, trusts)]
+        return [formula(a, b, share, trust) for share, trust in zip(shares, trusts, strict=True)]
 
     @staticmethod
     def city_variance(city_values: list) -> float:

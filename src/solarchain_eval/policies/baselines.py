@@ -21,7 +21,9 @@ class StaticPolicy:
 
     def __post_init__(self) -> None:
         m = self.market
-        self._action = ActionCodec.from_config(m).encode(m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate)
+        self._action = ActionCodec.from_config(m).encode(
+            m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate
+        )
         self._action.setflags(write=False)
 
     def begin_run(self, run_seed: int) -> None:

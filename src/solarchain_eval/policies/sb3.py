@@ -17,9 +17,10 @@ model is loaded.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable
+from typing import Any
 
 import numpy as np
 
@@ -121,7 +122,9 @@ class SB3Policy:
         if self.action_mode == "discrete":
             expected = self.config.discrete_levels**3
             if getattr(space, "n", None) != expected:
-                raise ValueError(f"{self.model_path}: the model has {getattr(space, 'n', space)} actions, the env {expected}")
+                raise ValueError(
+                    f"{self.model_path}: the model has {getattr(space, 'n', space)} actions, the env {expected}"
+                )
         elif tuple(space.shape or ()) != (3,):
             raise ValueError(f"{self.model_path}: the model's actions have shape {space.shape}, the env expects (3,)")
 

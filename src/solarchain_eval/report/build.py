@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Sequence
 
 from ..experiments.layout import REPORT_DIR
 from ..io import atomic_write_text
@@ -42,7 +42,9 @@ def parse_formats(text: str) -> tuple[str, ...]:
     return formats
 
 
-def _remove_stale(out_dir: Path, tables: Sequence[ReportTable | Skipped], figures: Sequence[FigureFile | Skipped]) -> None:
+def _remove_stale(
+    out_dir: Path, tables: Sequence[ReportTable | Skipped], figures: Sequence[FigureFile | Skipped]
+) -> None:
     """Delete earlier outputs of tables/figures this run skips, so nothing stale is left beside new files."""
     for item in tables:
         if isinstance(item, Skipped):
@@ -61,9 +63,13 @@ def _markdown_report(outcome: ReportOutcome) -> str:
     for table in outcome.tables:
         if isinstance(table, ReportTable):
             lines.append(to_markdown(table))
-    skipped = [t for t in outcome.tables if isinstance(t, Skipped)] + [f for f in outcome.figures if isinstance(f, Skipped)]
+    skipped = [t for t in outcome.tables if isinstance(t, Skipped)] + [
+        f for f in outcome.figures if isinstance(f, Skipped)
+    ]
     if skipped:
-        lines += ["## Not produced for this run", ""] + [f"- **{s.title}** (`{s.key}`): {s.reason}" for s in skipped] + [""]
+        lines += (
+            ["## Not produced for this run", ""] + [f"- **{s.title}** (`{s.key}`): {s.reason}" for s in skipped] + [""]
+        )
     figures = [f for f in outcome.figures if isinstance(f, FigureFile)]
     if figures:
         lines += ["## Figures", ""] + [f"![{f.title}](figures/{f.key}.png)\n\n*{f.caption}*\n" for f in figures]
@@ -113,7 +119,9 @@ def build_report(
         if isinstance(table, ReportTable):
             for fmt in formats:
                 if fmt in TABLE_FORMATS:
-                    outcome.files.append(atomic_write_text(out / "tables" / f"{table.key}.{fmt}", TABLE_FORMATS[fmt](table)))
+                    outcome.files.append(
+                        atomic_write_text(out / "tables" / f"{table.key}.{fmt}", TABLE_FORMATS[fmt](table))
+                    )
     _remove_stale(out, tables, drawn)
     if "md" in formats:
         outcome.files.append(atomic_write_text(out / MARKDOWN_FILE, _markdown_report(outcome)))

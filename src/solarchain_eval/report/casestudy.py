@@ -33,7 +33,10 @@ def select_case(logs: pd.DataFrame, options: ReportOptions) -> tuple[pd.Series |
     preferred = revised[(revised["policy"] == options.case_policy) & (revised["setting"] == options.case_setting)]
     scope = f"{options.case_policy} in {options.case_setting}"
     if preferred.empty:
-        preferred, scope = revised, f"all policies and settings ({options.case_policy} in {options.case_setting} has no revised step)"
+        preferred, scope = (
+            revised,
+            f"all policies and settings ({options.case_policy} in {options.case_setting} has no revised step)",
+        )
     ranked = preferred.assign(_neg_delta=-preferred["action_delta"].astype(float)).sort_values(
         ["_neg_delta", "setting", "policy", "run_seed", "episode", "step"], kind="stable"
     )

@@ -6,8 +6,9 @@ from __future__ import annotations
 import base64
 import html
 import json
+from collections.abc import Sequence
 from pathlib import Path
-from typing import Any, Sequence
+from typing import Any
 
 from .figures.style import FigureFile
 from .loading import ReportData
@@ -52,14 +53,16 @@ def _img(figure: FigureFile) -> str:
     return (
         f'<figure{css} id="fig-{_escape(figure.key)}"><img src="data:image/png;base64,{data}" alt="{_escape(figure.title)}">'
         f"<figcaption><strong>{_escape(figure.title)}.</strong> {_escape(figure.caption)} "
-        f"<span class=\"meta\">(figures/{_escape(figure.key)}.png, .svg)</span></figcaption></figure>\n"
+        f'<span class="meta">(figures/{_escape(figure.key)}.png, .svg)</span></figcaption></figure>\n'
     )
 
 
 def _skipped(items: Sequence[Skipped], what: str) -> str:
     if not items:
         return ""
-    rows = "".join(f"<li><strong>{_escape(s.title)}</strong> ({_escape(s.key)}): {_escape(s.reason)}</li>" for s in items)
+    rows = "".join(
+        f"<li><strong>{_escape(s.title)}</strong> ({_escape(s.key)}): {_escape(s.reason)}</li>" for s in items
+    )
     return f'<p>{what} this run cannot support:</p><ul class="skipped">{rows}</ul>\n'
 
 
@@ -92,11 +95,11 @@ def _provenance(data: ReportData) -> str:
         manifest_html = (
             f"<details><summary>manifest.json</summary><pre>{_escape(json.dumps(manifest, indent=2, sort_keys=True))}</pre></details>"
             if manifest is not None
-            else "<p class=\"meta\">No manifest.json in the dataset directory (the published CSVs ship without one).</p>"
+            else '<p class="meta">No manifest.json in the dataset directory (the published CSVs ship without one).</p>'
         )
         parts.append(
             f"<h3>Dataset <code>{_escape(record['data_dir'])}</code></h3>"
-            f"<p class=\"meta\">Used by: {_escape(', '.join(record['used_by']))}. Manifest sha256: "
+            f'<p class="meta">Used by: {_escape(", ".join(record["used_by"]))}. Manifest sha256: '
             f"<code>{_escape(record['manifest_sha256'] or 'not recorded')}</code>. Status compares the recorded "
             "sha256 with the file on disk now.</p>"
             f"<table><thead><tr><th>File</th><th>sha256 (recorded)</th><th>Status now</th></tr></thead><tbody>{files}</tbody></table>"
@@ -111,9 +114,17 @@ def _run_metadata(data: ReportData) -> str:
     head = "".join(f"<th>{_escape(k)}</th>" for k in keys)
 
     def fmt(value: Any) -> str:
-        return _escape(" ".join(value) if isinstance(value, list) and all(isinstance(v, str) for v in value) else json.dumps(value) if isinstance(value, (list, dict)) else value)
+        return _escape(
+            " ".join(value)
+            if isinstance(value, list) and all(isinstance(v, str) for v in value)
+            else json.dumps(value)
+            if isinstance(value, (list, dict))
+            else value
+        )
 
-    body = "".join("<tr>" + "".join(f'<td class="wrap">{fmt(r.get(k, ""))}</td>' for k in keys) + "</tr>" for r in records)
+    body = "".join(
+        "<tr>" + "".join(f'<td class="wrap">{fmt(r.get(k, ""))}</td>' for k in keys) + "</tr>" for r in records
+    )
     table = (
         f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>'
         if records

@@ -293,7 +293,9 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     unverified = verify_report_inputs(root, kind)
     if unverified and not allow_unverified:
         more = f" (and {len(unverified) - 1} more problem(s))" if len(unverified) > 1 else ""
-        raise ReportDataError(f"{unverified[0]}{more}; refusing to report (--allow-unverified reports anyway, with warnings)")
+        raise ReportDataError(
+            f"{unverified[0]}{more}; refusing to report (--allow-unverified reports anyway, with warnings)"
+        )
     return ReportData(
         root=root,
         kind=kind,

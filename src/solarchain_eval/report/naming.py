@@ -5,7 +5,7 @@ One home for every label the report shows, so tables and figures agree.
 
 from __future__ import annotations
 
-from typing import Iterable
+from collections.abc import Iterable
 
 from ..experiments.rollout import (
     SETTING_AGENTIC,

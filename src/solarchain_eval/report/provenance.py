@@ -79,8 +79,14 @@ def dataset_records(data: ReportData) -> list[dict[str, Any]]:
 def run_records(data: ReportData) -> list[dict[str, Any]]:
     """The summary fields of the run's metadata (one record per evaluation unit of a paper root)."""
     if data.kind == "run":
-        return [{"unit": data.root.name, **{k: data.metadata[k] for k in RUN_FIELDS if k in data.metadata}}] if data.metadata else []
-    return [{"unit": name, **{k: meta[k] for k in RUN_FIELDS if k in meta}} for name, meta in data.unit_metadata.items()]
+        return (
+            [{"unit": data.root.name, **{k: data.metadata[k] for k in RUN_FIELDS if k in data.metadata}}]
+            if data.metadata
+            else []
+        )
+    return [
+        {"unit": name, **{k: meta[k] for k in RUN_FIELDS if k in meta}} for name, meta in data.unit_metadata.items()
+    ]
 
 
 def metadata_dump(data: ReportData) -> str:

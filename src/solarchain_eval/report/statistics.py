@@ -12,8 +12,8 @@ output is deterministic.
 
 from __future__ import annotations
 
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Callable, Sequence
 
 import numpy as np
 import pandas as pd
@@ -191,9 +191,7 @@ def interquartile_mean(values: ArrayLike, weights: np.ndarray | None = None) -> 
     w2 = np.atleast_2d(w)[:, order]
     upper_edge = np.cumsum(w2, axis=1)
     total = upper_edge[:, -1:]
-    overlap = np.clip(
-        np.minimum(upper_edge, 0.75 * total) - np.maximum(upper_edge - w2, 0.25 * total), 0.0, None
-    )
+    overlap = np.clip(np.minimum(upper_edge, 0.75 * total) - np.maximum(upper_edge - w2, 0.25 * total), 0.0, None)
     iqm = (overlap * x[order]).sum(axis=1) / (0.5 * total[:, 0])
     return float(iqm[0]) if np.ndim(w) == 1 else iqm
 

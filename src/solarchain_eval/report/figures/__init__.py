@@ -7,8 +7,8 @@ Each builder takes the loaded run, the options and the output folder and returns
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from pathlib import Path
-from typing import Callable
 
 from ..loading import ReportData
 from ..options import ReportOptions

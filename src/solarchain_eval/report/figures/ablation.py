@@ -38,10 +38,25 @@ def paired_no_physics_delta(data: ReportData, options: ReportOptions, out_dir: P
                 if values.size == 0:
                     continue
                 x = i + offsets[base]
-                ax.scatter(x + rng.uniform(-0.07, 0.07, values.size), values, s=8, color=colour, alpha=0.3, linewidths=0, marker=MARKERS[base])
+                ax.scatter(
+                    x + rng.uniform(-0.07, 0.07, values.size),
+                    values,
+                    s=8,
+                    color=colour,
+                    alpha=0.3,
+                    linewidths=0,
+                    marker=MARKERS[base],
+                )
                 ax.scatter([x], [values.mean()], s=60, color=colour, edgecolors="black", marker=MARKERS[base], zorder=3)
         for base in deltas:
-            ax.scatter([], [], marker=MARKERS[base], color="white", edgecolors="black", label=f"{GOVERNANCE_LABELS[base]} (mean)")
+            ax.scatter(
+                [],
+                [],
+                marker=MARKERS[base],
+                color="white",
+                edgecolors="black",
+                label=f"{GOVERNANCE_LABELS[base]} (mean)",
+            )
         ax.axhline(0.0, color="black", linewidth=0.8)
         label_categories(ax, [policy_label(p) for p in policies])
         ax.set_ylabel("Δ artificial liquidity (MWh)")
@@ -69,12 +84,29 @@ def liquidity_four_settings(data: ReportData, options: ReportOptions, out_dir: P
         for j, setting in enumerate(settings):
             colour = SETTING_COLOURS[setting]
             for i, policy in enumerate(policies):
-                values = learned.loc[(learned["setting"] == setting) & (learned["policy"] == policy), METRIC].to_numpy(float)
+                values = learned.loc[(learned["setting"] == setting) & (learned["policy"] == policy), METRIC].to_numpy(
+                    float
+                )
                 if values.size == 0:
                     continue
                 x = i - 0.4 + width * (j + 0.5)
-                ax.bar(x, values.mean(), width=width * 0.9, color=colour, alpha=0.35, edgecolor=colour, label=GOVERNANCE_LABELS[setting] if i == 0 else None)
-                ax.scatter(x + rng.uniform(-width / 4, width / 4, values.size), values, s=5, color=colour, alpha=0.35, linewidths=0)
+                ax.bar(
+                    x,
+                    values.mean(),
+                    width=width * 0.9,
+                    color=colour,
+                    alpha=0.35,
+                    edgecolor=colour,
+                    label=GOVERNANCE_LABELS[setting] if i == 0 else None,
+                )
+                ax.scatter(
+                    x + rng.uniform(-width / 4, width / 4, values.size),
+                    values,
+                    s=5,
+                    color=colour,
+                    alpha=0.35,
+                    linewidths=0,
+                )
         label_categories(ax, [policy_label(p) for p in policies])
         ax.set_ylabel("Artificial liquidity (MWh)")
         ax.set_title(title)
@@ -99,7 +131,9 @@ def liquidity_trajectories(data: ReportData, options: ReportOptions, out_dir: Pa
                 continue
             # One value per (run seed, episode): the mean over the learned policies.
             per_seed = frame.groupby(["run_seed", "episode"], as_index=False)[METRIC].mean()
-            drawn |= trajectory(ax, per_seed, METRIC, SETTING_COLOURS[setting], GOVERNANCE_LABELS[setting], options.confidence)
+            drawn |= trajectory(
+                ax, per_seed, METRIC, SETTING_COLOURS[setting], GOVERNANCE_LABELS[setting], options.confidence
+            )
         ax.set_xlabel("Episode index within a run seed")
         ax.set_ylabel("Artificial liquidity (MWh)")
         ax.set_title(title)

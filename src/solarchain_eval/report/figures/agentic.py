@@ -25,7 +25,11 @@ def jitter_change(data: ReportData, options: ReportOptions, out_dir: Path) -> Fi
     """Mean action jitter per learned policy with (RL+LLM) and without (RL) the layer."""
     key, title = "jitter_change", "Action jitter with the Planner/Auditor"
     metrics = data.metrics
-    policies = [p for p in learned_order(metrics["policy"]) if {SETTING_MAIN, SETTING_AGENTIC} <= set(metrics.loc[metrics["policy"] == p, "setting"])]
+    policies = [
+        p
+        for p in learned_order(metrics["policy"])
+        if {SETTING_MAIN, SETTING_AGENTIC} <= set(metrics.loc[metrics["policy"] == p, "setting"])
+    ]
     if not policies:
         return Skipped(key, title, NEEDS_PAIR)
     rng = np.random.default_rng(options.seed)
@@ -34,16 +38,26 @@ def jitter_change(data: ReportData, options: ReportOptions, out_dir: Path) -> Fi
         for i, policy in enumerate(policies):
             colour = policy_colour(policy, policies)
             for offset, setting, alpha, hatch in ((-0.2, SETTING_MAIN, 0.25, None), (0.2, SETTING_AGENTIC, 0.6, "//")):
-                values = metrics.loc[(metrics["policy"] == policy) & (metrics["setting"] == setting), "action_jitter"].to_numpy(float)
+                values = metrics.loc[
+                    (metrics["policy"] == policy) & (metrics["setting"] == setting), "action_jitter"
+                ].to_numpy(float)
                 ax.bar(i + offset, values.mean(), width=0.36, color=colour, alpha=alpha, edgecolor=colour, hatch=hatch)
-                ax.scatter(i + offset + rng.uniform(-0.1, 0.1, values.size), values, s=5, color=colour, alpha=0.4, linewidths=0)
+                ax.scatter(
+                    i + offset + rng.uniform(-0.1, 0.1, values.size), values, s=5, color=colour, alpha=0.4, linewidths=0
+                )
         label_categories(ax, [policy_label(p) for p in policies])
         ax.set_ylabel("Action jitter (mean L1 change per step)")
         ax.set_title(title)
         ax.legend(
             handles=[
                 Patch(facecolor="#888888", alpha=0.25, edgecolor="#888888", label=GOVERNANCE_LABELS[SETTING_MAIN]),
-                Patch(facecolor="#888888", alpha=0.6, edgecolor="#888888", hatch="//", label=GOVERNANCE_LABELS[SETTING_AGENTIC]),
+                Patch(
+                    facecolor="#888888",
+                    alpha=0.6,
+                    edgecolor="#888888",
+                    hatch="//",
+                    label=GOVERNANCE_LABELS[SETTING_AGENTIC],
+                ),
             ],
             loc="best",
         )
@@ -56,7 +70,9 @@ def agentic_delta_scatter(data: ReportData, options: ReportOptions, out_dir: Pat
     key, title = "agentic_paired_deltas", "Paired RL+LLM − RL changes"
     if not {SETTING_MAIN, SETTING_AGENTIC} <= set(data.settings):
         return Skipped(key, title, NEEDS_PAIR)
-    deltas = paired_deltas(data.metrics, SETTING_MAIN, SETTING_AGENTIC, ["action_jitter", "artificial_liquidity_MWh"]).frame
+    deltas = paired_deltas(
+        data.metrics, SETTING_MAIN, SETTING_AGENTIC, ["action_jitter", "artificial_liquidity_MWh"]
+    ).frame
     policies = learned_order(deltas["policy"])
     if not policies:
         return Skipped(key, title, NEEDS_PAIR)
@@ -65,8 +81,19 @@ def agentic_delta_scatter(data: ReportData, options: ReportOptions, out_dir: Pat
         for policy in policies:
             group = deltas[deltas["policy"] == policy]
             colour = policy_colour(policy, policies)
-            ax.scatter(group["action_jitter"], group["artificial_liquidity_MWh"], s=10, alpha=0.35, color=colour, linewidths=0)
-            ax.scatter([group["action_jitter"].mean()], [group["artificial_liquidity_MWh"].mean()], s=90, marker="X", color=colour, edgecolors="black", label=policy_label(policy), zorder=3)
+            ax.scatter(
+                group["action_jitter"], group["artificial_liquidity_MWh"], s=10, alpha=0.35, color=colour, linewidths=0
+            )
+            ax.scatter(
+                [group["action_jitter"].mean()],
+                [group["artificial_liquidity_MWh"].mean()],
+                s=90,
+                marker="X",
+                color=colour,
+                edgecolors="black",
+                label=policy_label(policy),
+                zorder=3,
+            )
         ax.axhline(0.0, color="black", linewidth=0.8)
         ax.axvline(0.0, color="black", linewidth=0.8)
         ax.set_xlabel("Δ action jitter (RL+LLM − RL)")
@@ -91,12 +118,23 @@ def audit_step_delta(data: ReportData, options: ReportOptions, out_dir: Path) ->
         ax = axes[0, 0]
         for policy in policies:
             group = audited[audited["policy"] == policy]
-            ax.scatter(group["kappa"], group["action_delta"], s=9, alpha=0.4, color=policy_colour(policy, policies), label=policy_label(policy), linewidths=0)
+            ax.scatter(
+                group["kappa"],
+                group["action_delta"],
+                s=9,
+                alpha=0.4,
+                color=policy_colour(policy, policies),
+                label=policy_label(policy),
+                linewidths=0,
+            )
         ax.set_xlabel("Pre-audit action jitter κ (L1)")
         ax.set_ylabel("Auditor action delta (L1)")
         ax.set_title(f"{title} (Spearman ρ = {rho:.2f})")
         ax.legend(loc="best")
-        caption = f"Step-level relationship between pre-audit action jitter κ and the Auditor's action delta over {len(audited)} audited steps (all agentic settings); Spearman ρ = {rho:.2f}."
+        caption = (
+            f"Step-level relationship between pre-audit action jitter κ and the Auditor's "
+            f"action delta over {len(audited)} audited steps (all agentic settings); Spearman ρ = {rho:.2f}."
+        )
         return save_figure(figure, out_dir, key, title, caption)
 
 
@@ -113,8 +151,18 @@ def case_action_revision(data: ReportData, options: ReportOptions, out_dir: Path
     with new_figure(figsize=(4.6, 3.4)) as (figure, axes):
         ax = axes[0, 0]
         x = np.arange(3)
-        ax.bar(x - 0.18, case["proposed_action"], width=0.34, color=colour, alpha=0.3, edgecolor=colour, label="RL proposed")
-        ax.bar(x + 0.18, case["final_action"], width=0.34, color=colour, alpha=0.9, edgecolor=colour, label="Audited final")
+        ax.bar(
+            x - 0.18,
+            case["proposed_action"],
+            width=0.34,
+            color=colour,
+            alpha=0.3,
+            edgecolor=colour,
+            label="RL proposed",
+        )
+        ax.bar(
+            x + 0.18, case["final_action"], width=0.34, color=colour, alpha=0.9, edgecolor=colour, label="Audited final"
+        )
         label_categories(ax, list(COMPONENTS))
         ax.set_ylabel("Action value")
         ax.set_title(f"{title}: {policy_label(case['policy'])}, {setting_label(case['setting'])}")
@@ -145,12 +193,17 @@ def case_context(data: ReportData, options: ReportOptions, out_dir: Path) -> Fig
         top.plot(steps["step"], steps["supply_gap"], marker=".", color="#0072b2", label="supply gap")
         top.set_ylabel("Risk signal")
         top.legend(loc="best")
-        top.set_title(f"{policy_label(case['policy'])}, {setting_label(case['setting'])}: episode {int(case['episode'])} (shaded: audited)")
+        top.set_title(
+            f"{policy_label(case['policy'])}, {setting_label(case['setting'])}: episode "
+            f"{int(case['episode'])} (shaded: audited)"
+        )
         proposed = np.array([a[1] for a in steps["proposed_action"]])
         final = np.array([a[1] for a in steps["final_action"]])
         bottom.plot(steps["step"], proposed, marker="o", markersize=3, color=colour, alpha=0.45, label="ℓ proposed")
         bottom.plot(steps["step"], final, marker="o", markersize=3, color=colour, label="ℓ final")
-        bottom.scatter([case["step"]], [case["final_action"][1]], marker="*", s=160, color="black", zorder=4, label="selected step")
+        bottom.scatter(
+            [case["step"]], [case["final_action"][1]], marker="*", s=160, color="black", zorder=4, label="selected step"
+        )
         bottom.set_xlabel("Step (hour of the episode)")
         bottom.set_ylabel("Liquidity ratio ℓ")
         bottom.legend(loc="best")

@@ -16,7 +16,6 @@ from ..options import ReportOptions
 from ..tables.model import Skipped
 from .style import FigureFile, new_figure, save_figure
 
-
 HEATMAPS = (
     ("city_hour_liquidity", "liquidity_ratio", "City × hour liquidity ratio", "Mean liquidity ratio ℓ", "YlGnBu"),
     ("city_hour_reward", "city_reward", "City × hour city reward", "Mean city reward", "viridis"),
@@ -32,7 +31,9 @@ def city_hour_heatmaps(data: ReportData, options: ReportOptions, out_dir: Path) 
     return [_heatmap(data, out_dir, *spec) for spec in HEATMAPS]
 
 
-def _heatmap(data: ReportData, out_dir: Path, key: str, value: str, title: str, unit: str, cmap: str) -> FigureFile | Skipped:
+def _heatmap(
+    data: ReportData, out_dir: Path, key: str, value: str, title: str, unit: str, cmap: str
+) -> FigureFile | Skipped:
     """Mean ``value`` per city and hour of day, per policy, in the main setting.
 
     Runs without a main setting use their first setting (named in the title).
@@ -49,14 +50,15 @@ def _heatmap(data: ReportData, out_dir: Path, key: str, value: str, title: str, 
     heat = frame.groupby(["policy", "city", "hour"], sort=True)[value].mean()
     cities = sorted(frame["city"].unique())
     hours = sorted(frame["hour"].unique())
-    grids = {
-        p: heat.loc[p].unstack("hour").reindex(index=cities, columns=hours).to_numpy(float) for p in policies
-    }
+    grids = {p: heat.loc[p].unstack("hour").reindex(index=cities, columns=hours).to_numpy(float) for p in policies}
     vmin = min(float(np.nanmin(g)) for g in grids.values())
     vmax = max(float(np.nanmax(g)) for g in grids.values())
     ncols = min(3, len(policies))
     nrows = math.ceil(len(policies) / ncols)
-    with new_figure(nrows, ncols, figsize=(3.3 * ncols + 0.8, 2.3 * nrows + 0.4), sharex=True, sharey=True) as (figure, axes):
+    with new_figure(nrows, ncols, figsize=(3.3 * ncols + 0.8, 2.3 * nrows + 0.4), sharex=True, sharey=True) as (
+        figure,
+        axes,
+    ):
         image = None
         for index, ax in enumerate(axes.flat):
             if index >= len(policies):

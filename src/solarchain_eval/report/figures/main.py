@@ -37,16 +37,29 @@ def reward_distribution(data: ReportData, options: ReportOptions, out_dir: Path)
         ax = axes[0, 0]
         values = [rollouts.loc[rollouts["policy"] == p, "cumulative_reward"].to_numpy(float) for p in policies]
         box = ax.boxplot(values, positions=range(len(policies)), widths=0.55, showfliers=False, patch_artist=True)
-        for patch, policy in zip(box["boxes"], policies):
+        for patch, policy in zip(box["boxes"], policies, strict=True):
             patch.set(facecolor=policy_colour(policy, policies), alpha=0.25, edgecolor=policy_colour(policy, policies))
         for median in box["medians"]:
             median.set(color="black", linewidth=1.2)
-        for i, (policy, v) in enumerate(zip(policies, values)):
-            ax.scatter(i + rng.uniform(-0.16, 0.16, v.size), v, s=8, alpha=0.45, color=policy_colour(policy, policies), linewidths=0)
+        for i, (policy, v) in enumerate(zip(policies, values, strict=True)):
+            ax.scatter(
+                i + rng.uniform(-0.16, 0.16, v.size),
+                v,
+                s=8,
+                alpha=0.45,
+                color=policy_colour(policy, policies),
+                linewidths=0,
+            )
         label_categories(ax, [policy_label(p) for p in policies])
         ax.set_ylabel("Cumulative reward per episode")
         ax.set_title(title)
-        return save_figure(figure, out_dir, key, title, "Rollout-level cumulative reward in the main setting; boxes span the quartiles, points are rollouts.")
+        return save_figure(
+            figure,
+            out_dir,
+            key,
+            title,
+            "Rollout-level cumulative reward in the main setting; boxes span the quartiles, points are rollouts.",
+        )
 
 
 def utility_safety_frontier(data: ReportData, options: ReportOptions, out_dir: Path) -> FigureFile | Skipped:
@@ -62,8 +75,13 @@ def utility_safety_frontier(data: ReportData, options: ReportOptions, out_dir: P
             group = rollouts[rollouts["policy"] == policy]
             sizes = 8 + 120 * np.clip(group["artificial_liquidity_MWh"].to_numpy(float), 0.0, None) / largest
             ax.scatter(
-                group["physics_violation_rate"], group["cumulative_reward"], s=sizes, alpha=0.45,
-                color=policy_colour(policy, policies), label=policy_label(policy), linewidths=0,
+                group["physics_violation_rate"],
+                group["cumulative_reward"],
+                s=sizes,
+                alpha=0.45,
+                color=policy_colour(policy, policies),
+                label=policy_label(policy),
+                linewidths=0,
             )
         ax.set_xlabel("Physics violation rate (lower is safer)")
         ax.set_ylabel("Cumulative reward")
@@ -115,13 +133,22 @@ def reward_trajectory(data: ReportData, options: ReportOptions, out_dir: Path) -
         drawn = False
         for policy in policies:
             group = rollouts[rollouts["policy"] == policy]
-            drawn |= trajectory(ax, group, "cumulative_reward", policy_colour(policy, policies), policy_label(policy), options.confidence)
+            drawn |= trajectory(
+                ax,
+                group,
+                "cumulative_reward",
+                policy_colour(policy, policies),
+                policy_label(policy),
+                options.confidence,
+            )
         ax.set_xlabel("Episode index within a run seed")
         ax.set_ylabel("Cumulative reward")
         ax.set_title(title)
         ax.legend(loc="best", ncols=2)
         band = band_phrase(drawn, options.confidence, seeds)
-        return save_figure(figure, out_dir, key, title, f"Episode-wise reward trajectory: mean over run seeds with {band}.")
+        return save_figure(
+            figure, out_dir, key, title, f"Episode-wise reward trajectory: mean over run seeds with {band}."
+        )
 
 
 TRUST_METRICS = (
@@ -131,7 +158,9 @@ TRUST_METRICS = (
 )
 
 
-def _trust_figure(data: ReportData, options: ReportOptions, out_dir: Path, key: str, metric: str, title: str, ylabel: str) -> FigureFile | Skipped:
+def _trust_figure(
+    data: ReportData, options: ReportOptions, out_dir: Path, key: str, metric: str, title: str, ylabel: str
+) -> FigureFile | Skipped:
     rollouts, policies = _main(data)
     if rollouts.empty:
         return Skipped(key, title, NO_MAIN)
@@ -146,10 +175,16 @@ def _trust_figure(data: ReportData, options: ReportOptions, out_dir: Path, key: 
         label_categories(ax, [policy_label(p) for p in policies])
         ax.set_ylabel(ylabel)
         ax.set_title(title)
-        caption = f"{title} per policy in the main benchmark: bars and lines are means, translucent points are individual rollouts."
+        caption = (
+            f"{title} per policy in the main benchmark: bars and lines are means, translucent "
+            f"points are individual rollouts."
+        )
         return save_figure(figure, out_dir, key, title, caption)
 
 
 def trust_figures(data: ReportData, options: ReportOptions, out_dir: Path) -> list[FigureFile | Skipped]:
     """Violation, artificial liquidity and slippage per policy (one figure each)."""
-    return [_trust_figure(data, options, out_dir, key, metric, title, ylabel) for key, metric, title, ylabel in TRUST_METRICS]
+    return [
+        _trust_figure(data, options, out_dir, key, metric, title, ylabel)
+        for key, metric, title, ylabel in TRUST_METRICS
+    ]

@@ -8,10 +8,10 @@ no date or software metadata, so the same inputs give byte-identical files.
 from __future__ import annotations
 
 import io
+from collections.abc import Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Iterator, Sequence
 
 import matplotlib
 import numpy as np
@@ -33,7 +33,7 @@ POLICY_COLOURS = {
 #: Colours for policies the paper does not have, handed out by sorted name.
 EXTRA_COLOURS = ("#cc79a7", "#d55e00", "#56b4e9", "#9467bd", "#17becf", "#bcbd22")
 #: One colour per setting (four-setting figures).
-SETTING_COLOURS = dict(zip(SETTINGS, ("#0072b2", "#d55e00", "#009e73", "#cc79a7")))
+SETTING_COLOURS = dict(zip(SETTINGS, ("#0072b2", "#d55e00", "#009e73", "#cc79a7"), strict=True))
 
 STYLE = {
     "svg.hashsalt": "solarchain-eval-report",
@@ -72,7 +72,9 @@ class FigureFile:
 
 
 @contextmanager
-def new_figure(nrows: int = 1, ncols: int = 1, figsize: tuple[float, float] = FIGSIZE, **kwargs) -> Iterator[tuple[Figure, np.ndarray]]:
+def new_figure(
+    nrows: int = 1, ncols: int = 1, figsize: tuple[float, float] = FIGSIZE, **kwargs
+) -> Iterator[tuple[Figure, np.ndarray]]:
     """A figure and its axes (always a 2-D array) under the report style."""
     with matplotlib.rc_context(STYLE):
         figure = Figure(figsize=figsize, layout="constrained")

@@ -7,7 +7,7 @@ Each builder takes the loaded run and the options and returns a
 
 from __future__ import annotations
 
-from typing import Callable
+from collections.abc import Callable
 
 from ..loading import ReportData
 from ..options import ReportOptions

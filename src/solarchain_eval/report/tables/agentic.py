@@ -96,7 +96,7 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         label="tab:app-llm-ops",
         title=title,
         caption=(
-            "Detailed LLM governance operation rates per agentic setting (\"Main\": RL+LLM; \"No-physics\": "
+            'Detailed LLM governance operation rates per agentic setting ("Main": RL+LLM; "No-physics": '
             "RL+LLM no-physics) and policy. Rates are pooled over the group's governance steps; revision given "
             "audit is revisions per audit."
         ),
@@ -140,8 +140,8 @@ def llm_triggers(data: ReportData, options: ReportOptions) -> ReportTable | Skip
 
 
 def _action(values) -> str:
-    r, l, b = (float(v) for v in values)
-    return f"r={fixed(r, 3)}, l={fixed(l, 3)}, b={fixed(b, 3)}"
+    r, ell, b = (float(v) for v in values)
+    return f"r={fixed(r, 3)}, l={fixed(ell, 3)}, b={fixed(b, 3)}"
 
 
 def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
@@ -179,7 +179,10 @@ def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skippe
             "Representative LLM audit trace selected from agentic_logs.jsonl. The row records the market "
             "context, proposed RL action, audited final action, and action delta."
         ),
-        columns=[Column("Field", text("field"), align="p{0.28\\linewidth}"), Column("Value", text("value"), align="p{0.62\\linewidth}")],
+        columns=[
+            Column("Field", text("field"), align="p{0.28\\linewidth}"),
+            Column("Value", text("value"), align="p{0.62\\linewidth}"),
+        ],
         data=frame,
         basis=f"n = 1 logged step, chosen among {len(data.logs)} agentic log steps.",
         notes=[f"Selected as {rule}."],

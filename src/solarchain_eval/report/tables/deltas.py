@@ -6,7 +6,7 @@ seed agrees); mean ± sample std (ddof=1) over the matched pairs, as in the pape
 
 from __future__ import annotations
 
-from typing import Sequence
+from collections.abc import Sequence
 
 import pandas as pd
 
@@ -38,7 +38,13 @@ AGENTIC_METRICS = (
     ("artificial_liquidity_MWh", "Δ Artificial Liquidity", 4),
     ("spatial_fairness_index", "Δ Spatial Fairness", 4),
 )
-DETAIL_METRICS = ("cumulative_reward", "action_jitter", "spatial_fairness_index", "artificial_liquidity_MWh", "mean_slippage")
+DETAIL_METRICS = (
+    "cumulative_reward",
+    "action_jitter",
+    "spatial_fairness_index",
+    "artificial_liquidity_MWh",
+    "mean_slippage",
+)
 
 
 def _delta_header(header: str) -> str:
@@ -56,7 +62,9 @@ def _paired_rows(
     metrics = data.metrics
     for label, base, treated in pairs:
         # Only policies evaluated in both settings are compared (baselines never get the LLM layer).
-        both = set(metrics.loc[metrics["setting"] == base, "policy"]) & set(metrics.loc[metrics["setting"] == treated, "policy"])
+        both = set(metrics.loc[metrics["setting"] == base, "policy"]) & set(
+            metrics.loc[metrics["setting"] == treated, "policy"]
+        )
         deltas = paired_deltas(metrics[metrics["policy"].isin(both)], base, treated, columns)
         if deltas.unmatched:
             notes.append(
@@ -86,7 +94,11 @@ def physics_ablation_deltas(data: ReportData, options: ReportOptions) -> ReportT
         if {base, treated} <= set(data.settings)
     ]
     if not pairs:
-        return Skipped("physics_ablation_deltas", title, "needs a physics-penalised setting and its no-physics ablation (main + no_physics, or llm + llm_no_physics)")
+        return Skipped(
+            "physics_ablation_deltas",
+            title,
+            "needs a physics-penalised setting and its no-physics ablation (main + no_physics, or llm + llm_no_physics)",
+        )
     names = [m for m, _, _ in ABLATION_METRICS]
     rows, notes = _paired_rows(data, pairs, names, learned_order)
     if not rows:
@@ -118,7 +130,9 @@ def agentic_effects(data: ReportData, options: ReportOptions) -> ReportTable | S
         return Skipped("agentic_effects", title, "needs the main setting and the agentic setting 'llm' (RL+LLM)")
     agentic, missing = agentic_rollouts(data, [SETTING_AGENTIC])
     if missing:
-        return Skipped("agentic_effects", title, f"metrics of setting 'llm' lack agentic column(s) {', '.join(missing)}")
+        return Skipped(
+            "agentic_effects", title, f"metrics of setting 'llm' lack agentic column(s) {', '.join(missing)}"
+        )
     names = [m for m, _, _ in AGENTIC_METRICS]
     rows, notes = _paired_rows(data, [("Main", SETTING_MAIN, SETTING_AGENTIC)], names, learned_order)
     if not rows:
@@ -157,7 +171,9 @@ def agentic_paired_deltas(data: ReportData, options: ReportOptions) -> ReportTab
         if {base, treated} <= set(data.settings)
     ]
     if not pairs:
-        return Skipped("agentic_paired_deltas", title, "needs an agentic setting (llm / llm_no_physics) and its raw-RL setting")
+        return Skipped(
+            "agentic_paired_deltas", title, "needs an agentic setting (llm / llm_no_physics) and its raw-RL setting"
+        )
     rows, notes = _paired_rows(data, pairs, DETAIL_METRICS, alphabetical_order)
     if not rows:
         return Skipped("agentic_paired_deltas", title, "no policy was evaluated both with and without the LLM layer")
@@ -168,7 +184,9 @@ def agentic_paired_deltas(data: ReportData, options: ReportOptions) -> ReportTab
         Column("Δ Reward", cell_pm("cumulative_reward", 3), latex=r"$\Delta$ Reward"),
         Column("Δ Action Jitter", cell_pm("action_jitter", 4), latex=r"$\Delta$ Action Jitter"),
         Column("Δ Spatial Fairness", cell("spatial_fairness_index_mean", 4), latex=r"$\Delta$ Spatial Fairness"),
-        Column("Δ Artificial Liquidity", cell("artificial_liquidity_MWh_mean", 4), latex=r"$\Delta$ Artificial Liquidity"),
+        Column(
+            "Δ Artificial Liquidity", cell("artificial_liquidity_MWh_mean", 4), latex=r"$\Delta$ Artificial Liquidity"
+        ),
         Column("Δ Slippage", cell("mean_slippage_mean", 4), latex=r"$\Delta$ Slippage"),
     ]
     return ReportTable(
@@ -177,8 +195,8 @@ def agentic_paired_deltas(data: ReportData, options: ReportOptions) -> ReportTab
         title=title,
         caption=(
             "Paired episode-level effects of adding the LLM Planner/Auditor layer. Deltas are RL+LLM minus raw "
-            "RL under matched run seed, policy, and episode (\"Main\": physics-penalised reward; "
-            "\"No-physics\": the ablation); the last three columns are means."
+            'RL under matched run seed, policy, and episode ("Main": physics-penalised reward; '
+            '"No-physics": the ablation); the last three columns are means.'
         ),
         columns=columns,
         data=frame,

@@ -44,7 +44,9 @@ def _comparisons(rollouts: pd.DataFrame) -> list[tuple[str, pd.DataFrame, pd.Dat
                 rollouts[rollouts["policy"].isin(baselines)],
             )
         ]
-        return pooled + [(f"{policy_label(a)} vs {policy_label(b)}", rows[a], rows[b]) for a in learned for b in baselines]
+        return pooled + [
+            (f"{policy_label(a)} vs {policy_label(b)}", rows[a], rows[b]) for a in learned for b in baselines
+        ]
     return [
         (f"{policy_label(a)} vs {policy_label(b)}", rows[a], rows[b])
         for i, b in enumerate(policies)
@@ -98,13 +100,24 @@ def statistical_tests(data: ReportData, options: ReportOptions) -> ReportTable |
         Column("n (A / B)", lambda r: f"{int(r['n_a'])} / {int(r['n_b'])}"),
         Column("Mean A", lambda r: fixed(r["mean_a"], 2)),
         Column("Mean B", lambda r: fixed(r["mean_b"], 2)),
-        Column("Δ Mean [95% CI]", lambda r: with_interval(r["difference"], r["difference_low"], r["difference_high"], 2), latex=r"$\Delta$ Mean [95\% CI]"),
+        Column(
+            "Δ Mean [95% CI]",
+            lambda r: with_interval(r["difference"], r["difference_low"], r["difference_high"], 2),
+            latex=r"$\Delta$ Mean [95\% CI]",
+        ),
         Column("Welch t", lambda r: fixed(r["welch_t"], 2)),
         Column("Welch p", lambda r: p_value(r["welch_p"])),
-        Column(f"Paired p ({unit_name})", lambda r: f"{p_value(r['paired_cluster_p'])} (n={int(r['shared_clusters'])})"),
+        Column(
+            f"Paired p ({unit_name})", lambda r: f"{p_value(r['paired_cluster_p'])} (n={int(r['shared_clusters'])})"
+        ),
         Column(
             "P(A > B) [95% CI]",
-            lambda r: with_interval(r["probability_of_improvement"], r["probability_of_improvement_low"], r["probability_of_improvement_high"], 3),
+            lambda r: with_interval(
+                r["probability_of_improvement"],
+                r["probability_of_improvement_low"],
+                r["probability_of_improvement_high"],
+                3,
+            ),
             latex=r"P(A $>$ B) [95\% CI]",
         ),
     ]
@@ -157,11 +170,16 @@ def robust_summary(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         Column("Setting", text("setting"), align="l"),
         Column("Policy", text("policy"), align="l"),
         Column("n", integer("n")),
-        Column(f"{UNIT_NAMES[unit].capitalize()}", integer("distinct_start_days" if unit == "start_hour" else "distinct_episode_seeds")),
+        Column(
+            f"{UNIT_NAMES[unit].capitalize()}",
+            integer("distinct_start_days" if unit == "start_hour" else "distinct_episode_seeds"),
+        ),
         Column("Reward Mean [95% CI]", ci("reward_mean", 2), latex=r"Reward Mean [95\% CI]"),
         Column("Reward IQM [95% CI]", ci("reward_iqm", 2), latex=r"Reward IQM [95\% CI]"),
     ]
-    columns += [Column(f"{header} [95% CI]", ci(name, d), latex=f"{header} [95\\% CI]") for name, header, d in SUMMARY_METRICS]
+    columns += [
+        Column(f"{header} [95% CI]", ci(name, d), latex=f"{header} [95\\% CI]") for name, header, d in SUMMARY_METRICS
+    ]
     return ReportTable(
         key="robust_summary",
         label="tab:robust-summary",

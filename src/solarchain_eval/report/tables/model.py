@@ -10,8 +10,9 @@ from __future__ import annotations
 import html
 import io
 import math
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import Any, Callable, Mapping, Sequence
+from typing import Any
 
 import pandas as pd
 
@@ -104,17 +105,17 @@ def fixed(value: float, digits: int) -> str:
 
 
 def pm(mean: float, std: float, digits: int) -> str:
-    """"mean ± std" with the same number of decimals (the paper's main-table cell)."""
+    """ "mean ± std" with the same number of decimals (the paper's main-table cell)."""
     return f"{fixed(mean, digits)} ± {fixed(std, digits)}"
 
 
 def span(low: float, high: float, digits: int) -> str:
-    """"low–high" (rendered "low--high" in LaTeX)."""
+    """ "low–high" (rendered "low--high" in LaTeX)."""
     return f"{fixed(low, digits)}–{fixed(high, digits)}"
 
 
 def with_interval(value: float, low: float, high: float, digits: int) -> str:
-    """"value [low, high]" for an estimate with its confidence interval."""
+    """ "value [low, high]" for an estimate with its confidence interval."""
     return f"{fixed(value, digits)} [{fixed(low, digits)}, {fixed(high, digits)}]"
 
 

@@ -41,7 +41,9 @@ def main_performance(data: ReportData, options: ReportOptions) -> ReportTable | 
     rows = []
     for policy in paper_order(rollouts["policy"]):
         group = rollouts[rollouts["policy"] == policy]
-        rows.append({"policy": policy_label(policy), **size_fields(group), **moments(group, [m for m, _, _ in MAIN_METRICS])})
+        rows.append(
+            {"policy": policy_label(policy), **size_fields(group), **moments(group, [m for m, _, _ in MAIN_METRICS])}
+        )
     frame = pd.DataFrame(rows)
     columns = [Column("Policy", text("policy"), align="l")]
     columns += [Column(header, cell_pm(name, digits)) for name, header, digits in MAIN_METRICS]
@@ -125,7 +127,11 @@ def four_setting_learned(data: ReportData, options: ReportOptions) -> ReportTabl
     frame = pd.DataFrame(rows)
     absent = [GOVERNANCE_LABELS[s] for s in GOVERNANCE_ORDER if s not in set(learned["setting"])]
     columns = _setting_columns(
-        [Column("Setting", text("setting"), align="l"), Column("Policy", text("policy"), align="l"), Column("Rollouts", integer("n"), align="r")]
+        [
+            Column("Setting", text("setting"), align="l"),
+            Column("Policy", text("policy"), align="l"),
+            Column("Rollouts", integer("n"), align="r"),
+        ]
     )
     return ReportTable(
         key="four_setting_learned",
