@@ -79,6 +79,12 @@ def paper(
         None, "--policies", help="Comma-separated subset of the policies to run (default: all; train units follow)."
     ),
     workers: int = typer.Option(1, "--workers", min=1, help="Local worker processes (one torch thread each)."),
+    backend: str = typer.Option(
+        "sb3",
+        "--backend",
+        help="Train units' backend: sb3 (Stable-Baselines3, the reference) or jax (rejax; needs the jax extra; "
+        "one seed per unit, no checkpoints; docs/jax.md).",
+    ),
     ray_address: str | None = typer.Option(
         None,
         "--ray-address",
@@ -140,6 +146,7 @@ def paper(
             config=cfg,
             checkpoint_every=checkpoint_every,
             agentic=governance,
+            backend=backend,
         )
         spec.validate()
     except ValueError as error:
@@ -147,7 +154,7 @@ def paper(
     where = f"Ray ({ray_address})" if ray_address else f"{workers} worker(s)"
     err_console.print(
         f"grid: {spec.timesteps:,} training steps, {spec.episodes} episodes × {len(spec.seeds)} seed(s), "
-        f"settings {', '.join(spec.settings)}, on {where} -> {out}",
+        f"settings {', '.join(spec.settings)}, {spec.backend} backend, on {where} -> {out}",
         soft_wrap=True,
     )
     from ..experiments.ray_executor import RayUnavailableError

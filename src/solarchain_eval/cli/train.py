@@ -1,4 +1,5 @@
-"""``solarchain-eval train``: one PPO, SAC or DQN model (Stable-Baselines3), resumable."""
+"""``solarchain-eval train``: one PPO, SAC or DQN model (Stable-Baselines3, resumable), or one per
+seed with the JAX backend (rejax, all seeds in one compiled ``vmap``)."""
 
 from __future__ import annotations
 
@@ -10,7 +11,16 @@ import typer
 from ..config import BenchmarkConfig, load_config
 from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY, TRAIN_LOG_FILE, TrainingError, TrainSpec, check_algo, train
 from . import app
-from .common import console, err_console, invoked_command, progress_bar, register_user_error, reports_errors
+from .common import (
+    CliError,
+    console,
+    err_console,
+    invoked_command,
+    parse_seeds,
+    progress_bar,
+    register_user_error,
+    reports_errors,
+)
 
 register_user_error(TrainingError)
 
@@ -20,6 +30,17 @@ register_user_error(TrainingError)
 def train_command(
     algo: str = typer.Option(..., "--algo", help=f"Algorithm: {', '.join(ALGOS)} (DQN acts on the 125-point grid)."),
     seed: int | None = typer.Option(None, "--seed", help="Training seed (default: the config seed, 20260511)."),
+    backend: str = typer.Option(
+        "sb3",
+        "--backend",
+        help="sb3 (Stable-Baselines3, the reference) or jax (rejax on the JAX env; needs the jax extra; docs/jax.md).",
+    ),
+    seeds: str | None = typer.Option(
+        None,
+        "--seeds",
+        help="JAX backend: comma-separated seeds trained at once in one vmap; "
+        "one seed writes into --out, several into --out/seed_<s>/ (default: --seed).",
+    ),
     timesteps: int | None = typer.Option(
         None,
         "--timesteps",
@@ -41,9 +62,14 @@ def train_command(
         help="TensorBoard log directory (SB3 scalars + per-episode violation and artificial liquidity).",
     ),
     checkpoint_every: int = typer.Option(
-        DEFAULT_CHECKPOINT_EVERY, "--checkpoint-every", min=0, help="Timesteps between checkpoints (0: none)."
+        DEFAULT_CHECKPOINT_EVERY,
+        "--checkpoint-every",
+        min=0,
+        help="Timesteps between checkpoints (0: none; SB3 only: a JAX training is one compiled program).",
     ),
-    torch_threads: int = typer.Option(1, "--torch-threads", min=1, help="torch threads (1 is fastest for these MLPs)."),
+    torch_threads: int = typer.Option(
+        1, "--torch-threads", min=1, help="torch threads (1 is fastest for these MLPs; SB3 only)."
+    ),
     config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace a finished or different training in --out."),
 ) -> None:
@@ -53,11 +79,24 @@ def train_command(
 
     A killed run resumes from its last checkpoint when the same command is run again.
     Evaluate the model with: solarchain-eval evaluate --policies ALGO --models OUT
+
+    --backend jax trains one model per --seeds seed with rejax (the same hyperparameters; the
+    remaining differences are listed in docs/jax.md) and writes jax_model.msgpack,
+    train_config.json and train_metadata.json per seed; evaluate --models loads them the same way.
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     key = check_algo(algo)
     steps = timesteps or cfg.training.timesteps
     out_dir = out or Path(cfg.output_dir) / f"{datetime.now().strftime('%Y%m%d-%H%M%S')}_train_{key}"
+    if backend not in ("sb3", "jax"):
+        raise CliError(f"unknown backend '{backend}' (choose from sb3, jax)")
+    if backend == "jax" or seeds is not None:
+        if backend != "jax":
+            raise CliError("--seeds trains several seeds at once with --backend jax; SB3 takes one --seed")
+        if tensorboard is not None:
+            raise CliError("--tensorboard is for the SB3 backend (rejax writes no TensorBoard scalars)")
+        run_seeds = parse_seeds(seeds) if seeds else [cfg.seed if seed is None else seed]
+        return _train_jax(key, run_seeds, steps, no_physics_penalty, data, cfg, out_dir, overwrite)
     spec = TrainSpec(
         algo=key,
         seed=cfg.seed if seed is None else seed,
@@ -89,3 +128,44 @@ def train_command(
         f"({outcome.steps_per_s:,.0f} steps/s in this session); model: {outcome.model_path}"
     )
     console.print(f"training log: {out_dir / TRAIN_LOG_FILE}", soft_wrap=True)
+
+
+def _train_jax(
+    algo: str,
+    seeds: list[int],
+    steps: int,
+    no_physics_penalty: bool,
+    data: Path | None,
+    cfg: BenchmarkConfig,
+    out_dir: Path,
+    overwrite: bool,
+) -> None:
+    """``train --backend jax``: every seed in one compiled vmap (see docs/jax.md)."""
+    try:
+        from ..jax.train import JaxTrainSpec, seed_dirs, train_jax
+    except ImportError as error:
+        raise CliError(str(error)) from None
+    spec = JaxTrainSpec(algo, tuple(seeds), steps, no_physics_penalty, data, cfg)
+    dirs = seed_dirs(out_dir, spec.seeds)
+    err_console.print(
+        f"training {algo.upper()} with JAX for {steps:,} steps × {len(seeds)} seed(s) into {out_dir} "
+        "(compiling first: 20-40 s on a CPU)",
+        soft_wrap=True,
+    )
+    with progress_bar(f"training {algo} (jax)", steps) as advance:
+        done = [0]
+
+        def report(now: int) -> None:
+            advance(max(now - done[0], 0))
+            done[0] = max(done[0], now)
+
+        outcome = train_jax(spec, dirs, on_progress=report, overwrite=overwrite, command=invoked_command())
+    if outcome.already_complete:
+        console.print(f"{out_dir} already holds this finished training (pass --overwrite to train again)")
+        return
+    console.print(
+        f"{algo.upper()} (jax): {len(seeds)} model(s) × {steps:,} steps in {outcome.train_s:.1f} s after "
+        f"{outcome.compile_s:.1f} s of compilation ({outcome.steps_per_s:,.0f} env-steps/s over all seeds)"
+    )
+    for path in outcome.model_paths:
+        console.print(f"model: {path}", soft_wrap=True)

@@ -2,8 +2,9 @@
 
 A grid is a list of *units*, each one directory under ``ROOT/units`` (see :mod:`.layout`):
 
-- train units ``train/<algo>-<setting>-<seed>``: one SB3 model per algorithm × training
-  setting × seed (``main`` trains with the physics penalty, ``no_physics`` without);
+- train units ``train/<algo>-<setting>-<seed>``: one model per algorithm × training setting ×
+  seed (``main`` trains with the physics penalty, ``no_physics`` without), trained with the
+  grid's backend (``sb3``, or ``jax``: rejax on the JAX environment, docs/jax.md);
 - eval units ``eval/<policy>-<setting>-<seed>``: one policy evaluated in one setting for one
   run seed over the grid's episodes. An eval unit of a learned policy depends on the train unit
   of the same algorithm, seed and the setting's ``model_setting``.
@@ -31,6 +32,9 @@ from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS
 from .layout import eval_unit_dir, train_unit_dir
 from .rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS, SETTING_MAIN, SETTING_NO_PHYSICS, paper_episode_seeds
+
+#: Training backends of the grid's train units.
+BACKENDS = ("sb3", "jax")
 
 #: ``spawn_key`` of the SeedSequence behind ``--episode-seeds independent``.
 EPISODE_SEED_SPAWN_KEY = 0x45504953  # "EPIS"
@@ -130,6 +134,7 @@ class GridSpec:
     preset: str | None = None
     policies: tuple[str, ...] | None = None  # None: every policy of each setting
     agentic: AgenticOptions = field(default_factory=AgenticOptions)  # the agentic settings' layer
+    backend: str = "sb3"  # the train units' backend: "sb3" or "jax"
 
     @property
     def has_agentic(self) -> bool:
@@ -156,6 +161,8 @@ class GridSpec:
     def validate(self) -> None:
         if self.timesteps < 1 or self.episodes < 1 or not self.seeds:
             raise ValueError("timesteps and episodes must be at least 1, and at least one seed is needed")
+        if self.backend not in BACKENDS:
+            raise ValueError(f"unknown backend '{self.backend}' (choose from {', '.join(BACKENDS)})")
         if len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"a seed is listed twice: {list(self.seeds)}")
         unknown = [s for s in self.settings if s not in SETTING_REGISTRY]
@@ -190,6 +197,7 @@ class Unit:
     setting: str
     seed: int
     depends_on: tuple[str, ...] = ()
+    backend: str = "sb3"  # train units: which library trains the model
 
     @property
     def name(self) -> str:
@@ -201,8 +209,8 @@ class Unit:
         return eval_unit_dir(root, self.policy, self.setting, self.seed)
 
 
-def train_unit(algo: str, setting: str, seed: int) -> Unit:
-    return Unit("train", algo, setting, seed)
+def train_unit(algo: str, setting: str, seed: int, backend: str = "sb3") -> Unit:
+    return Unit("train", algo, setting, seed, backend=backend)
 
 
 def plan_units(spec: GridSpec) -> list[Unit]:
@@ -221,7 +229,7 @@ def plan_units(spec: GridSpec) -> list[Unit]:
                 evals.append(Unit("eval", policy, setting_name, seed, deps))
     order = {algo: i for i, algo in enumerate(("sac", "ppo", "dqn"))}
     trains = [
-        train_unit(algo, setting, seed)
+        train_unit(algo, setting, seed, spec.backend)
         for algo, setting, seed in sorted(needed, key=lambda k: (order.get(k[0], 9), TRAIN_SETTINGS.index(k[1]), k[2]))
     ]
     return trains + evals

@@ -60,7 +60,16 @@ def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
         "dataset_sha256": dataset.get("files", {}),
         "config": spec.config.model_dump(mode="json"),
         "agentic": _agentic_identity(spec),
+        # Only a JAX grid records its backend, so that the identity of existing SB3 roots is unchanged.
+        **({"backend": spec.backend} if spec.backend != "sb3" else {}),
     }
+
+
+def model_file(backend: str) -> str:
+    """The model file a train unit of ``backend`` writes (the one its eval units load and hash)."""
+    from ..policies.jax_policy import JAX_MODEL_FILE
+
+    return JAX_MODEL_FILE if backend == "jax" else MODEL_FILE
 
 
 def _agentic_identity(spec: GridSpec) -> dict[str, Any]:
@@ -101,7 +110,7 @@ def _read_metadata(root: Path) -> dict[str, Any] | None:
         raise GridError(f"{path} is not valid JSON ({error})") from None
 
 
-def _stale_eval(root: Path, unit: Unit) -> bool:
+def _stale_eval(root: Path, unit: Unit, backend: str) -> bool:
     """A done eval unit whose model changed since it was evaluated."""
     if unit.policy not in ALGOS or not unit.depends_on:
         return False
@@ -111,7 +120,7 @@ def _stale_eval(root: Path, unit: Unit) -> bool:
         recorded = json.loads((unit.directory(root) / UNIT_FILE).read_text(encoding="utf-8")).get("model_sha256")
     except (OSError, ValueError):
         return True
-    model = root / UNITS_DIR / unit.depends_on[0] / MODEL_FILE
+    model = root / UNITS_DIR / unit.depends_on[0] / model_file(backend)
     return not model.is_file() or recorded != model_digest({unit.policy: model})
 
 
@@ -159,7 +168,7 @@ def run_paper(
         for unit in units:
             if read_done(unit.directory(root)) is None:
                 continue
-            if unit.kind == "eval" and _stale_eval(root, unit):
+            if unit.kind == "eval" and _stale_eval(root, unit, spec.backend):
                 undo(unit.directory(root))
             else:
                 done.add(unit.name)
@@ -237,7 +246,7 @@ def _task(
         "seed": unit.seed,
     }
     if unit.kind == "eval" and unit.depends_on:
-        models = {unit.policy: root / UNITS_DIR / unit.depends_on[0] / MODEL_FILE}
+        models = {unit.policy: root / UNITS_DIR / unit.depends_on[0] / model_file(spec.backend)}
         unit_identity["model_sha256"] = model_digest(models)
     return UnitTask(
         unit=unit,
@@ -274,6 +283,7 @@ def _metadata(
             "seeds": list(spec.seeds),
             "settings": {s: list(spec.setting_policies(s)) for s in spec.settings},
             "algorithms": list(ALGOS),
+            "backend": spec.backend,
             "episode_seed_protocol": spec.episode_seed_protocol,
             "episode_seed_derivation": (
                 "episode e of run seed s is reset with seed s + e"

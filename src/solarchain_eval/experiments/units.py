@@ -158,6 +158,8 @@ def execute_unit(task: UnitTask, *, mark_done: bool = True) -> UnitResult:
 
 def _train_unit(task: UnitTask, log: _UnitLog) -> None:
     unit = task.unit
+    if unit.backend == "jax":
+        return _train_jax_unit(task, log)
     spec = TrainSpec(
         algo=unit.policy,
         seed=unit.seed,
@@ -179,6 +181,19 @@ def _train_unit(task: UnitTask, log: _UnitLog) -> None:
     if outcome.resumed_from:
         log.write(f"resumed from checkpoint(s) at step {outcome.resumed_from}")
     log.write(f"{outcome.timesteps_done:,} steps at {outcome.steps_per_s:,.0f} steps/s")
+
+
+def _train_jax_unit(task: UnitTask, log: _UnitLog) -> None:
+    """One seed with the JAX backend (no checkpoints: a redone unit trains again unless it had finished)."""
+    from ..jax.train import JaxTrainSpec, train_jax
+
+    unit = task.unit
+    spec = JaxTrainSpec(unit.policy, (unit.seed,), task.timesteps, task.no_physics_penalty, task.data_dir, task.config)
+    outcome = train_jax(spec, {unit.seed: task.unit_dir}, command=list(task.command))
+    if outcome.already_complete:
+        log.write("the finished training was already there")
+    else:
+        log.write(f"jax: compiled in {outcome.compile_s:.1f} s, trained at {outcome.steps_per_s:,.0f} steps/s")
 
 
 def _evaluate_unit(task: UnitTask) -> None:

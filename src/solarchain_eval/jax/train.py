@@ -2,18 +2,22 @@
 
 Hyperparameters follow the SB3 reference (docs/training.md): learning rate, batch size and γ
 from the config (3e-4, 64, 0.98), SB3's default network sizes and other defaults where rejax
-has the same knob. The remaining differences between the libraries are listed in docs/jax.md.
-Each seed's acting network (actor, or Q-network for DQN) is written to ``OUT/seed_<seed>/jax_model.msgpack`` with a
-``train_config.json`` beside it (a policy adapter for ``evaluate`` is still to come).
+has the same knob. The optimiser is SB3's (global-norm gradient clipping, SB3's Adam ε); the remaining differences
+between the libraries are listed in docs/jax.md. Each seed's acting network (actor, or
+Q-network for DQN) is written to ``jax_model.msgpack`` in its directory with
+``train_config.json`` and ``train_metadata.json`` beside it; ``evaluate --models`` loads it
+through :class:`~solarchain_eval.policies.jax_policy.JaxPolicy`.
 """
 
 from __future__ import annotations
 
 import json
-import os
-import tempfile
+import sys
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from functools import cache
 from pathlib import Path
 from typing import Any
 
@@ -22,11 +26,21 @@ import numpy as np
 from flax import serialization
 
 from ..config import BenchmarkConfig
-from ..training import ACTION_MODES, dqn_learning_starts
+from ..io import atomic_write_bytes, atomic_write_json
+from ..policies.jax_policy import JAX_MODEL_FILE
+from ..redaction import redact_command
+from ..training import (
+    ACTION_MODES,
+    TRAIN_CONFIG_FILE,
+    TRAIN_METADATA_FILE,
+    TrainingError,
+    TrainSpec,
+    check_algo,
+    differences,
+    dqn_learning_starts,
+)
+from ..versions import git_commit, package_versions
 from .env import EnvParams, SolarChainJaxEnv, make_env_params
-
-JAX_MODEL_FILE = "jax_model.msgpack"
-JAX_TRAIN_CONFIG_FILE = "train_config.json"
 
 
 def rejax_config(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str, Any]:
@@ -42,7 +56,7 @@ def rejax_config(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str
     if algo == "ppo":
         # SB3 PPO: n_steps 2048, n_epochs 10, minibatches of batch_size, ent 0, clip 0.2, grad norm 0.5,
         # separate 64x64 tanh actor and critic.
-        n_steps = min(2048, int(timesteps))
+        n_steps = 2048  # SB3 collects whole 2,048-step rollouts even for smaller budgets
         return {
             **common,
             "num_envs": 1,
@@ -92,11 +106,156 @@ def rejax_config(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str
     raise ValueError(f"unknown algorithm {algo!r} (choose from ppo, sac, dqn)")
 
 
-def make_algo(algo: str, params: EnvParams, config: BenchmarkConfig, timesteps: int) -> Any:
-    import rejax
+#: Adam's epsilon in SB3: PPO's policies use 1e-5, SAC and DQN torch's default 1e-8.
+ADAM_EPS = {"ppo": 1e-5, "sac": 1e-8, "dqn": 1e-8}
 
-    kwargs = rejax_config(algo, config, timesteps)
-    return rejax.get_algo(algo).create(env=SolarChainJaxEnv(params), env_params=params, **kwargs)
+
+@cache
+def _sb3_optimiser_variant(algo: str) -> type:
+    """rejax's algorithm class with SB3's optimiser: global-norm gradient clipping and SB3's Adam epsilon.
+
+    rejax chains ``optax.clip(max_grad_norm)`` (each gradient element clipped to ±max_grad_norm)
+    with Adam (ε 1e-8); SB3 clips the gradients' global norm. The subclass rebuilds each train
+    state's optimiser after rejax has initialised the parameters.
+    """
+    import optax
+    import rejax
+    from flax.training.train_state import TrainState
+    from rejax.algos.algorithm import register_init
+
+    base = rejax.get_algo(algo)
+
+    class SB3Optimiser(base):  # type: ignore[misc, valid-type]
+        @register_init
+        def initialize_network_params(self, rng):
+            state = super().initialize_network_params(rng)
+            tx = optax.chain(
+                optax.clip_by_global_norm(self.max_grad_norm),
+                optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS[algo]),
+            )
+            return {
+                k: TrainState.create(apply_fn=(), params=v.params, tx=tx) if isinstance(v, TrainState) else v
+                for k, v in state.items()
+            }
+
+    SB3Optimiser.__name__ = f"{base.__name__}SB3Optimiser"
+    return SB3Optimiser
+
+
+def iteration_steps(algo: str, settings: dict[str, Any]) -> int:
+    """Env steps per rejax training iteration (all of one seed's parallel envs)."""
+    return int(settings["num_envs"]) * (int(settings["num_steps"]) if algo == "ppo" else 1)
+
+
+def progress_chunks(iterations: int, most: int = 10) -> int:
+    """The largest divisor of ``iterations`` up to ``most``: progress reports that keep the step count exact."""
+    return max(k for k in range(1, min(most, iterations) + 1) if iterations % k == 0)
+
+
+def make_algo(
+    algo: str,
+    params: EnvParams,
+    config: BenchmarkConfig,
+    timesteps: int,
+    on_progress: Callable[[int], None] | None = None,
+) -> Any:
+    """The rejax algorithm, reporting the steps done ``progress_chunks`` times through ``on_progress``.
+
+    rejax runs ``ceil(total / eval_freq)`` chunks of ``ceil(eval_freq / iteration)`` iterations
+    with an evaluation callback after each; ``eval_freq`` is set to a whole number of iterations
+    so that the chunks add up to exactly SB3's step count, and the callback only reports progress.
+    """
+    import jax.numpy as jnp
+
+    settings = rejax_config(algo, config, timesteps)
+    per_iteration = iteration_steps(algo, settings)
+    iterations = -(-int(timesteps) // per_iteration)
+    settings["eval_freq"] = iterations // progress_chunks(iterations) * per_iteration
+    instance = _sb3_optimiser_variant(algo).create(env=SolarChainJaxEnv(params), env_params=params, **settings)
+
+    def report(algo_instance: Any, ts: Any, rng: Any) -> Any:
+        if on_progress is not None:
+            jax.debug.callback(lambda step: on_progress(int(np.max(step))), ts.global_step)
+        return jnp.zeros(())
+
+    return instance.replace(eval_callback=report)
+
+
+def use_compilation_cache() -> None:
+    """Keep compiled training programs on disk (unless ``JAX_COMPILATION_CACHE_DIR`` says where already).
+
+    Every seed and every rerun of one algorithm and setting compiles the same program (the seeds'
+    keys are its arguments), so a grid's second train unit of a kind skips the 20-40 s compilation.
+    """
+    if not jax.config.jax_compilation_cache_dir:
+        from ..data.default import cache_dir
+
+        jax.config.update("jax_compilation_cache_dir", str(cache_dir() / "jax-compilation"))
+
+
+def compile_training(
+    algo: str,
+    seeds: tuple[int, ...],
+    timesteps: int,
+    params: EnvParams,
+    config: BenchmarkConfig,
+    on_progress: Callable[[int], None] | None = None,
+) -> tuple[Any, float]:
+    """``jit(vmap(train))`` over the seeds' keys, compiled; returns (compiled function, compile s)."""
+    use_compilation_cache()
+    instance = make_algo(algo, params, config, timesteps, on_progress)
+    keys = seed_keys(seeds)
+    start = time.perf_counter()
+    compiled = jax.jit(jax.vmap(instance.train)).lower(keys).compile()
+    return compiled, time.perf_counter() - start
+
+
+def seed_keys(seeds: tuple[int, ...]) -> jax.Array:
+    return jax.vmap(jax.random.key)(np.asarray(seeds, dtype=np.uint32))
+
+
+def train_seeds(
+    algo: str,
+    seeds: tuple[int, ...],
+    timesteps: int,
+    params: EnvParams,
+    config: BenchmarkConfig,
+    on_progress: Callable[[int], None] | None = None,
+) -> tuple[Any, float, float]:
+    """Train one model per seed in one jitted vmap; returns (train states, compile s, train s)."""
+    compiled, compile_s = compile_training(algo, seeds, timesteps, params, config, on_progress)
+    start = time.perf_counter()
+    states, _ = jax.block_until_ready(compiled(seed_keys(seeds)))
+    return states, compile_s, time.perf_counter() - start
+
+
+@dataclass(frozen=True)
+class JaxTrainSpec:
+    """One JAX training command: one model per seed, all seeds in one jitted ``vmap``.
+
+    Parameters
+    ----------
+    algo : {"ppo", "sac", "dqn"}
+    seeds : tuple of int
+        One model per seed; each seed's ``jax.random.key`` drives its initialisation, env
+        resets and exploration.
+    timesteps : int
+        Environment steps per model (PPO rounds up to whole 2,048-step rollouts, DQN to a
+        multiple of its 4 envs, as SB3 does).
+    no_physics_penalty : bool
+    data_dir : path, optional
+    config : BenchmarkConfig
+    """
+
+    algo: str
+    seeds: tuple[int, ...]
+    timesteps: int
+    no_physics_penalty: bool = False
+    data_dir: Path | None = None
+    config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+
+    def seed_spec(self, seed: int) -> TrainSpec:
+        return TrainSpec(self.algo, seed, self.timesteps, self.no_physics_penalty, self.data_dir, self.config)
 
 
 @dataclass(frozen=True)
@@ -107,6 +266,7 @@ class JaxTrainOutcome:
     compile_s: float
     train_s: float
     model_paths: tuple[Path, ...]
+    already_complete: bool = False
 
     @property
     def steps_per_s(self) -> float:
@@ -114,64 +274,128 @@ class JaxTrainOutcome:
         return self.timesteps * len(self.seeds) / max(self.train_s, 1e-9)
 
 
-def train_seeds(algo: str, seeds: tuple[int, ...], timesteps: int, params: EnvParams, config: BenchmarkConfig):
-    """Train one model per seed in one jitted vmap; returns (train states, compile s, train s)."""
-    instance = make_algo(algo, params, config, timesteps)
-    keys = jax.vmap(jax.random.key)(np.asarray(seeds, dtype=np.uint32))
-    train = jax.jit(jax.vmap(instance.train))
-    start = time.perf_counter()
-    compiled = train.lower(keys).compile()
-    compile_s = time.perf_counter() - start
-    start = time.perf_counter()
-    states, _ = jax.block_until_ready(compiled(keys))
-    return instance, states, compile_s, time.perf_counter() - start
+def seed_dirs(out_dir: Path, seeds: tuple[int, ...]) -> dict[int, Path]:
+    """Where each seed's model goes: ``out_dir`` itself for one seed, ``out_dir/seed_<s>`` for several."""
+    out_dir = Path(out_dir)
+    if len(seeds) == 1:
+        return {int(seeds[0]): out_dir}
+    return {int(s): out_dir / f"seed_{s}" for s in seeds}
 
 
-def _write_atomic(path: Path, data: bytes) -> None:
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.")
-    with os.fdopen(fd, "wb") as handle:
-        handle.write(data)
-    os.replace(tmp, path)
+def _identity(spec: JaxTrainSpec, seed: int, dataset: dict[str, Any]) -> dict[str, Any]:
+    cfg = spec.seed_spec(seed).resolved_config()
+    return {
+        "algo": spec.algo,
+        "backend": "jax",
+        "seed": int(seed),
+        "timesteps": int(spec.timesteps),
+        "no_physics_penalty": bool(spec.no_physics_penalty),
+        "action_mode": cfg.action_mode,
+        "hyperparameters": json.loads(json.dumps(rejax_config(spec.algo, cfg, spec.timesteps), default=list)),
+        "dataset_sha256": dataset.get("files", {}),
+        "config": cfg.model_dump(mode="json"),
+    }
+
+
+def _read_json(path: Path) -> dict[str, Any] | None:
+    try:
+        return json.loads(path.read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        return None
+    except (OSError, ValueError) as error:
+        raise TrainingError(f"{path} cannot be read ({error}); remove the directory to retrain") from None
+
+
+def _finished(directory: Path, identity: dict[str, Any], overwrite: bool) -> bool:
+    """Whether ``directory`` holds this finished training; a different one is an error unless overwriting."""
+    previous = _read_json(directory / TRAIN_CONFIG_FILE)
+    if previous is not None and previous.get("identity") != identity and not overwrite:
+        diffs = differences(previous.get("identity") or {}, identity)
+        raise TrainingError(
+            f"{directory} holds a different training ({'; '.join(diffs[:6])}); "
+            "choose another output directory or pass --overwrite"
+        )
+    meta = _read_json(directory / TRAIN_METADATA_FILE) or {}
+    same = previous is not None and previous.get("identity") == identity
+    return same and bool(meta.get("complete")) and (directory / JAX_MODEL_FILE).is_file() and not overwrite
 
 
 def train_jax(
-    algo: str,
-    seeds: tuple[int, ...],
-    timesteps: int,
-    out_dir: Path,
+    spec: JaxTrainSpec,
+    out_dirs: dict[int, Path],
     *,
-    config: BenchmarkConfig | None = None,
-    data_dir: Path | None = None,
-    no_physics_penalty: bool = False,
+    on_progress: Callable[[int], None] | None = None,
+    overwrite: bool = False,
+    command: list[str] | None = None,
 ) -> JaxTrainOutcome:
-    """Train ``algo`` for every seed and write ``out_dir/seed_<s>/`` per seed."""
-    cfg = config or BenchmarkConfig()
-    if algo not in ACTION_MODES:
-        raise ValueError(f"unknown algorithm {algo!r} (choose from ppo, sac, dqn)")
+    """Train ``spec.algo`` for every seed at once and write each seed's directory.
+
+    Each ``out_dirs[seed]`` receives ``jax_model.msgpack`` (the acting network's parameters,
+    flax msgpack), ``train_config.json`` (identity, rejax settings; written first) and
+    ``train_metadata.json`` (times, steps/s, versions; ``"complete": true``, written last).
+    A directory that already holds the same finished training is left as it is; when every
+    seed's is, nothing is trained (``already_complete``). There are no checkpoints: a killed
+    run trains again from the start.
+
+    Raises
+    ------
+    TrainingError
+        An unknown algorithm, a bad step count, or a directory holding a different training.
+    """
+    from ..data.default import default_dataset_dir
+    from ..data.table import load_table
+    from ..experiments.evaluate import dataset_provenance
+
+    algo = check_algo(spec.algo)
+    if algo not in ACTION_MODES or spec.timesteps < 1 or not spec.seeds or set(out_dirs) != set(spec.seeds):
+        raise TrainingError(f"cannot train {algo} with the JAX backend for seeds {list(spec.seeds)}")
+    cfg = spec.config
+    data_dir = Path(spec.data_dir or cfg.data_dir or default_dataset_dir())
+    table = load_table(data_dir)
+    dataset = dataset_provenance(table)
+    identities = {s: _identity(spec, s, dataset) for s in spec.seeds}
+    if all(_finished(Path(out_dirs[s]), identities[s], overwrite) for s in spec.seeds):
+        paths = tuple(Path(out_dirs[s]) / JAX_MODEL_FILE for s in spec.seeds)
+        return JaxTrainOutcome(algo, tuple(spec.seeds), int(spec.timesteps), 0.0, 0.0, paths, already_complete=True)
+    started_at = datetime.now(UTC).isoformat(timespec="seconds")
+    settings = rejax_config(algo, cfg, spec.timesteps)
+    for seed in spec.seeds:
+        directory = Path(out_dirs[seed])
+        for name in (JAX_MODEL_FILE, TRAIN_METADATA_FILE):
+            (directory / name).unlink(missing_ok=True)
+        record = {"identity": identities[seed], "rejax": settings, "data_dir": str(data_dir.resolve())}
+        atomic_write_bytes(directory / TRAIN_CONFIG_FILE, json.dumps(record, indent=2, default=list).encode())
     params = make_env_params(
-        data_dir, config=cfg, action_mode=ACTION_MODES[algo], no_physics_penalty=no_physics_penalty
+        table=table, config=cfg, action_mode=ACTION_MODES[algo], no_physics_penalty=spec.no_physics_penalty
     )
-    _, states, compile_s, train_s = train_seeds(algo, seeds, timesteps, params, cfg)
+    states, compile_s, train_s = train_seeds(algo, tuple(spec.seeds), spec.timesteps, params, cfg, on_progress)
+    network = states.q_ts.params if algo == "dqn" else states.actor_ts.params
     paths = []
-    for i, seed in enumerate(seeds):
-        network = states.q_ts.params if algo == "dqn" else states.actor_ts.params
-        seed_dir = out_dir / f"seed_{seed}"
-        # Only the acting network's parameters: what a policy adapter needs to act.
-        _write_atomic(
-            seed_dir / JAX_MODEL_FILE, serialization.to_bytes(jax.tree.map(lambda x, i=i: np.asarray(x[i]), network))
-        )
-        meta = {
-            "identity": {
-                "algo": algo,
+    for i, seed in enumerate(spec.seeds):
+        directory = Path(out_dirs[seed])
+        # Only the acting network's parameters: what the policy adapter needs to act.
+        one = jax.tree.map(lambda x, i=i: np.asarray(x[i]), network)
+        paths.append(atomic_write_bytes(directory / JAX_MODEL_FILE, serialization.to_bytes(one)))
+        steps_done = int(np.asarray(states.global_step)[i])
+        atomic_write_json(
+            directory / TRAIN_METADATA_FILE,
+            {
+                "complete": True,
                 "backend": "jax",
+                "algo": algo,
                 "seed": int(seed),
-                "timesteps": int(timesteps),
-                "no_physics_penalty": bool(no_physics_penalty),
-                "data_dir": str(data_dir) if data_dir else None,
+                "seeds_in_batch": [int(s) for s in spec.seeds],
+                "timesteps_requested": int(spec.timesteps),
+                "timesteps_done": steps_done,
+                "compile_s": round(compile_s, 3),
+                "train_s": round(train_s, 3),
+                "wall_s": round(compile_s + train_s, 3),
+                "steps_per_s": round(steps_done / max(train_s, 1e-9), 2),
+                "jax_devices": [str(d) for d in jax.devices()],
+                "started_at": started_at,
+                "command": redact_command(command if command is not None else sys.argv),
+                "git_commit": git_commit(),
+                "package_versions": package_versions(),
             },
-            "rejax": rejax_config(algo, cfg, timesteps),
-        }
-        _write_atomic(seed_dir / JAX_TRAIN_CONFIG_FILE, json.dumps(meta, indent=2, default=list).encode())
-        paths.append(seed_dir / JAX_MODEL_FILE)
-    return JaxTrainOutcome(algo, tuple(seeds), int(timesteps), compile_s, train_s, tuple(paths))
+        )
+    return JaxTrainOutcome(algo, tuple(spec.seeds), int(spec.timesteps), compile_s, train_s, tuple(paths))

@@ -8,12 +8,14 @@ from pathlib import Path
 from ..config import BenchmarkConfig
 from .base import Policy
 from .baselines import BASELINES, make_baseline
+from .jax_policy import register_jax_policies
 from .sb3 import register_learned_policies
 
 #: Factories for policies that need more than the config (e.g. trained models), by name.
 #: Each takes (config, models) and returns a Policy; extra modules register themselves here.
 EXTRA_POLICIES: dict[str, Callable[[BenchmarkConfig, dict[str, Path]], Policy]] = {}
 register_learned_policies(EXTRA_POLICIES)  # "ppo", "sac", "dqn" (SB3 is imported only to load a model)
+register_jax_policies(EXTRA_POLICIES)  # the same names also load JAX checkpoints (JAX imported only then)
 
 
 def known_policies() -> tuple[str, ...]:
