@@ -14,6 +14,7 @@ from __future__ import annotations
 import json
 import sys
 import time
+import warnings
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
@@ -206,7 +207,10 @@ def compile_training(
     instance = make_algo(algo, params, config, timesteps, on_progress)
     keys = seed_keys(seeds)
     start = time.perf_counter()
-    compiled = jax.jit(jax.vmap(instance.train)).lower(keys).compile()
+    with warnings.catch_warnings():
+        # rejax asks for int64 indices, which JAX truncates to int32 without x64: harmless here.
+        warnings.filterwarnings("ignore", message="Explicitly requested dtype int64")
+        compiled = jax.jit(jax.vmap(instance.train)).lower(keys).compile()
     return compiled, time.perf_counter() - start
 
 

@@ -1,0 +1,188 @@
+"""JAX backend training: ``train --backend jax`` checkpoints per seed, the JAX policy adapter behind
+``evaluate --models`` (actions equal a direct flax apply of the trained network), and
+``paper --backend jax`` through the grid's train units (smoke preset, tiny budget).
+
+Each rejax program compiles for 20-40 s on a CPU, so the models are trained once per module.
+"""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
+pytest.importorskip("rejax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
+
+CLI = [sys.executable, "-c", "from solarchain_eval.cli import main; main()"]
+SEEDS = (3, 4)
+
+
+def _cli(*args: str, timeout: int = 600) -> subprocess.CompletedProcess:
+    return subprocess.run([*CLI, *args], capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture(scope="module")
+def trained(tmp_path_factory, tiny_dataset) -> dict[str, Path]:
+    """Tiny JAX models: DQN through the CLI (two seeds), PPO and SAC through the library (one seed)."""
+    from solarchain_eval.jax.train import JaxTrainSpec, seed_dirs, train_jax
+
+    root = tmp_path_factory.mktemp("jax-train")
+    done = _cli(
+        "train", "--backend", "jax", "--algo", "dqn", "--seeds", ",".join(map(str, SEEDS)),
+        "--timesteps", "400", "--data", str(tiny_dataset), "--out", str(root / "dqn"),
+    )  # fmt: skip
+    assert done.returncode == 0, done.stderr
+    dirs = {"dqn": root / "dqn" / f"seed_{SEEDS[0]}"}
+    for algo, steps in (("sac", 300), ("ppo", 64)):
+        out = root / algo
+        train_jax(JaxTrainSpec(algo, (SEEDS[0],), steps, data_dir=tiny_dataset), seed_dirs(out, (SEEDS[0],)))
+        dirs[algo] = out
+    return dirs
+
+
+def test_train_cli_writes_one_checkpoint_per_seed_and_refuses_a_different_training(trained, tiny_dataset):
+    from flax import serialization
+
+    root = trained["dqn"].parent
+    networks = []
+    for seed in SEEDS:
+        directory = root / f"seed_{seed}"
+        config = json.loads((directory / "train_config.json").read_text())
+        meta = json.loads((directory / "train_metadata.json").read_text())
+        assert config["identity"]["backend"] == "jax" and config["identity"]["seed"] == seed
+        assert config["rejax"]["num_envs"] == 4 and config["rejax"]["target_update_freq"] == 10_000
+        assert meta["complete"] and meta["timesteps_done"] == 400 and meta["seeds_in_batch"] == list(SEEDS)
+        networks.append(serialization.msgpack_restore((directory / "jax_model.msgpack").read_bytes()))
+    first, second = (np.concatenate([np.ravel(x) for x in _leaves(n)]) for n in networks)
+    assert first.size == 12 * 64 + 64 + 64 * 64 + 64 + 64 * 125 + 125  # SB3's 64x64 Q-network on 125 actions
+    assert not np.array_equal(first, second)  # each seed its own initialisation and data
+
+    again = _cli(
+        "train", "--backend", "jax", "--algo", "dqn", "--seeds", "3,4",
+        "--timesteps", "400", "--data", str(tiny_dataset), "--out", str(root),
+    )  # fmt: skip
+    assert again.returncode == 0 and "already holds this finished training" in again.stdout
+    other = _cli(
+        "train", "--backend", "jax", "--algo", "dqn", "--seeds", "3,4",
+        "--timesteps", "800", "--data", str(tiny_dataset), "--out", str(root),
+    )  # fmt: skip
+    assert other.returncode == 2 and "holds a different training" in other.stderr and "timesteps" in other.stderr
+    assert json.loads((root / "seed_3" / "train_metadata.json").read_text())["timesteps_done"] == 400
+    bad = _cli("train", "--algo", "ppo", "--seeds", "1,2", "--out", str(root / "sb3"))
+    assert bad.returncode == 2 and "--backend jax" in bad.stderr
+
+
+def _leaves(tree) -> list[np.ndarray]:
+    if isinstance(tree, dict):
+        return [leaf for key in sorted(tree) for leaf in _leaves(tree[key])]
+    return [np.asarray(tree)]
+
+
+def _direct_actor(algo: str, model_path: Path, data_dir: Path):
+    """Deterministic actions by a flax apply of the network rejax itself builds for this env."""
+    import jax
+    import jax.numpy as jnp
+    from flax import serialization
+
+    from solarchain_eval.config import BenchmarkConfig
+    from solarchain_eval.jax.env import make_env_params
+    from solarchain_eval.jax.train import make_algo
+
+    mode = "discrete" if algo == "dqn" else "continuous"
+    instance = make_algo(algo, make_env_params(data_dir, action_mode=mode), BenchmarkConfig(), 1000)
+    state = instance.init_state(jax.random.key(0))
+    template = state.q_ts.params if algo == "dqn" else state.actor_ts.params
+    params = serialization.from_bytes(template, model_path.read_bytes())
+
+    def act(observation: np.ndarray):
+        obs = jnp.asarray(observation[None], jnp.float32)
+        if algo == "dqn":
+            return int(jnp.argmax(instance.agent.apply(params, obs), axis=1)[0])
+        mean = instance.actor.apply(params, obs, method=lambda m, o: m._action_dist(o).mean())[0]
+        if algo == "sac":
+            return np.asarray(0.5 + 0.5 * jnp.tanh(mean))  # the squashed mean on Box(0, 1)
+        return np.asarray(jnp.clip(mean, 0.0, 1.0))
+
+    return act
+
+
+@pytest.mark.parametrize("algo", ["ppo", "sac", "dqn"])
+def test_evaluate_models_acts_with_the_trained_network(trained, tiny_dataset, tmp_path, algo):
+    from solarchain_eval.env import SolarChainEnv
+
+    runs = []
+    for attempt in range(2):
+        out = tmp_path / f"run{attempt}"
+        done = _cli(
+            "evaluate", "--policies", algo, "--models", str(trained[algo]), "--seeds", "20260511",
+            "--episodes", "2", "--data", str(tiny_dataset), "--out", str(out),
+        )  # fmt: skip
+        assert done.returncode == 0, done.stderr
+        runs.append(pd.read_csv(out / "actions.csv"))
+    pd.testing.assert_frame_equal(runs[0], runs[1])  # deterministic
+    recorded = runs[0]
+    # Replay each episode with the actions of a direct flax apply on the env's observations.
+    env = SolarChainEnv(data_dir=tiny_dataset, action_mode="discrete" if algo == "dqn" else "continuous")
+    columns = ["reward_ratio", "liquidity_ratio", "burn_rate", "reward"]
+    distinct = set()
+    act = _direct_actor(algo, trained[algo] / "jax_model.msgpack", tiny_dataset)
+    for episode_seed, rows in recorded.groupby("episode_seed", sort=True):
+        obs, _ = env.reset(seed=int(episode_seed))
+        replayed = []
+        for _ in range(len(rows)):
+            action = act(obs)
+            distinct.add(np.asarray(action).tobytes())
+            obs, reward, _, _, info = env.step(action)
+            replayed.append([info["reward_ratio"], info["liquidity_ratio"], info["burn_rate"], reward])
+        np.testing.assert_allclose(rows[columns].to_numpy(), np.asarray(replayed), rtol=1e-12, atol=0)
+    assert len(distinct) > 1  # the network reacts to the observations (not a constant action)
+
+
+def test_both_backends_for_one_name_in_one_directory_is_refused(trained, tmp_path):
+    import shutil
+
+    from solarchain_eval.config import BenchmarkConfig
+    from solarchain_eval.policies.registry import make_policy
+
+    shared = tmp_path / "models"
+    shutil.copytree(trained["sac"], shared / "sac")
+    policy = make_policy("sac", BenchmarkConfig(), {"*": shared})
+    assert type(policy).__name__ == "JaxPolicy"
+    (shared / "sac.zip").write_bytes(b"an SB3 model would be here")
+    with pytest.raises(ValueError, match="both an SB3 model"):
+        make_policy("sac", BenchmarkConfig(), {"*": shared})
+    explicit = make_policy("sac", BenchmarkConfig(), {"sac": shared / "sac"})
+    assert type(explicit).__name__ == "JaxPolicy"
+
+
+def test_paper_backend_jax_runs_the_smoke_grid_through_train_units(tiny_dataset, tmp_path):
+    from solarchain_eval.experiments.grid import GridSpec, plan_units
+
+    spec = GridSpec.from_preset("smoke", settings=("main",), policies=("static", "dqn"), backend="jax")
+    assert [u.backend for u in plan_units(spec) if u.kind == "train"] == ["jax"]
+    root = tmp_path / "root"
+    args = (
+        "paper", "--backend", "jax", "--preset", "smoke", "--settings", "main", "--policies", "static,dqn",
+        "--data", str(tiny_dataset), "--out", str(root), "--no-report",
+    )  # fmt: skip
+    done = _cli(*args)
+    assert done.returncode == 0, done.stderr
+    train_dir = root / "units" / "train" / "dqn-main-20260511"
+    meta = json.loads((train_dir / "train_metadata.json").read_text())
+    assert meta["backend"] == "jax" and meta["timesteps_done"] == 300 and (train_dir / "DONE").is_file()
+    unit = json.loads((root / "units" / "eval" / "dqn-main-20260511" / "unit.json").read_text())
+    assert list(unit["model_sha256"]) == ["dqn"] and unit["grid"]["backend"] == "jax"
+    metrics = pd.read_csv(root / "combined" / "main" / "metrics.csv")
+    assert sorted(metrics["policy"].unique()) == ["dqn", "static"] and len(metrics) == 4
+    stamp = (train_dir / "jax_model.msgpack").stat().st_mtime_ns
+    again = _cli(*args)  # resume: every unit done, nothing retrained
+    assert again.returncode == 0 and "3 of 3 units already done" in again.stderr
+    assert (train_dir / "jax_model.msgpack").stat().st_mtime_ns == stamp
+    sb3 = _cli(*[a if a != "jax" else "sb3" for a in args])
+    assert sb3.returncode == 2 and "holds a different grid" in sb3.stderr and "backend" in sb3.stderr
