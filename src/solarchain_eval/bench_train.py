@@ -20,7 +20,7 @@ import json
 import statistics
 import time
 from collections.abc import Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +91,7 @@ class UnitTimes:
     eval_s: dict[str, float]  # per policy, one eval unit of ``episodes`` episodes
     source: str
     episodes: int = 30
+    train_overhead_by_algo: dict[str, float] = field(default_factory=dict)  # where it differs (JAX: compilation)
 
 
 def unit_times_from_root(root: Path) -> UnitTimes:
@@ -124,7 +125,8 @@ def unit_times_from_root(root: Path) -> UnitTimes:
 def unit_duration(unit: Unit, times: UnitTimes, spec: GridSpec) -> float:
     """Seconds of one unit: training scales with the timesteps, evaluation with the episodes."""
     if unit.kind == "train":
-        return times.train_overhead_s + spec.timesteps / times.steps_per_s[unit.policy]
+        overhead = times.train_overhead_by_algo.get(unit.policy, times.train_overhead_s)
+        return overhead + spec.timesteps / times.steps_per_s[unit.policy]
     measured = times.eval_s.get(unit.policy, max(times.eval_s.values(), default=1.0))
     return measured * spec.episodes / times.episodes
 

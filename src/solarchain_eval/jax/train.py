@@ -301,6 +301,18 @@ def _identity(spec: JaxTrainSpec, seed: int, dataset: dict[str, Any]) -> dict[st
     }
 
 
+def save_network(path: Path, algo: str, states: Any, index: int) -> Path:
+    """Write seed ``index``'s acting network (what the policy adapter needs to act) as flax msgpack."""
+    network = states.q_ts.params if algo == "dqn" else states.actor_ts.params
+    one = jax.tree.map(lambda x: np.asarray(x[index]), network)
+    return atomic_write_bytes(path, serialization.to_bytes(one))
+
+
+def write_train_config(directory: Path, record: dict[str, Any]) -> Path:
+    """``train_config.json``: the identity and the rejax settings the policy adapter rebuilds the network from."""
+    return atomic_write_bytes(directory / TRAIN_CONFIG_FILE, json.dumps(record, indent=2, default=list).encode())
+
+
 def _read_json(path: Path) -> dict[str, Any] | None:
     try:
         return json.loads(path.read_text(encoding="utf-8"))
@@ -368,18 +380,15 @@ def train_jax(
         for name in (JAX_MODEL_FILE, TRAIN_METADATA_FILE):
             (directory / name).unlink(missing_ok=True)
         record = {"identity": identities[seed], "rejax": settings, "data_dir": str(data_dir.resolve())}
-        atomic_write_bytes(directory / TRAIN_CONFIG_FILE, json.dumps(record, indent=2, default=list).encode())
+        write_train_config(directory, record)
     params = make_env_params(
         table=table, config=cfg, action_mode=ACTION_MODES[algo], no_physics_penalty=spec.no_physics_penalty
     )
     states, compile_s, train_s = train_seeds(algo, tuple(spec.seeds), spec.timesteps, params, cfg, on_progress)
-    network = states.q_ts.params if algo == "dqn" else states.actor_ts.params
     paths = []
     for i, seed in enumerate(spec.seeds):
         directory = Path(out_dirs[seed])
-        # Only the acting network's parameters: what the policy adapter needs to act.
-        one = jax.tree.map(lambda x, i=i: np.asarray(x[i]), network)
-        paths.append(atomic_write_bytes(directory / JAX_MODEL_FILE, serialization.to_bytes(one)))
+        paths.append(save_network(directory / JAX_MODEL_FILE, algo, states, i))
         steps_done = int(np.asarray(states.global_step)[i])
         atomic_write_json(
             directory / TRAIN_METADATA_FILE,

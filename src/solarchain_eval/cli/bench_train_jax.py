@@ -1,0 +1,77 @@
+"""``bench-train --backend jax``: rejax training speed beside SB3's, and the JAX paper-preset estimate."""
+
+from __future__ import annotations
+
+import tempfile
+from dataclasses import replace
+from pathlib import Path
+
+from rich.table import Table
+
+from .common import CliError, console, err_console
+
+#: Goals of the JAX backend on 2 CPU cores.
+SAC_SPEEDUP_GOAL = 3.0
+PAPER_JAX_GOAL_MIN = 45.0
+
+
+def bench_jax(names: list[str], data_dir: Path, repeats: int, sb3_times, workers: int, seeds: int) -> None:
+    """Measure each algorithm with rejax, print it beside SB3's figure, then the paper estimate."""
+    from .. import bench_train as measure
+    from ..experiments.grid import GridSpec
+
+    try:
+        from ..jax.bench_train import DEFAULT_STEPS, describe_flags, jax_eval_unit_s, jax_training_steps_per_s
+    except ImportError as error:
+        raise CliError(str(error)) from None
+    flags = describe_flags()
+    table = Table(
+        title=f"JAX (rejax) vs SB3 training throughput, steps/s per model (XLA_FLAGS={flags['XLA_FLAGS'] or '-'})",
+        title_justify="left",
+    )
+    for column in ("algorithm", "SB3 median", "JAX median", "JAX best", "JAX / SB3", "compile s", "JAX CPU/wall"):
+        table.add_column(column, justify="left" if column == "algorithm" else "right")
+    rates, overheads, evals = {}, {}, {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for algo in names:
+            steps = DEFAULT_STEPS[algo]
+            err_console.print(f"measuring {algo.upper()} with JAX (compile, then {repeats} × {steps:,} steps)...")
+            model_dir = Path(tmp) / algo
+            speed = jax_training_steps_per_s(algo, data_dir, steps, repeats, seeds=seeds, model_dir=model_dir)
+            rates[algo] = speed.throughput.median
+            # A grid compiles each (algorithm, setting) once and loads it from the cache for the other seeds.
+            overheads[algo] = (speed.compile_s + 2 * speed.cached_compile_s) / 3
+            evals[algo] = jax_eval_unit_s(algo, model_dir, data_dir, sb3_times.episodes)
+            sb3 = sb3_times.steps_per_s.get(algo)
+            table.add_row(
+                algo.upper(),
+                f"{sb3:,.0f}" if sb3 else "-",
+                f"{speed.throughput.median:,.0f}",
+                f"{speed.throughput.best:,.0f}",
+                f"{speed.throughput.median / sb3:.2f}×" if sb3 else "-",
+                f"{speed.compile_s:.1f} ({speed.cached_compile_s:.1f} cached)",
+                f"{speed.cpu_per_wall:.2f}",
+            )
+    console.print(table)
+    if "sac" in rates and "sac" in sb3_times.steps_per_s:
+        ratio = rates["sac"] / sb3_times.steps_per_s["sac"]
+        verdict = "met" if ratio >= SAC_SPEEDUP_GOAL else "NOT met"
+        console.print(f"SAC: JAX {ratio:.2f}× SB3 (goal >= {SAC_SPEEDUP_GOAL:.0f}×: {verdict})")
+    missing = [a for a in ("ppo", "sac", "dqn") if a not in rates]
+    if missing:
+        console.print(f"no JAX paper estimate: it needs all three algorithms (missing {', '.join(missing)})")
+        return
+    times = replace(
+        sb3_times,
+        steps_per_s=rates,
+        train_overhead_by_algo={a: sb3_times.train_overhead_s + o for a, o in overheads.items()},
+        eval_s={**sb3_times.eval_s, **evals},
+        source="JAX micro-benchmarks (compile once per algorithm and setting, cached for the other seeds)",
+    )
+    estimate = measure.estimate_paper_wall_time(times, workers, GridSpec.from_preset("paper", backend="jax"))
+    minutes = estimate["wall_s"] / 60
+    console.print(
+        f"paper preset with --backend jax on {workers} worker(s): estimated wall time {minutes:.1f} min "
+        f"(goal <= {PAPER_JAX_GOAL_MIN:.0f} min on 2 CPU cores: {'met' if minutes <= PAPER_JAX_GOAL_MIN else 'NOT met'}); "
+        f"total CPU {estimate['cpu_s'] / 60:.1f} min, of which SAC training {estimate['train_sac_cpu_s'] / 60:.1f} min"
+    )
