@@ -59,8 +59,14 @@ class TrivialEnv(gym.Env):
         return self._obs.copy(), 0.0, False, self._k >= 24, {}
 
 
-def training_steps_per_s(algo: str, env: gym.Env, steps: int, repeats: int, seed: int = 0) -> Throughput:
-    """Median-ready samples of steady-state SB3 training speed (one torch thread)."""
+def training_steps_per_s(
+    algo: str, env: gym.Env, steps: int, repeats: int, seed: int = 0, cpu_rates: list[float] | None = None
+) -> Throughput:
+    """Median-ready samples of steady-state SB3 training speed (one torch thread).
+
+    ``cpu_rates``, if given, receives each repeat's steps per CPU second of this process (a
+    figure that the machine's other load distorts less than the wall-clock one).
+    """
     from .config import BenchmarkConfig
 
     set_torch_threads(1)
@@ -70,9 +76,11 @@ def training_steps_per_s(algo: str, env: gym.Env, steps: int, repeats: int, seed
         model = algorithm_class(algo)("MlpPolicy", env, seed=seed + repeat, verbose=0, device="cpu", **params)
         model.learn(WARMUP_STEPS[algo])
         before = model.num_timesteps
-        start = time.perf_counter()
+        start, cpu = time.perf_counter(), time.process_time()
         model.learn(steps, reset_num_timesteps=False)
         samples.append((model.num_timesteps - before) / (time.perf_counter() - start))
+        if cpu_rates is not None:
+            cpu_rates.append((model.num_timesteps - before) / max(time.process_time() - cpu, 1e-9))
     return Throughput(f"{algo.upper()} training", "steps/s", tuple(samples))
 
 

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import statistics
 from pathlib import Path
 
 import typer
@@ -62,10 +63,14 @@ def bench_train(
         for column in ("algorithm", "median", "best", "trivial env median", "env share", "target"):
             table.add_column(column, justify="left" if column == "algorithm" else "right")
         rates: dict[str, float] = {}
+        cpu_rates: dict[str, list[float]] = {}
         for algo in names:
             steps = measure.DEFAULT_STEPS[algo]
             err_console.print(f"measuring {algo.upper()} ({repeats} × {steps:,} steps)...")
-            result = measure.training_steps_per_s(algo, measure.solarchain_env(algo, data_dir), steps, repeats)
+            cpu_rates[algo] = []
+            result = measure.training_steps_per_s(
+                algo, measure.solarchain_env(algo, data_dir), steps, repeats, cpu_rates=cpu_rates[algo]
+            )
             rates[algo] = result.median
             trivial: Throughput | None = None
             if ceiling:
@@ -100,4 +105,5 @@ def bench_train(
     if backend == "jax" and from_root is None:
         from .bench_train_jax import bench_jax
 
-        bench_jax(names, data_dir, repeats, times, workers, jax_seeds)
+        sb3_cpu = {a: statistics.median(r) for a, r in cpu_rates.items()}
+        bench_jax(names, data_dir, repeats, times, sb3_cpu, workers, jax_seeds)
