@@ -50,7 +50,7 @@ def bench_jax(
             overheads[algo] = (speed.compile_s + 2 * speed.cached_compile_s) / 3
             evals[algo] = jax_eval_unit_s(algo, model_dir, data_dir, sb3_times.episodes)
             sb3, sb3_per_cpu = sb3_times.steps_per_s.get(algo), sb3_cpu.get(algo)
-            jax_per_cpu = speed.throughput.median * seeds / max(speed.cpu_per_wall, 1e-9)
+            jax_per_cpu = speed.steps_per_cpu_s
             cpu_ratios[algo] = jax_per_cpu / sb3_per_cpu if sb3_per_cpu else float("nan")
             table.add_row(
                 algo.upper(),

@@ -9,6 +9,7 @@ may use more than one thread, SB3 runs with one torch thread.
 
 from __future__ import annotations
 
+import statistics
 import tempfile
 import time
 from dataclasses import dataclass
@@ -35,8 +36,9 @@ class JaxTrainingSpeed:
     throughput: Throughput
     compile_s: float
     cached_compile_s: float  # the same program again, from the persistent compilation cache
-    cpu_per_wall: float  # process CPU seconds per wall second while training (≈ threads busy)
+    cpu_per_wall: float  # process CPU seconds per wall second while training (≈ threads busy), median
     seeds: int
+    steps_per_cpu_s: float  # env steps of all seeds per CPU second of the process, median over repeats
 
 
 def jax_training_steps_per_s(
@@ -64,7 +66,7 @@ def jax_training_steps_per_s(
     batch = tuple(range(seeds))
     compiled, compile_s = compile_training(algo, batch, steps, params, cfg)
     _, cached_compile_s = compile_training(algo, batch, steps, params, cfg)  # what a later train unit pays
-    samples, cpu_ratios, states = [], [], None
+    samples, cpu_ratios, cpu_rates, states = [], [], [], None
     for repeat in range(repeats):
         keys = seed_keys(tuple(1000 * (repeat + 1) + s for s in batch))
         wall, cpu = time.perf_counter(), time.process_time()
@@ -73,6 +75,7 @@ def jax_training_steps_per_s(
         done = int(states.global_step[0])
         samples.append(done / wall)
         cpu_ratios.append(cpu / wall)
+        cpu_rates.append(done * seeds / max(cpu, 1e-9))
     if model_dir is not None and states is not None:
         save_network(Path(model_dir) / JAX_MODEL_FILE, algo, states, 0)
         write_train_config(
@@ -80,7 +83,12 @@ def jax_training_steps_per_s(
         )
     name = f"{algo.upper()} training (JAX on {jax.devices()[0].platform}, {seeds} seed(s) vmapped, per model)"
     return JaxTrainingSpeed(
-        Throughput(name, "steps/s", tuple(samples)), compile_s, cached_compile_s, max(cpu_ratios), seeds
+        Throughput(name, "steps/s", tuple(samples)),
+        compile_s,
+        cached_compile_s,
+        statistics.median(cpu_ratios),
+        seeds,
+        statistics.median(cpu_rates),
     )
 
 
