@@ -186,3 +186,25 @@ def test_paper_backend_jax_runs_the_smoke_grid_through_train_units(tiny_dataset,
     assert (train_dir / "jax_model.msgpack").stat().st_mtime_ns == stamp
     sb3 = _cli(*[a if a != "jax" else "sb3" for a in args])
     assert sb3.returncode == 2 and "holds a different grid" in sb3.stderr and "backend" in sb3.stderr
+
+
+@pytest.mark.parametrize(
+    ("algo", "timesteps", "expected"),
+    [("ppo", 300_000, 301_056), ("ppo", 300, 2048), ("sac", 300_000, 300_000), ("sac", 1_001, 1_001),
+     ("dqn", 300_000, 300_000), ("dqn", 30_001, 30_004)],
+)  # fmt: skip
+def test_progress_chunks_keep_sb3s_step_counts(tiny_dataset, algo, timesteps, expected):
+    """rejax runs ceil(total / eval_freq) chunks of ceil(eval_freq / iteration) iterations."""
+    import math
+
+    from solarchain_eval.config import BenchmarkConfig
+    from solarchain_eval.jax.env import make_env_params
+    from solarchain_eval.jax.train import make_algo
+
+    mode = "discrete" if algo == "dqn" else "continuous"
+    instance = make_algo(algo, make_env_params(tiny_dataset, action_mode=mode), BenchmarkConfig(), timesteps)
+    per_iteration = instance.num_envs * (instance.num_steps if algo == "ppo" else 1)
+    chunks = math.ceil(instance.total_timesteps / instance.eval_freq)
+    assert chunks * math.ceil(instance.eval_freq / per_iteration) * per_iteration == expected
+    if timesteps == 300_000:  # the paper's budget reports progress 7 (PPO: 147 rollouts) or 10 times
+        assert chunks == (7 if algo == "ppo" else 10)
