@@ -2,8 +2,9 @@
 
 Hyperparameters follow the SB3 reference (docs/training.md): learning rate, batch size and γ
 from the config (3e-4, 64, 0.98), SB3's default network sizes and other defaults where rejax
-has the same knob. The optimiser is SB3's (global-norm gradient clipping, SB3's Adam ε); the remaining differences
-between the libraries are listed in docs/jax.md. Each seed's acting network (actor, or
+has the same knob. The optimiser is SB3's (global-norm gradient clipping, SB3's Adam ε), and
+so is PPO's value loss (unclipped); the remaining differences between the libraries are
+listed in docs/jax.md. Each seed's acting network (actor, or
 Q-network for DQN) is written to ``jax_model.msgpack`` in its directory with
 ``train_config.json`` and ``train_metadata.json`` beside it; ``evaluate --models`` loads it
 through :class:`~solarchain_eval.policies.jax_policy.JaxPolicy`.
@@ -110,15 +111,27 @@ def rejax_config(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str
 #: Adam's epsilon in SB3: PPO's policies use 1e-5, SAC and DQN torch's default 1e-8.
 ADAM_EPS = {"ppo": 1e-5, "sac": 1e-8, "dqn": 1e-8}
 
+#: Where this backend changes rejax to follow SB3 (recorded in each model's identity).
+SB3_ALIGNMENT = {
+    "ppo": {"gradient_clip": "global norm", "adam_eps": 1e-5, "value_loss": "unclipped, vf_coef * mean squared error"},
+    "sac": {"gradient_clip": "global norm", "adam_eps": 1e-8},
+    "dqn": {"gradient_clip": "global norm", "adam_eps": 1e-8},
+}
+
 
 @cache
-def _sb3_optimiser_variant(algo: str) -> type:
-    """rejax's algorithm class with SB3's optimiser: global-norm gradient clipping and SB3's Adam epsilon.
+def _sb3_variant(algo: str) -> type:
+    """rejax's algorithm class changed where SB3 differs and rejax has no setting for it.
 
-    rejax chains ``optax.clip(max_grad_norm)`` (each gradient element clipped to ±max_grad_norm)
-    with Adam (ε 1e-8); SB3 clips the gradients' global norm. The subclass rebuilds each train
-    state's optimiser after rejax has initialised the parameters.
+    - The optimiser: rejax chains ``optax.clip(max_grad_norm)`` (each gradient element clipped
+      to ±max_grad_norm) with Adam (ε 1e-8); SB3 clips the gradients' global norm and uses
+      ε 1e-5 for PPO. Each train state's optimiser is rebuilt after rejax initialises the parameters.
+    - PPO's value loss: rejax clips the value prediction to ±clip_eps around the rollout's value
+      and halves the squared error; SB3 (``clip_range_vf=None``) uses ``vf_coef * mean((V - R)²)``.
+      With returns near -20 and values starting at 0, the clipped loss lets the value move only
+      0.2 per rollout.
     """
+    import jax.numpy as jnp
     import optax
     import rejax
     from flax.training.train_state import TrainState
@@ -126,7 +139,7 @@ def _sb3_optimiser_variant(algo: str) -> type:
 
     base = rejax.get_algo(algo)
 
-    class SB3Optimiser(base):  # type: ignore[misc, valid-type]
+    class SB3Variant(base):  # type: ignore[misc, valid-type]
         @register_init
         def initialize_network_params(self, rng):
             state = super().initialize_network_params(rng)
@@ -139,8 +152,18 @@ def _sb3_optimiser_variant(algo: str) -> type:
                 for k, v in state.items()
             }
 
-    SB3Optimiser.__name__ = f"{base.__name__}SB3Optimiser"
-    return SB3Optimiser
+        if algo == "ppo":
+
+            def update_critic(self, ts, batch):
+                def critic_loss_fn(params):
+                    value = self.critic.apply(params, batch.trajectories.obs)
+                    return self.vf_coef * jnp.mean(jnp.square(value - batch.targets))
+
+                grads = jax.grad(critic_loss_fn)(ts.critic_ts.params)
+                return ts.replace(critic_ts=ts.critic_ts.apply_gradients(grads=grads))
+
+    SB3Variant.__name__ = f"{base.__name__}SB3Variant"
+    return SB3Variant
 
 
 def iteration_steps(algo: str, settings: dict[str, Any]) -> int:
@@ -172,7 +195,7 @@ def make_algo(
     per_iteration = iteration_steps(algo, settings)
     iterations = -(-int(timesteps) // per_iteration)
     settings["eval_freq"] = iterations // progress_chunks(iterations) * per_iteration
-    instance = _sb3_optimiser_variant(algo).create(env=SolarChainJaxEnv(params), env_params=params, **settings)
+    instance = _sb3_variant(algo).create(env=SolarChainJaxEnv(params), env_params=params, **settings)
 
     def report(algo_instance: Any, ts: Any, rng: Any) -> Any:
         if on_progress is not None:
@@ -296,6 +319,7 @@ def _identity(spec: JaxTrainSpec, seed: int, dataset: dict[str, Any]) -> dict[st
         "no_physics_penalty": bool(spec.no_physics_penalty),
         "action_mode": cfg.action_mode,
         "hyperparameters": json.loads(json.dumps(rejax_config(spec.algo, cfg, spec.timesteps), default=list)),
+        "sb3_alignment": SB3_ALIGNMENT[spec.algo],
         "dataset_sha256": dataset.get("files", {}),
         "config": cfg.model_dump(mode="json"),
     }
