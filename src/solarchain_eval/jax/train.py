@@ -113,7 +113,12 @@ ADAM_EPS = {"ppo": 1e-5, "sac": 1e-8, "dqn": 1e-8}
 
 #: Where this backend changes rejax to follow SB3 (recorded in each model's identity).
 SB3_ALIGNMENT = {
-    "ppo": {"gradient_clip": "global norm", "adam_eps": 1e-5, "value_loss": "unclipped, vf_coef * mean squared error"},
+    "ppo": {
+        "gradient_clip": "global norm",
+        "adam_eps": 1e-5,
+        "value_loss": "unclipped, vf_coef * mean squared error",
+        "init": "orthogonal: hidden gain sqrt(2), action mean 0.01, value 1; zero biases",
+    },
     "sac": {"gradient_clip": "global norm", "adam_eps": 1e-8},
     "dqn": {"gradient_clip": "global norm", "adam_eps": 1e-8},
 }
@@ -143,6 +148,8 @@ def _sb3_variant(algo: str) -> type:
         @register_init
         def initialize_network_params(self, rng):
             state = super().initialize_network_params(rng)
+            if algo == "ppo":
+                state = _orthogonal_ppo(state, rng)
             tx = optax.chain(
                 optax.clip_by_global_norm(self.max_grad_norm),
                 optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS[algo]),
@@ -164,6 +171,33 @@ def _sb3_variant(algo: str) -> type:
 
     SB3Variant.__name__ = f"{base.__name__}SB3Variant"
     return SB3Variant
+
+
+def _orthogonal_ppo(state: dict[str, Any], rng: jax.Array) -> dict[str, Any]:
+    """SB3's PPO initialisation (``ortho_init``): orthogonal kernels with gain √2 in the hidden
+    layers, 0.01 for the action mean and 1 for the value; zero biases; the log-std keeps 0."""
+    import jax.numpy as jnp
+
+    def reinit(params: Any, output_gain: float, output_layer: str, key: jax.Array) -> Any:
+        flat = jax.tree_util.tree_flatten_with_path(params)[0]
+        keys = iter(jax.random.split(key, len(flat)))
+        leaves = []
+        for path, leaf in flat:
+            names = [str(getattr(p, "key", p)) for p in path]
+            if names[-1] == "kernel":
+                gain = output_gain if output_layer in names else np.sqrt(2.0)
+                leaf = jax.nn.initializers.orthogonal(scale=gain)(next(keys), leaf.shape, leaf.dtype)
+            elif names[-1] == "bias":
+                leaf = jnp.zeros_like(leaf)
+            leaves.append(leaf)
+        return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(params), leaves)
+
+    actor_key, critic_key = jax.random.split(jax.random.fold_in(rng, 1))
+    actor = state["actor_ts"].replace(params=reinit(state["actor_ts"].params, 0.01, "action_mean", actor_key))
+    critic_params = state["critic_ts"].params
+    last = sorted(k for k in critic_params["params"] if k.startswith("Dense_"))[-1]  # the value head
+    critic = state["critic_ts"].replace(params=reinit(critic_params, 1.0, last, critic_key))
+    return {**state, "actor_ts": actor, "critic_ts": critic}
 
 
 def iteration_steps(algo: str, settings: dict[str, Any]) -> int:
