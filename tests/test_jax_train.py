@@ -208,3 +208,33 @@ def test_progress_chunks_keep_sb3s_step_counts(tiny_dataset, algo, timesteps, ex
     assert chunks * math.ceil(instance.eval_freq / per_iteration) * per_iteration == expected
     if timesteps == 300_000:  # the paper's budget reports progress 7 (PPO: 147 rollouts) or 10 times
         assert chunks == (7 if algo == "ppo" else 10)
+
+
+def test_ppo_starts_from_sb3s_orthogonal_initialisation(tiny_dataset):
+    """Kernels orthogonal with gain √2 (hidden), 0.01 (action mean), 1 (value); zero biases."""
+    import jax
+
+    from solarchain_eval.config import BenchmarkConfig
+    from solarchain_eval.jax.env import make_env_params
+    from solarchain_eval.jax.train import make_algo
+
+    instance = make_algo("ppo", make_env_params(tiny_dataset), BenchmarkConfig(), 2048)
+    state = instance.init_state(jax.random.key(0))
+    gains = {}
+    for net, ts in (("actor", state.actor_ts), ("critic", state.critic_ts)):
+        for path, leaf in jax.tree_util.tree_flatten_with_path(ts.params)[0]:
+            name = net + jax.tree_util.keystr(path)
+            if name.endswith("['bias']"):
+                assert not np.any(np.asarray(leaf)), name
+            elif name.endswith("['kernel']"):
+                singular = np.linalg.svd(np.asarray(leaf), compute_uv=False)
+                np.testing.assert_allclose(singular, singular[0], rtol=1e-5, err_msg=name)  # orthogonal
+                gains[name.split("['params']")[1]] = round(float(singular[0]), 4)
+    assert gains == {
+        "['action_mean']['kernel']": 0.01,
+        "['features']['Dense_0']['kernel']": 1.4142,
+        "['features']['Dense_1']['kernel']": 1.4142,
+        "['Dense_0']['kernel']": 1.4142,
+        "['Dense_1']['kernel']": 1.4142,
+        "['Dense_2']['kernel']": 1.0,
+    }
