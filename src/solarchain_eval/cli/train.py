@@ -149,7 +149,7 @@ def _train_jax(
     dirs = seed_dirs(out_dir, spec.seeds)
     err_console.print(
         f"training {algo.upper()} with JAX for {steps:,} steps × {len(seeds)} seed(s) into {out_dir} "
-        "(compiling first: 20-40 s on a CPU)",
+        "(compiling first: seconds on an idle CPU, up to minutes on a busy one)",
         soft_wrap=True,
     )
     with progress_bar(f"training {algo} (jax)", steps) as advance:
