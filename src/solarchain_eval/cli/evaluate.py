@@ -91,7 +91,8 @@ def evaluate(
         None,
         "--models",
         metavar="DIR|NAME=PATH",
-        help="Trained models: a directory, or NAME=PATH per learned policy (repeatable).",
+        help="Trained models: a directory, or NAME=PATH per learned policy (repeatable); "
+        "SB3 model.zip or JAX jax_model.msgpack (train --backend jax).",
     ),
     agentic: str = agentic_cli.AGENTIC,
     llm_backend: str = agentic_cli.LLM_BACKEND,
