@@ -325,6 +325,35 @@ class SolarChainEnv(gym.Env):
             return self._discrete_actions[discrete_index(action, len(self._discrete_actions))]
         return self.codec.decode(action)
 
+    def counterfactual_step(self, executed: tuple[float, float, float]) -> StepOutcome:
+        """The outcome of executing ``executed`` (market units) now, without changing the env.
+
+        Same state, same hour and the same price shock as the next :meth:`step`, so the
+        counterfactual of the action that ``step`` then executes equals its outcome exactly
+        (docs/governance.md#counterfactual-step-records). The caller passes the action as the
+        env would execute it (float32 values, sanitised).
+        """
+        k = self._k
+        if not self._episode_open or k >= self.episode_steps:
+            raise RuntimeError("the episode is over (or was never started): call reset() first")
+        hour = min(self._start + k, self._n_hours - 1)
+        return market_step(
+            SCALAR,
+            self.weights,
+            self._verified[hour],
+            self._unsafe[hour],
+            self._demand[hour],
+            self._share[hour],
+            self._trust[hour],
+            self._liquidity,
+            self._peak_liquidity,
+            self._price,
+            self._peak_price,
+            executed,
+            action_jitter_f32(executed, self._prev),
+            self._noise[k],
+        )
+
     def step(self, action: Any):
         k = self._k
         if not self._episode_open or k >= self.episode_steps:

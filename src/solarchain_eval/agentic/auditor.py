@@ -15,7 +15,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -27,7 +28,7 @@ from .prompts import auditor_messages
 from .scheduler import Action, action_delta
 from .schemas import ACTION_FIELDS, AuditorOutput, Plan, validate_audit
 
-AUDITOR_KINDS = ("rule", "llm", "approve-only")
+AUDITOR_KINDS = ("rule", "llm", "approve-only", "always-audit", "random", "oracle")
 REVISION_TOLERANCE = 1e-6  # L1 distance below which a rule revision counts as "approve"
 
 _F32 = np.float32
@@ -54,6 +55,9 @@ class StepContext:
     hard_reasons: tuple[str, ...]
     soft_trigger: bool
     recent: dict[str, float] | None
+    #: The step's counterfactual evaluator (market-unit action -> StepOutcome from the same
+    #: state and price shock; docs/governance.md); never shown to a model.
+    counterfactual: Callable[[Action], Any] | None = field(default=None, compare=False, repr=False)
 
     def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
         def named(action: Action) -> dict[str, float]:

@@ -12,7 +12,7 @@ Every planner's output goes through the same validation
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -23,7 +23,7 @@ from .llm_client import StructuredLLM
 from .prompts import planner_messages
 from .schemas import ActionBounds, AuditPolicy, Bounds, Plan, PlannerOutput, validate_plan
 
-PLANNER_KINDS = ("rule", "llm", "default")
+PLANNER_KINDS = ("rule", "llm", "default", "calibrated-rule")
 
 # Rule-planner constants (docs/planner_auditor.md#rule-planner).
 RISK_MAX_VIOLATION = 0.01
@@ -69,6 +69,9 @@ class EpisodeContext:
     min_supply_gap: float
     mean_static_slippage: float
     statistics: dict[str, float]
+    #: Per-step trigger signals (ν, gap, σ) as the observation shows them (float32, clipped to
+    #: ±10): what the calibrated planner takes its quantiles of; never shown to a model.
+    hourly_signals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
     def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
         return {
@@ -118,6 +121,7 @@ def episode_context(env: Any, start_hour: int) -> EpisodeContext:
         min_supply_gap=stats["min_supply_gap"],
         mean_static_slippage=stats["mean_static_slippage"],
         statistics=stats,
+        hourly_signals=tuple(np.clip(x.astype(np.float32), -10.0, 10.0) for x in (violation, gap, slippage)),
     )
 
 

@@ -10,7 +10,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..agentic.policy import EXTRA_LOG_KEY, EXTRA_METRICS_KEY
+from ..agentic.counterfactual import DIAGNOSTIC_COLUMNS
+from ..agentic.policy import EXTRA_DIAGNOSTICS_KEY, EXTRA_LOG_KEY, EXTRA_METRICS_KEY
 from ..io import atomic_write_csv, atomic_write_json, atomic_write_text
 from ..metrics import METRIC_NAMES
 from .rollout import STEP_FIELDS, EpisodeResult
@@ -21,6 +22,7 @@ CITY_HOUR_FILE = "city_hour_policy.csv"
 SUMMARY_FILE = "summary.json"
 METADATA_FILE = "run_metadata.json"
 AGENTIC_LOG_FILE = "agentic_logs.jsonl"
+DIAGNOSTICS_FILE = "governance_diagnostics.csv"
 
 EPISODE_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "start_hour")
 
@@ -103,6 +105,18 @@ def agentic_log_text(results: Sequence[EpisodeResult]) -> str | None:
     return "".join(line + "\n" for line in lines)
 
 
+def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
+    """One row per governed step with its counterfactual outcomes (docs/governance.md), or None
+    when no episode recorded diagnostics."""
+    if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
+        return None
+    ids = (*EPISODE_KEYS[:5], "start_hour")
+    rows = [
+        {**{k: getattr(r, k) for k in ids}, **row} for r in results for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ())
+    ]
+    return pd.DataFrame(rows, columns=[*ids, *DIAGNOSTIC_COLUMNS])
+
+
 def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
     """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric.
 
@@ -154,5 +168,8 @@ def write_records(run_dir: Path, results: Sequence[EpisodeResult], cities: Seque
     log = agentic_log_text(results)
     if log is not None:
         paths[AGENTIC_LOG_FILE] = atomic_write_text(run_dir / AGENTIC_LOG_FILE, log)
+    diagnostics = diagnostics_frame(results)
+    if diagnostics is not None:
+        paths[DIAGNOSTICS_FILE] = atomic_write_csv(run_dir / DIAGNOSTICS_FILE, diagnostics)
     paths[SUMMARY_FILE] = atomic_write_json(run_dir / SUMMARY_FILE, summarize(metrics))
     return paths

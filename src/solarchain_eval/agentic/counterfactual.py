@@ -1,0 +1,118 @@
+"""Counterfactual step records of the Planner/Auditor layer (docs/governance.md).
+
+At every governed step the market is a pure function of its state, the hour, the action and the
+step's price shock (:func:`~solarchain_eval.market.dynamics.market_step`), so the outcome of any
+action from the *same* state and the *same* shock is one call away
+(:meth:`~solarchain_eval.env.SolarChainEnv.counterfactual_step`). A diagnostics row holds, for
+the policy's proposal, the bounded action ā and the executed final action, the outcome each would
+have produced: V, A, cost = V + A, reward, matched energy, slippage and artificial liquidity.
+Nothing here changes the env, so the executed trajectory is the one a run without diagnostics
+takes.
+
+A fourth number, ``least_cost``, is the cost of the least-backing action (α and ℓ at their
+lower ends): cost grows with α + ℓ only, so no action costs less, and ``proposal_cost -
+least_cost`` is the avoidable cost on which the ground truth "unsafe step" rests
+(:data:`DEFAULT_UNSAFE_THRESHOLD`).
+
+Each action is evaluated as the env would execute it, decode(encode(a)) (docs/planner_auditor.md
+#scheduler, point 6), so the final action's counterfactual equals the executed step's outcome
+bit for bit.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from ..market.actions import ActionCodec
+from ..market.dynamics import StepOutcome
+
+Action = tuple[float, float, float]
+Evaluator = Callable[[Action], StepOutcome]
+
+#: The three evaluated actions, as column prefixes.
+ACTION_ROLES = ("proposal", "bounded", "final")
+#: Outcome fields per role: column suffix -> :class:`StepOutcome` attribute (None: cost = V + A).
+OUTCOME_FIELDS = {
+    "violation_rate": "violation_rate",
+    "unsafe_backed_MWh": "unsafe_backed_mwh",
+    "cost": None,
+    "reward": "reward",
+    "matched_energy_MWh": "matched_mwh",
+    "slippage": "slippage",
+    "artificial_liquidity_MWh": "artificial_liquidity_mwh",
+}
+#: A step is unsafe when its proposal's avoidable cost (proposal cost - least cost) exceeds
+#: this. On the published data the avoidable cost of a fully backing action is at most 0.0052
+#: in the night hours (no verified supply: V = 1 whatever the action) and at least 0.039 in 90 %
+#: of the day hours; 0.01 lies in that gap (docs/governance.md#ground-truth).
+DEFAULT_UNSAFE_THRESHOLD = 0.01
+#: Step identifiers copied from the agentic log row into the diagnostics row.
+STEP_KEYS = ("step", "audited", "decision", "hard_trigger", "soft_trigger")
+DIAGNOSTIC_COLUMNS = (
+    *STEP_KEYS,
+    *(f"{role}_{name}" for role in ACTION_ROLES for name in OUTCOME_FIELDS),
+    "least_cost",
+)
+
+
+def executed_form(action: Action, codec: ActionCodec) -> Action:
+    """The action the env executes for a market-unit target: decode(encode(a))."""
+    return codec.decode(codec.encode(*action))
+
+
+def least_backing_action(codec: ActionCodec) -> Action:
+    """α and ℓ at their lower ends (b too): the action of least cost at every step."""
+    return codec.sanitize(codec.lo[0], codec.lo[1], codec.lo[2])
+
+
+def step_cost(outcome: StepOutcome) -> float:
+    """cost = V + A (the env's ``info["cost"]``, same order of operations)."""
+    return outcome.violation_rate + outcome.unsafe_backed_mwh
+
+
+def outcome_values(outcome: StepOutcome) -> dict[str, float]:
+    """The outcome fields of :data:`OUTCOME_FIELDS` as Python floats."""
+    return {
+        name: float(step_cost(outcome) if attribute is None else getattr(outcome, attribute))
+        for name, attribute in OUTCOME_FIELDS.items()
+    }
+
+
+class CounterfactualEvaluator:
+    """Evaluates market-unit actions from the env's current state, memoising within one step.
+
+    Parameters
+    ----------
+    env : SolarChainEnv
+        The env the governed policy acts in; only :meth:`counterfactual_step` is called.
+    """
+
+    def __init__(self, env: Any) -> None:
+        self._env = env
+        self._codec: ActionCodec = env.codec
+        self._memo: dict[Action, StepOutcome] = {}
+        self.least_action = least_backing_action(self._codec)
+
+    def new_step(self) -> None:
+        """Forget the previous step's outcomes (call before each step's evaluations)."""
+        self._memo.clear()
+
+    def __call__(self, action: Action) -> StepOutcome:
+        executed = executed_form(action, self._codec)
+        outcome = self._memo.get(executed)
+        if outcome is None:
+            outcome = self._memo[executed] = self._env.counterfactual_step(executed)
+        return outcome
+
+
+def diagnostics_row(
+    log_row: dict[str, Any], evaluate: CounterfactualEvaluator, proposal: Action, bounded: Action, final: Action
+) -> dict[str, Any]:
+    """One ``governance_diagnostics.csv`` row (without the episode identifiers)."""
+    row: dict[str, Any] = {key: log_row[key] for key in STEP_KEYS}
+    for role, action in zip(ACTION_ROLES, (proposal, bounded, final), strict=True):
+        for name, value in outcome_values(evaluate(action)).items():
+            row[f"{role}_{name}"] = value
+    row["least_cost"] = float(step_cost(evaluate(evaluate.least_action)))
+    return row
