@@ -39,6 +39,14 @@ PLANNER = typer.Option(
 AUDITOR = typer.Option(
     None, "--auditor", help=f"Auditor: {' | '.join(AUDITOR_KINDS)} (default rule).", rich_help_panel=_PANEL
 )
+DIAGNOSTICS = typer.Option(
+    False,
+    "--diagnostics",
+    help="Also write governance_diagnostics.csv: the counterfactual outcome (V, A, cost, reward, matched energy, "
+    "slippage) of the proposal, the bounded action and the final action at every governed step, from the same "
+    "state and price shock (the executed trajectory is unchanged; docs/governance.md).",
+    rich_help_panel=_PANEL,
+)
 LLM_BACKEND_CHOICES = ("remote", "local")
 LLM_BACKEND = typer.Option(
     "remote",

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 from datetime import datetime
 from pathlib import Path
 
@@ -63,11 +64,7 @@ def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> N
     summary = summarize(metrics_frame(outcome.results))
     console.print(results_table(summary, title))
     if spec.agentic is not None:
-        console.print(
-            agentic_cli.agentic_table(
-                summary, f"Planner/Auditor ({spec.agentic.planner} planner, {spec.agentic.auditor} auditor)"
-            )
-        )
+        console.print(agentic_cli.agentic_table(summary, f"Planner/Auditor ({spec.agentic.label()})"))
     show_files(outcome.files, f"wrote {len(outcome.results)} episodes in {outcome.wall_s:.1f} s to {out}")
 
 
@@ -106,6 +103,7 @@ def evaluate(
     llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
     llm_cache: Path | None = agentic_cli.LLM_CACHE,
     llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
+    diagnostics: bool = agentic_cli.DIAGNOSTICS,
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
@@ -128,6 +126,10 @@ def evaluate(
         raise CliError(str(error)) from None
     params = dict(locals())
     governance = agentic_cli.options_from(params, agentic)
+    if diagnostics:
+        if governance is None:
+            raise CliError("--diagnostics needs --agentic planner_auditor")
+        governance = dataclasses.replace(governance, diagnostics=True)
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_seeds(seeds),

@@ -111,10 +111,12 @@ def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
     if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
         return None
     ids = (*EPISODE_KEYS[:5], "start_hour")
-    rows = [
-        {**{k: getattr(r, k) for k in ids}, **row} for r in results for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ())
-    ]
-    return pd.DataFrame(rows, columns=[*ids, *DIAGNOSTIC_COLUMNS])
+    rows = []
+    for r in results:
+        metrics = r.extras.get(EXTRA_METRICS_KEY, {})
+        head = {**{k: getattr(r, k) for k in ids}, "planner": metrics.get("planner"), "auditor": metrics.get("auditor")}
+        rows.extend({**head, **row} for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ()))
+    return pd.DataFrame(rows, columns=[*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
 
 
 def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:

@@ -33,13 +33,14 @@ from .records import (
     ACTIONS_FILE,
     AGENTIC_LOG_FILE,
     CITY_HOUR_FILE,
+    DIAGNOSTICS_FILE,
     METADATA_FILE,
     METRICS_FILE,
     SUMMARY_FILE,
 )
 
 #: The files a run directory's metadata vouches for, when present.
-RUN_FILES = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, SUMMARY_FILE)
+RUN_FILES = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, DIAGNOSTICS_FILE, SUMMARY_FILE)
 #: Environment variable naming a point where the writer kills itself with SIGKILL (kill tests).
 KILL_AT_ENV = "SOLARCHAIN_TEST_KILL_AT"
 KILL_POINTS = ("staged", "metadata", "old-moved", "published")

@@ -28,7 +28,7 @@ from ..experiments.layout import (
     is_paper_root,
     run_table_paths,
 )
-from ..experiments.records import EPISODE_KEYS, SUMMARY_FILE
+from ..experiments.records import DIAGNOSTICS_FILE, EPISODE_KEYS, SUMMARY_FILE
 from ..experiments.rundir import verify_files, verify_run_dir
 from ..metrics import METRIC_NAMES
 from ..redaction import redact_command
@@ -59,6 +59,23 @@ LOG_KEYS = (
 )
 ACTION_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "step", "episode_start_hour")
 CITY_HOUR_KEYS = ("policy", "setting", "run_seed", "episode", "step", "hour", "city", "city_reward", "liquidity_ratio")
+#: Columns of ``governance_diagnostics.csv`` the audit-quality tables read.
+DIAGNOSTICS_REQUIRED = (
+    "policy",
+    "setting",
+    "run_seed",
+    "episode",
+    "start_hour",
+    "step",
+    "audited",
+    "decision",
+    "proposal_cost",
+    "least_cost",
+    "bounded_cost",
+    "bounded_reward",
+    "final_cost",
+    "final_reward",
+)
 #: Rollout identity: one row per (setting, policy, run seed, episode).
 ROLLOUT_KEY = ["setting", "policy", "run_seed", "episode"]
 
@@ -97,6 +114,8 @@ class ReportData:
     unit_metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
     sources: dict[str, list[Path]] = field(default_factory=dict)
     unverified: list[str] = field(default_factory=list)
+    #: ``governance_diagnostics.csv`` rows (counterfactual step records; empty without them).
+    diagnostics: pd.DataFrame = field(default_factory=pd.DataFrame)
 
     @property
     def settings(self) -> list[str]:
@@ -288,6 +307,7 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=list(LOG_KEYS))
     # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
     log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
+    diagnostics, diagnostic_paths = _read_table(root, DIAGNOSTICS_FILE, DIAGNOSTICS_REQUIRED, kind)
     metadata_file = PAPER_METADATA_FILE if kind == "paper" else METADATA_FILE
     # Checked after the files parse, so a malformed file gets the message naming its row.
     unverified = verify_report_inputs(root, kind)
@@ -310,6 +330,8 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
             ACTIONS_FILE: action_paths,
             CITY_HOUR_FILE: city_paths,
             AGENTIC_LOG_FILE: log_paths,
+            DIAGNOSTICS_FILE: diagnostic_paths,
         },
         unverified=unverified,
+        diagnostics=diagnostics,
     )
