@@ -3,9 +3,9 @@
 The paper's rule planner fixes τσ at 0.60/0.75, below the published data's static slippage, so
 its slippage trigger fires on every step and the audit rate is 1. The calibrated planner keeps
 the rule planner's bounds but sets the three hard thresholds at quantiles of the episode's own
-signals (the observation's ν, gap and σ of its hours, known before the episode), choosing the
-quantile level whose hard-trigger rate is closest to a target audit rate r (ties: the lower
-rate). The soft trigger is switched off (τκ = 3 exceeds any κ ≤ 1.55), so the audit rate is
+signals (the observation's ν, gap and σ of its hours, known before the episode): lowering them
+one signal value at a time, it stops at the thresholds whose hard-trigger rate is closest to a
+target audit rate r (ties: the lower rate). The soft trigger is switched off (τκ = 3 exceeds any κ ≤ 1.55), so the audit rate is
 exactly the calibrated hard-trigger rate, whatever the policy does.
 """
 
@@ -39,32 +39,55 @@ def hard_trigger_mask(
     return (violation > tv) | (gap < tg) | (slippage > ts)
 
 
+def _candidates(values: np.ndarray, low: float, high: float, upper_tail: bool) -> list[float]:
+    """Thresholds in the order that lets more steps fire: from the range end where none fires
+    through every distinct signal value to the other end of the range."""
+    inside = [float(v) for v in np.unique(values) if low <= float(v) <= high]
+    ordered = sorted({low, high, *inside}, reverse=upper_tail)
+    return ordered
+
+
 def calibrated_thresholds(
     signals: tuple[np.ndarray, np.ndarray, np.ndarray], target_rate: float
 ) -> tuple[tuple[float, float, float], float]:
     """(τν, τΔ, τσ) and the hard-trigger rate they give over the episode's steps.
 
-    For each level k/T (k = 0..T) the thresholds are the order statistics leaving k steps in each
-    signal's risky tail (clipped to the audit-policy ranges); the level whose union rate is
-    closest to ``target_rate`` wins, the lower rate on a tie.
+    Greedy path from "nothing fires" (each threshold at the end of its range): at each move one
+    threshold goes to its next candidate value (the one adding the fewest newly triggered steps;
+    ties in the order ν, gap, σ). Of the states on the path, the one whose rate is closest to
+    ``target_rate`` wins, the lower rate on a tie.
     """
-    violation, gap, slippage = (np.sort(np.asarray(x, dtype=_F32)) for x in signals)
-    steps = violation.size
-    best: tuple[tuple[float, float, float], float] | None = None
-    for k in range(steps + 1):
-        # k = 0: thresholds at the extremes, so nothing fires (strict comparisons).
-        tv = float(violation[steps - 1 - k]) if k < steps else VIOLATION_THRESHOLD_RANGE[0]
-        tg = float(gap[k]) if k < steps else GAP_THRESHOLD_RANGE[1]
-        ts = float(slippage[steps - 1 - k]) if k < steps else SLIPPAGE_THRESHOLD_RANGE[0]
-        thresholds = (
-            float(np.clip(tv, *VIOLATION_THRESHOLD_RANGE)),
-            float(np.clip(tg, *GAP_THRESHOLD_RANGE)),
-            float(np.clip(ts, *SLIPPAGE_THRESHOLD_RANGE)),
-        )
-        rate = float(hard_trigger_mask(signals, thresholds).mean())
-        if best is None or abs(rate - target_rate) < abs(best[1] - target_rate) - 1e-12:
-            best = (thresholds, rate)
-    assert best is not None
+    ranges = (VIOLATION_THRESHOLD_RANGE, GAP_THRESHOLD_RANGE, SLIPPAGE_THRESHOLD_RANGE)
+    upper = (True, False, True)  # ν and σ fire above their threshold, the gap below it
+    lists = [
+        _candidates(np.asarray(x, dtype=_F32), lo, hi, tail)
+        for x, (lo, hi), tail in zip(signals, ranges, upper, strict=True)
+    ]
+    index = [0, 0, 0]
+
+    def state() -> tuple[float, float, float]:
+        return (lists[0][index[0]], lists[1][index[1]], lists[2][index[2]])
+
+    def rate_of(thresholds: tuple[float, float, float]) -> float:
+        return float(hard_trigger_mask(signals, thresholds).mean())
+
+    current = state()
+    best = (current, rate_of(current))
+    while True:
+        moves = []
+        for i in range(3):
+            if index[i] + 1 < len(lists[i]):
+                index[i] += 1
+                moves.append((rate_of(state()), i))
+                index[i] -= 1
+        if not moves:
+            break
+        rate, i = min(moves)
+        index[i] += 1
+        if abs(rate - target_rate) < abs(best[1] - target_rate) - 1e-12:
+            best = (state(), rate)
+        if rate >= target_rate:
+            break
     return best
 
 

@@ -12,10 +12,12 @@ over start days (:func:`~solarchain_eval.report.statistics.cluster_bootstrap`).
 
 from __future__ import annotations
 
+import warnings
 from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
+from scipy.stats import DegenerateDataWarning
 
 from ..agentic.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from .statistics import DEFAULT_RESAMPLES, DEFAULT_SEED, Interval, cluster_bootstrap
@@ -81,11 +83,17 @@ def ratio_interval(
     if y.sum() == 0:
         return Interval(float("nan"), float("nan"), float("nan"))
 
+    if np.ptp(x) == 0 and np.ptp(y) == 0:  # every resample gives the same ratio (e.g. approve-only's zeros)
+        estimate = float(x.sum() / y.sum())
+        return Interval(estimate, estimate, estimate)
+
     def statistic(w: np.ndarray) -> np.ndarray:
         top, bottom = w @ x, w @ y
         return np.divide(top, bottom, out=np.full_like(top, np.nan), where=bottom > 0)
 
-    return cluster_bootstrap(statistic, clusters, n_resamples=n_resamples, seed=seed)
+    with warnings.catch_warnings():  # a ratio that every resample leaves at 1 (precision of 1) is fine
+        warnings.simplefilter("ignore", DegenerateDataWarning)
+        return cluster_bootstrap(statistic, clusters, n_resamples=n_resamples, seed=seed)
 
 
 def confusion(steps: pd.DataFrame) -> dict[str, int]:
