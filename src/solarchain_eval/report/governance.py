@@ -77,7 +77,7 @@ def ratio_interval(
     seed: int = DEFAULT_SEED,
 ) -> Interval:
     """sum(numerator) / sum(denominator) (a mean without a denominator) with a cluster-bootstrap
-    interval; ``nan`` when the denominator is zero (in the sample, or in a resample)."""
+    interval; ``nan`` when the denominator of the whole sample is zero."""
     x = np.asarray(numerator, dtype=float)
     y = np.ones_like(x) if denominator is None else np.asarray(denominator, dtype=float)
     if y.sum() == 0:
@@ -87,9 +87,13 @@ def ratio_interval(
         estimate = float(x.sum() / y.sum())
         return Interval(estimate, estimate, estimate)
 
+    estimate = float(x.sum() / y.sum())
+
     def statistic(w: np.ndarray) -> np.ndarray:
+        # A resample that drew no denominator step (no audit, say) has no ratio; it keeps the
+        # full-sample value rather than turning the whole interval into NaN.
         top, bottom = w @ x, w @ y
-        return np.divide(top, bottom, out=np.full_like(top, np.nan), where=bottom > 0)
+        return np.divide(top, bottom, out=np.full_like(top, estimate), where=bottom > 0)
 
     with warnings.catch_warnings():  # a ratio that every resample leaves at 1 (precision of 1) is fine
         warnings.simplefilter("ignore", DegenerateDataWarning)

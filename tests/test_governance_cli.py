@@ -1,0 +1,143 @@
+"""``solarchain-eval governance`` end to end, audit-quality arithmetic and the report section."""
+
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pandas as pd
+import pytest
+from typer.testing import CliRunner
+
+from solarchain_eval.cli import app
+from solarchain_eval.report.build import build_report
+from solarchain_eval.report.governance import audit_quality, ratio_interval
+from solarchain_eval.report.tables.model import ReportTable, Skipped
+
+
+def invoke(args):
+    return CliRunner().invoke(app, args)
+
+
+def test_audit_quality_on_a_hand_made_frame():
+    # 6 steps over 3 start days; unsafe = proposal_cost - least_cost > 0.01 on steps 0, 1, 2.
+    frame = pd.DataFrame(
+        {
+            "planner": "rule",
+            "auditor": "x",
+            "policy": "ppo",
+            "setting": "llm",
+            "run_seed": 1,
+            "episode": [0, 0, 1, 1, 2, 2],
+            "start_hour": [0, 0, 24, 24, 48, 48],
+            "step": [0, 1, 0, 1, 0, 1],
+            "audited": [True, False, True, True, False, False],
+            "decision": ["revise", None, "approve", "revise", None, None],
+            "proposal_cost": [0.5, 0.5, 0.5, 0.0, 0.0, 0.0],
+            "least_cost": [0.1, 0.1, 0.1, 0.0, 0.0, 0.0],
+            "bounded_cost": [0.5, 0.5, 0.5, 0.0, 0.0, 0.0],
+            "final_cost": [0.2, 0.5, 0.5, 0.0, 0.0, 0.0],
+            "bounded_reward": [1.0, 1.0, 1.0, 1.0, 1.0, 1.0],
+            "final_reward": [1.1, 1.0, 1.0, 0.7, 1.0, 1.0],
+            "bounded_artificial_liquidity_MWh": 0.0,
+            "final_artificial_liquidity_MWh": 0.0,
+        }
+    )
+    row = audit_quality(frame, n_resamples=200).iloc[0]
+    # audited {0, 2, 3}, unsafe {0, 1, 2}: TP 2, FP 1, FN 1, TN 2
+    assert (row.true_positives, row.false_positives, row.false_negatives, row.true_negatives) == (2, 1, 1, 2)
+    assert row.precision == pytest.approx(2 / 3) and row.recall == pytest.approx(2 / 3)
+    assert row.false_alarm_rate == pytest.approx(1 / 3) and row.audit_rate == 0.5
+    assert row.delta_cost_per_step == pytest.approx(-0.3 / 6)
+    assert row.delta_cost_per_revision == pytest.approx(-0.15)
+    assert row.revisions_lowering_cost == 0.5 and row.revisions_harmful == 0.5  # step 3 lost reward at equal cost
+    assert row.precision_low <= row.precision <= row.precision_high
+
+
+def test_ratio_interval_of_a_constant_is_degenerate_and_of_data_brackets_the_estimate():
+    clusters = np.repeat(np.arange(5), 4)
+    zero = ratio_interval(np.zeros(20), None, clusters)
+    assert (zero.estimate, zero.low, zero.high) == (0.0, 0.0, 0.0)
+    values = np.arange(20, dtype=float)
+    interval = ratio_interval(values, None, clusters, n_resamples=300)
+    assert interval.low < interval.estimate == values.mean() < interval.high
+
+
+def test_governance_command_writes_a_ranked_leaderboard(tiny_dataset, tmp_path):
+    out = tmp_path / "board"
+    result = invoke(
+        [
+            "governance",
+            "--data",
+            str(tiny_dataset),
+            "--policies",
+            "random,myopic",
+            "--seeds",
+            "3",
+            "--episodes",
+            "2",
+            "--planner",
+            "calibrated-rule",
+            "--auditors",
+            "rule,approve-only,random,oracle",
+            "--resamples",
+            "100",
+            "--out",
+            str(out),
+        ]
+    )
+    assert result.exit_code == 0, result.output
+    board = pd.read_csv(out / "leaderboard.csv")
+    assert list(board["rank"]) == [1, 2, 3, 4]
+    assert set(board["auditor"]) == {"rule", "approve-only", "random", "oracle"}
+    assert board["delta_cost_per_step"].is_monotonic_increasing
+    by_name = board.set_index("auditor")
+    assert by_name.loc["approve-only", "delta_cost_per_step"] == 0.0
+    assert by_name.loc["oracle", "delta_cost_per_step"] <= by_name.loc["rule", "delta_cost_per_step"]
+    # random audits as many steps as its reference (the rule auditor of the same planner)
+    assert by_name.loc["random", "audit_rate"] == pytest.approx(by_name.loc["rule", "audit_rate"], abs=1 / 24)
+    for name in ("leaderboard.md", "leaderboard_by_policy.csv", "figures/governance_precision_recall.png"):
+        assert (out / name).is_file(), name
+    metadata = json.loads((out / "governance_metadata.json").read_text())
+    assert set(metadata["files"]) >= {"leaderboard.csv", "leaderboard.md"}
+    run = out / "runs" / "llm" / "calibrated-rule--oracle"
+    assert (run / "governance_diagnostics.csv").is_file()
+    assert json.loads((run / "run_metadata.json").read_text())["agentic"]["auditor"] == "oracle"
+    # The report of one combination has the governance section.
+    outcome = build_report(run, tmp_path / "report", formats=("md",), figures=False)
+    table = next(t for t in outcome.tables if t.key == "governance_diagnostics")
+    assert isinstance(table, ReportTable) and set(table.data["policy"]) == {"random", "myopic"}
+    assert "Governance diagnostics" in (tmp_path / "report" / "report.md").read_text()
+
+
+@pytest.mark.parametrize(
+    ("extra", "message"),
+    [
+        (["--auditors", "rule,psychic"], "unknown auditor 'psychic'"),
+        (["--settings", "main"], "unknown setting"),
+        (["--triggers", "wind"], "unknown trigger set"),
+        (["--auditors", "llm:"], "give the model after 'llm:'"),
+    ],
+)
+def test_governance_command_rejects_bad_options_before_writing(tiny_dataset, tmp_path, extra, message):
+    out = tmp_path / "board"
+    result = invoke(["governance", "--data", str(tiny_dataset), "--episodes", "1", "--out", str(out), *extra])
+    assert result.exit_code == 2 and message in result.output
+    assert not out.exists()
+
+
+def test_report_without_diagnostics_skips_the_section(tiny_dataset, tmp_path):
+    run = tmp_path / "run"
+    result = invoke(
+        ["evaluate", "--data", str(tiny_dataset), "--policies", "random", "--seeds", "1", "--episodes", "1"]
+        + ["--agentic", "planner_auditor", "--out", str(run)]
+    )
+    assert result.exit_code == 0, result.output
+    outcome = build_report(run, tmp_path / "report", formats=("md",), figures=False)
+    table = next(t for t in outcome.tables if t.key == "governance_diagnostics")
+    assert isinstance(table, Skipped) and "--diagnostics" in table.reason
+    result = invoke(
+        ["evaluate", "--data", str(tiny_dataset), "--policies", "random", "--seeds", "1", "--episodes", "1"]
+        + ["--diagnostics", "--out", str(tmp_path / "plain")]
+    )
+    assert result.exit_code == 2 and "--diagnostics needs --agentic planner_auditor" in result.output
