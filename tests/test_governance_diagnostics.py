@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
@@ -119,6 +120,9 @@ class ComparingAuditor(RuleAuditor):
     def audit(self, context, site):
         evaluate = context.counterfactual
         action, cost, reward = self.oracle.best(context)
+        # fast path (grid pre-encoded, evaluator.executed) == the plain evaluator call per action
+        plain = dataclasses.replace(context, counterfactual=lambda a: evaluate(a))
+        assert self.oracle.best(plain) == (action, cost, reward)
         assert cost == step_cost(evaluate(action))
         rule_action, _ = rule_revision(context, self.codec)
         base, rule = evaluate(context.bounded_action), evaluate(rule_action)

@@ -26,7 +26,7 @@ import numpy as np
 
 from ..market.actions import ActionCodec
 from .auditor import REVISION_TOLERANCE, AuditOutcome, RuleAuditor, StepContext
-from .counterfactual import step_cost
+from .counterfactual import executed_form, step_cost
 from .errors import CallSite, LLMConfigError
 from .scheduler import HARD_REASONS, Decision, action_delta
 
@@ -161,6 +161,9 @@ class OracleAuditor:
         self.codec = codec
         self.reward_loss = float(reward_loss)
         self.grid = codec.discrete_table(ORACLE_GRID_LEVELS)
+        # Each candidate with the form the env executes, computed once (the evaluator would
+        # compute the same decode(encode(a)) at every audited step).
+        self._executed = [executed_form(a, codec) for a in self.grid]
 
     def best(self, context: StepContext) -> tuple[tuple[float, float, float], float, float]:
         """(action, cost, reward): ā unless an admissible grid action costs strictly less; among
@@ -171,8 +174,9 @@ class OracleAuditor:
         base = evaluate(context.bounded_action)
         floor = base.reward - self.reward_loss if math.isfinite(self.reward_loss) else -math.inf
         best, best_cost, best_reward = context.bounded_action, step_cost(base), base.reward
-        for action in self.grid:
-            outcome = evaluate(action)
+        evaluate_executed = getattr(evaluate, "executed", None)
+        for action, executed in zip(self.grid, self._executed, strict=True):
+            outcome = evaluate_executed(executed) if evaluate_executed is not None else evaluate(action)
             if outcome.reward < floor:
                 continue
             cost = step_cost(outcome)

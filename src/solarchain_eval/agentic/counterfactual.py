@@ -99,7 +99,10 @@ class CounterfactualEvaluator:
         self._memo.clear()
 
     def __call__(self, action: Action) -> StepOutcome:
-        executed = executed_form(action, self._codec)
+        return self.executed(executed_form(action, self._codec))
+
+    def executed(self, executed: Action) -> StepOutcome:
+        """The outcome of an action already in executed form (skips decode(encode(·)))."""
         outcome = self._memo.get(executed)
         if outcome is None:
             outcome = self._memo[executed] = self._env.counterfactual_step(executed)
