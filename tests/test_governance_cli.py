@@ -94,8 +94,16 @@ def test_governance_command_writes_a_ranked_leaderboard(tiny_dataset, tmp_path):
     by_name = board.set_index("auditor")
     assert by_name.loc["approve-only", "delta_cost_per_step"] == 0.0
     assert by_name.loc["oracle", "delta_cost_per_step"] <= by_name.loc["rule", "delta_cost_per_step"]
-    # random audits as many steps as its reference (the rule auditor of the same planner)
-    assert by_name.loc["random", "audit_rate"] == pytest.approx(by_name.loc["rule", "audit_rate"], abs=1 / 24)
+    # random audits exactly as many steps per episode as its reference (the rule auditor of the same planner)
+    logs = {
+        name: pd.read_json(out / "runs" / "llm" / f"calibrated-rule--{name}" / "agentic_logs.jsonl", lines=True)
+        for name in ("rule", "random")
+    }
+    keys = ["policy", "run_seed", "episode"]
+    per_episode = {name: log.groupby(keys)["audited"].sum() for name, log in logs.items()}
+    assert per_episode["random"].equals(per_episode["rule"])
+    assert by_name.loc["random", "audit_rate"] == by_name.loc["rule", "audit_rate"]
+    assert not logs["random"]["audited"].equals(logs["rule"]["audited"])  # but not on the same steps
     for name in ("leaderboard.md", "leaderboard_by_policy.csv", "figures/governance_precision_recall.png"):
         assert (out / name).is_file(), name
     metadata = json.loads((out / "governance_metadata.json").read_text())

@@ -142,7 +142,9 @@ def test_oracle_costs_no_more_than_the_rule_auditor_on_the_same_steps(tiny_datas
     checkers = []
 
     def install(governance):
-        governance.auditor = ComparingAuditor(governance.auditor.codec, OracleAuditor(governance.auditor.codec, reward_loss))
+        governance.auditor = ComparingAuditor(
+            governance.auditor.codec, OracleAuditor(governance.auditor.codec, reward_loss)
+        )
         checkers.append(governance.auditor)
 
     governed(tiny_dataset, AgenticOptions(auditor="rule"), policy="random", episodes=2, governance_hook=install)

@@ -61,6 +61,8 @@ class AgenticOptions:
         The random auditor's audit rate (default: the plan's budget B per episode).
     random_seed : int
         Seed of the random auditor's step choice.
+    random_audit_counts : mapping of (policy, run seed, episode) -> int, optional
+        Audits per episode for the random auditor to match exactly (e.g. a reference run's).
     oracle_reward_loss : float
         The oracle auditor's reward-loss bound per audited step.
     """
@@ -73,6 +75,7 @@ class AgenticOptions:
     target_audit_rate: float = DEFAULT_TARGET_AUDIT_RATE
     random_audit_rate: float | Mapping[str, float] | None = None
     random_seed: int = 0
+    random_audit_counts: Mapping[tuple[str, int, int], int] | None = None
     oracle_reward_loss: float = DEFAULT_ORACLE_REWARD_LOSS
 
     def __post_init__(self) -> None:
@@ -105,6 +108,11 @@ class AgenticOptions:
             rate = self.random_audit_rate
             described["random_audit_rate"] = dict(rate) if isinstance(rate, Mapping) else rate
             described["random_seed"] = self.random_seed
+            if self.random_audit_counts:
+                described["random_audit_counts"] = {
+                    f"{policy}/{seed}/{episode}": int(n)
+                    for (policy, seed, episode), n in self.random_audit_counts.items()
+                }
         if self.auditor == "oracle":
             described["oracle_reward_loss"] = self.oracle_reward_loss
         return described
@@ -155,7 +163,9 @@ class Governance:
         if kind == "always-audit":
             return AlwaysAuditAuditor(codec)
         if kind == "random":
-            return RandomAuditor(codec, self.options.random_audit_rate, self.options.random_seed)
+            return RandomAuditor(
+                codec, self.options.random_audit_rate, self.options.random_seed, self.options.random_audit_counts
+            )
         if kind == "oracle":
             return OracleAuditor(codec, self.options.oracle_reward_loss)
         assert self.client is not None

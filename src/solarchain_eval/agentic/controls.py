@@ -4,8 +4,9 @@ Auditor controls (selected with ``--auditor`` like ``rule`` and ``approve-only``
 
 - ``always-audit``: every step is audited, with the rule auditor's revision.
 - ``random``: a seeded, uniformly random set of steps is audited, as many per episode as the
-  reference auditor audited on average (``random_audit_rate``; default the plan's budget B), with
-  the rule auditor's revision. Against ``rule`` it isolates the selectivity of the triggers.
+  reference auditor audited in that episode (``random_audit_counts``), or round(rate · steps)
+  (``random_audit_rate``), or else the plan's budget B, with the rule auditor's revision.
+  Against ``rule`` it isolates the selectivity of the triggers.
 - ``oracle``: the scheduler's steps, and on each the action of the benchmark's 125-point grid
   (or ā) that minimises the counterfactual cost V + A with a reward loss against ā of at most
   ``oracle_reward_loss``. With an unbounded loss its cost is the least any action can reach,
@@ -123,14 +124,23 @@ class RandomAuditor(RuleAuditor):
         auditor's measured rate); None or a policy absent from the mapping: the plan's budget B.
     seed : int
         Seed of the selection; the stream of an episode is keyed by (seed, run seed, episode, policy).
+    counts : mapping of (policy, run seed, episode) -> int, optional
+        Audits per episode to match exactly (the reference's); wins over ``rates`` where given.
     """
 
     kind = "random"
 
-    def __init__(self, codec: ActionCodec, rates: float | Mapping[str, float] | None = None, seed: int = 0) -> None:
+    def __init__(
+        self,
+        codec: ActionCodec,
+        rates: float | Mapping[str, float] | None = None,
+        seed: int = 0,
+        counts: Mapping[tuple[str, int, int], int] | None = None,
+    ) -> None:
         super().__init__(codec)
         self.rates = rates
         self.seed = int(seed)
+        self.counts = counts or {}
 
     def rate_for(self, policy: str) -> float | None:
         if isinstance(self.rates, Mapping):
@@ -138,7 +148,8 @@ class RandomAuditor(RuleAuditor):
         return self.rates
 
     def select_steps(self, *, steps: int, budget: int, run_seed: int, episode: int, policy: str) -> frozenset[int]:
-        count = random_audit_count(self.rate_for(policy), budget, steps)
+        matched = self.counts.get((policy, int(run_seed), int(episode)))
+        count = int(matched) if matched is not None else random_audit_count(self.rate_for(policy), budget, steps)
         rng = np.random.default_rng([self.seed, int(run_seed), int(episode), zlib.crc32(policy.encode())])
         return frozenset(int(i) for i in rng.choice(steps, size=count, replace=False))
 

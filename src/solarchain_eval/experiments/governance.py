@@ -6,24 +6,24 @@ directory (``runs/<setting>/<planner>--<auditor>/``, written by :func:`run_evalu
 them inside one leaderboard root published as a whole by :class:`~.rundir.RunDirWriter`; the
 caller (``solarchain-eval governance``) adds the ranked table and figures before publication.
 
-The ``random`` auditor matches the audit rate of a reference combination: the first non-random
-auditor of the same planner and setting (``rule`` when it is asked for), measured per policy.
+The ``random`` auditor matches the audits of a reference combination, episode by episode: the
+``rule`` auditor of the same planner and setting when it is asked for, else the first other one.
 """
 
 from __future__ import annotations
 
 import dataclasses
+import statistics
 import tempfile
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
-import numpy as np
 import pandas as pd
 
 from ..agentic.build import AgenticOptions
-from ..agentic.policy import EXTRA_LOG_KEY, EXTRA_METRICS_KEY
+from ..agentic.policy import EXTRA_LOG_KEY
 from ..config import BenchmarkConfig
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, run_evaluation
 from .records import diagnostics_frame
@@ -72,12 +72,12 @@ class CombinationRun:
     wall_s: float
 
 
-def audit_rates(results: Sequence[EpisodeResult]) -> dict[str, float]:
-    """Mean audit rate per policy over its episodes."""
-    rates: dict[str, list[float]] = {}
-    for r in results:
-        rates.setdefault(r.policy, []).append(float(r.extras[EXTRA_METRICS_KEY]["audit_rate"]))
-    return {policy: float(np.mean(values)) for policy, values in rates.items()}
+def audit_counts(results: Sequence[EpisodeResult]) -> dict[tuple[str, int, int], int]:
+    """Audited steps per (policy, run seed, episode)."""
+    return {
+        (r.policy, int(r.run_seed), int(r.episode)): sum(1 for row in r.extras[EXTRA_LOG_KEY] if row["audited"])
+        for r in results
+    }
 
 
 def _ordered(combinations: Sequence[Combination]) -> list[Combination]:
@@ -113,7 +113,7 @@ def run_governance(
             if options.auditor == "random" and options.random_audit_rate is None:
                 reference = _reference(done, combination, setting)
                 if reference is not None:
-                    options = dataclasses.replace(options, random_audit_rate=audit_rates(reference.results))
+                    options = dataclasses.replace(options, random_audit_counts=audit_counts(reference.results))
             if on_combination is not None:
                 on_combination(combination, setting)
             evaluation = EvaluationSpec(
@@ -175,7 +175,7 @@ class Overhead:
     @property
     def ratio(self) -> float:
         """Median with / median without."""
-        return float(np.median(self.with_s) / np.median(self.without_s))
+        return float(statistics.median(self.with_s) / statistics.median(self.without_s))
 
 
 def diagnostics_overhead(
