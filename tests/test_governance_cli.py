@@ -138,7 +138,7 @@ def test_report_without_diagnostics_skips_the_section(tiny_dataset, tmp_path):
     run = tmp_path / "run"
     result = invoke(
         ["evaluate", "--data", str(tiny_dataset), "--policies", "random", "--seeds", "1", "--episodes", "1"]
-        + ["--agentic", "planner_auditor", "--out", str(run)]
+        + ["--agentic", "planner_auditor", "--no-diagnostics", "--out", str(run)]
     )
     assert result.exit_code == 0, result.output
     outcome = build_report(run, tmp_path / "report", formats=("md",), figures=False)
@@ -148,4 +148,4 @@ def test_report_without_diagnostics_skips_the_section(tiny_dataset, tmp_path):
         ["evaluate", "--data", str(tiny_dataset), "--policies", "random", "--seeds", "1", "--episodes", "1"]
         + ["--diagnostics", "--out", str(tmp_path / "plain")]
     )
-    assert result.exit_code == 2 and "--diagnostics needs --agentic planner_auditor" in result.output
+    assert result.exit_code == 2 and "--diagnostics/--no-diagnostics need --agentic planner_auditor" in result.output

@@ -241,3 +241,10 @@ def test_evaluator_memoises_and_matches_the_env(tiny_dataset):
     assert evaluate((0.3, 0.5, 0.1)) is first
     executed = env.codec.decode(env.codec.encode(0.3, 0.5, 0.1))
     assert env.counterfactual_step(executed) == first
+
+
+def test_diagnostics_csv_is_what_pandas_writes(tiny_dataset):
+    from solarchain_eval.experiments.records import diagnostics_csv
+
+    _, results = governed(tiny_dataset, AgenticOptions(planner="calibrated-rule", diagnostics=True), episodes=2)
+    assert diagnostics_csv(results) == diagnostics_frame(results).to_csv(index=False)

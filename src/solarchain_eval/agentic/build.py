@@ -54,7 +54,8 @@ class AgenticOptions:
     controls : SchedulerControls
         Trigger ablation and budget/cooldown overrides (docs/governance.md#controls).
     diagnostics : bool
-        Record counterfactual step records (``governance_diagnostics.csv``).
+        Record counterfactual step records (``governance_diagnostics.csv``; on by default, so the
+        report's governance section has them whenever a run has agentic logs).
     target_audit_rate : float
         The calibrated rule planner's target audit rate.
     random_audit_rate : float or mapping of policy -> float, optional
@@ -71,7 +72,7 @@ class AgenticOptions:
     auditor: str = "rule"
     llm: LLMOptions | None = None
     controls: SchedulerControls = field(default_factory=SchedulerControls)
-    diagnostics: bool = False
+    diagnostics: bool = True
     target_audit_rate: float = DEFAULT_TARGET_AUDIT_RATE
     random_audit_rate: float | Mapping[str, float] | None = None
     random_seed: int = 0
@@ -100,8 +101,8 @@ class AgenticOptions:
         # What differs from the paper's layer only, so default runs describe themselves as before.
         if not self.controls.is_default:
             described["controls"] = self.controls.describe()
-        if self.diagnostics:
-            described["diagnostics"] = True
+        if not self.diagnostics:
+            described["diagnostics"] = False
         if self.planner == "calibrated-rule":
             described["target_audit_rate"] = self.target_audit_rate
         if self.auditor == "random":

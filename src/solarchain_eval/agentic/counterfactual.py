@@ -92,14 +92,20 @@ class CounterfactualEvaluator:
         self._env = env
         self._codec: ActionCodec = env.codec
         self._memo: dict[Action, StepOutcome] = {}
+        self._raw_memo: dict[Action, StepOutcome] = {}  # by the action as given: skips re-encoding
         self.least_action = least_backing_action(self._codec)
+        self.least_executed = executed_form(self.least_action, self._codec)
 
     def new_step(self) -> None:
         """Forget the previous step's outcomes (call before each step's evaluations)."""
         self._memo.clear()
+        self._raw_memo.clear()
 
     def __call__(self, action: Action) -> StepOutcome:
-        return self.executed(executed_form(action, self._codec))
+        outcome = self._raw_memo.get(action)
+        if outcome is None:
+            outcome = self._raw_memo[action] = self.executed(executed_form(action, self._codec))
+        return outcome
 
     def executed(self, executed: Action) -> StepOutcome:
         """The outcome of an action already in executed form (skips decode(encode(·)))."""
@@ -114,8 +120,10 @@ def diagnostics_row(
 ) -> dict[str, Any]:
     """One ``governance_diagnostics.csv`` row (without the episode identifiers)."""
     row: dict[str, Any] = {key: log_row[key] for key in STEP_KEYS}
-    for role, action in zip(ACTION_ROLES, (proposal, bounded, final), strict=True):
-        for name, value in outcome_values(evaluate(action)).items():
-            row[f"{role}_{name}"] = value
-    row["least_cost"] = float(step_cost(evaluate(evaluate.least_action)))
+    for keys, action in zip(_ROLE_KEYS, (proposal, bounded, final), strict=True):
+        row.update(zip(keys, outcome_values(evaluate(action)).values(), strict=True))
+    row["least_cost"] = float(step_cost(evaluate.executed(evaluate.least_executed)))
     return row
+
+
+_ROLE_KEYS = tuple(tuple(f"{role}_{name}" for name in OUTCOME_FIELDS) for role in ACTION_ROLES)

@@ -40,11 +40,12 @@ AUDITOR = typer.Option(
     None, "--auditor", help=f"Auditor: {' | '.join(AUDITOR_KINDS)} (default rule).", rich_help_panel=_PANEL
 )
 DIAGNOSTICS = typer.Option(
-    False,
-    "--diagnostics",
-    help="Also write governance_diagnostics.csv: the counterfactual outcome (V, A, cost, reward, matched energy, "
-    "slippage) of the proposal, the bounded action and the final action at every governed step, from the same "
-    "state and price shock (the executed trajectory is unchanged; docs/governance.md).",
+    None,
+    "--diagnostics/--no-diagnostics",
+    help="With --agentic planner_auditor (default on): also write governance_diagnostics.csv, the counterfactual "
+    "outcome (V, A, cost, reward, matched energy, slippage) of the proposal, the bounded action and the final action "
+    "at every governed step, from the same state and price shock (the executed trajectory is unchanged; "
+    "docs/governance.md).",
     rich_help_panel=_PANEL,
 )
 LLM_BACKEND_CHOICES = ("remote", "local")

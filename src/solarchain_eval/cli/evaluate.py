@@ -103,7 +103,7 @@ def evaluate(
     llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
     llm_cache: Path | None = agentic_cli.LLM_CACHE,
     llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
-    diagnostics: bool = agentic_cli.DIAGNOSTICS,
+    diagnostics: bool | None = agentic_cli.DIAGNOSTICS,
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
@@ -115,7 +115,7 @@ def evaluate(
     With --agentic planner_auditor every policy runs behind the Planner/Auditor layer
     (rule planner and rule auditor by default; --planner llm / --auditor llm
     call an OpenAI-compatible endpoint, recordable and replayable with --llm-cache),
-    and the run also writes agentic_logs.jsonl.
+    and the run also writes agentic_logs.jsonl and governance_diagnostics.csv (see --no-diagnostics).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     if out is not None:
@@ -126,10 +126,10 @@ def evaluate(
         raise CliError(str(error)) from None
     params = dict(locals())
     governance = agentic_cli.options_from(params, agentic)
-    if diagnostics:
+    if diagnostics is not None:
         if governance is None:
-            raise CliError("--diagnostics needs --agentic planner_auditor")
-        governance = dataclasses.replace(governance, diagnostics=True)
+            raise CliError("--diagnostics/--no-diagnostics need --agentic planner_auditor")
+        governance = dataclasses.replace(governance, diagnostics=diagnostics)
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_seeds(seeds),

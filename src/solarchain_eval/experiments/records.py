@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -105,6 +107,23 @@ def agentic_log_text(results: Sequence[EpisodeResult]) -> str | None:
     return "".join(line + "\n" for line in lines)
 
 
+def diagnostics_csv(results: Sequence[EpisodeResult]) -> str | None:
+    """:func:`diagnostics_frame` as CSV text, written row by row with the csv module (what pandas
+    writes for these columns: floats as ``repr``, None empty; several times faster)."""
+    if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
+        return None
+    ids = (*EPISODE_KEYS[:5], "start_hour")
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow([*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
+    for r in results:
+        metrics = r.extras.get(EXTRA_METRICS_KEY, {})
+        head = [*(getattr(r, k) for k in ids), metrics.get("planner"), metrics.get("auditor")]
+        for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ()):
+            writer.writerow([*head, *(row[c] for c in DIAGNOSTIC_COLUMNS)])
+    return buffer.getvalue()
+
+
 def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
     """One row per governed step with its counterfactual outcomes (docs/governance.md), or None
     when no episode recorded diagnostics."""
@@ -170,8 +189,8 @@ def write_records(run_dir: Path, results: Sequence[EpisodeResult], cities: Seque
     log = agentic_log_text(results)
     if log is not None:
         paths[AGENTIC_LOG_FILE] = atomic_write_text(run_dir / AGENTIC_LOG_FILE, log)
-    diagnostics = diagnostics_frame(results)
+    diagnostics = diagnostics_csv(results)
     if diagnostics is not None:
-        paths[DIAGNOSTICS_FILE] = atomic_write_csv(run_dir / DIAGNOSTICS_FILE, diagnostics)
+        paths[DIAGNOSTICS_FILE] = atomic_write_text(run_dir / DIAGNOSTICS_FILE, diagnostics)
     paths[SUMMARY_FILE] = atomic_write_json(run_dir / SUMMARY_FILE, summarize(metrics))
     return paths

@@ -256,7 +256,7 @@ def verify_report_inputs(root: Path, kind: str) -> list[str]:
     problems = [p for unit in _eval_units(root) if is_done(unit) for p in verify_run_dir(unit)]
     meta_path = root / PAPER_METADATA_FILE
     recorded = _read_json(meta_path).get("combined_sha256") or {}
-    names = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, SUMMARY_FILE)
+    names = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, DIAGNOSTICS_FILE, SUMMARY_FILE)
     for folder in sorted(p for p in (root / COMBINED_DIR).glob("*") if p.is_dir()):
         problems += verify_files(folder, recorded.get(folder.name), meta_path, names)
     return problems

@@ -5,7 +5,8 @@ One home for every label the report shows, so tables and figures agree.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from typing import Any
 
 from ..experiments.rollout import (
     SETTING_AGENTIC,
@@ -57,6 +58,7 @@ __all__ = [
     "paper_order",
     "alphabetical_order",
     "learned_order",
+    "governance_layer",
 ]
 
 
@@ -92,3 +94,32 @@ def learned_order(policies: Iterable[str]) -> list[str]:
     learned = {p for p in policies if is_learned(p)}
     known = [p for p in LEARNED_ORDER if p in learned]
     return known + sorted(learned - set(known))
+
+
+def _llm_model(metadata: Mapping[str, Any]) -> str | None:
+    """The LLM model recorded in run or paper metadata (``agentic.llm.model``), if any."""
+    for holder in (metadata, metadata.get("grid") or {}, metadata.get("identity") or {}):
+        agentic = holder.get("agentic") if isinstance(holder, Mapping) else None
+        llm = agentic.get("llm") if isinstance(agentic, Mapping) else None
+        if isinstance(llm, Mapping) and llm.get("model"):
+            return str(llm["model"])
+    return None
+
+
+def governance_layer(metrics: Any, metadata: Mapping[str, Any]) -> str:
+    """The planner and auditor that governed the agentic rollouts, as tables name them.
+
+    E.g. "rule planner, rule auditor" or "llm:gpt-4o planner, oracle auditor" (from the
+    ``planner`` and ``auditor`` columns of ``metrics.csv`` and the model in the metadata); several
+    kinds are joined with "/"; "Planner/Auditor layer" when the columns are absent.
+    """
+    agentic = metrics[metrics["setting"].isin(list(AGENTIC_BASE))] if "setting" in metrics else metrics
+    if agentic.empty or not {"planner", "auditor"} <= set(agentic.columns):
+        return "Planner/Auditor layer"
+    model = _llm_model(metadata)
+
+    def kinds(column: str) -> str:
+        names = sorted({str(k) for k in agentic[column].dropna()})
+        return "/".join(f"llm:{model}" if k == "llm" and model else k for k in names) or "unknown"
+
+    return f"{kinds('planner')} planner, {kinds('auditor')} auditor"

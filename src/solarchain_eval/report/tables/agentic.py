@@ -7,7 +7,7 @@ import pandas as pd
 from ...experiments.rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS
 from ..casestudy import select_case
 from ..loading import ReportData
-from ..naming import AGENTIC_REWARD_LABELS, alphabetical_order, policy_label, setting_label
+from ..naming import AGENTIC_REWARD_LABELS, alphabetical_order, governance_layer, policy_label, setting_label
 from ..options import ReportOptions
 from .common import agentic_rollouts, means, pooled_revision_rate, size_fields, sizes_of
 from .model import Column, ReportTable, Skipped, basis_sentence, cell, fixed, integer, text
@@ -53,7 +53,8 @@ def _step_count(data: ReportData, setting: str, policy: str, episodes: int) -> t
 
 def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """Appendix: audit, revision and modification rates, mean action delta, not-triggered rate."""
-    title = "Detailed LLM governance operation rates"
+    layer = governance_layer(data.metrics, data.metadata)
+    title = f"Detailed governance operation rates ({layer})"
     groups = _agentic_groups(data, "llm_operations", title)
     if isinstance(groups, Skipped):
         return groups
@@ -96,9 +97,9 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         label="tab:app-llm-ops",
         title=title,
         caption=(
-            'Detailed LLM governance operation rates per agentic setting ("Main": RL+LLM; "No-physics": '
-            "RL+LLM no-physics) and policy. Rates are pooled over the group's governance steps; revision given "
-            "audit is revisions per audit."
+            f'Detailed governance operation rates of the {layer} per agentic setting ("Main": RL+LLM; '
+            '"No-physics": RL+LLM no-physics) and policy. Rates are pooled over the group\'s governance steps; '
+            "revision given audit is revisions per audit."
         ),
         columns=columns,
         data=frame,
@@ -109,7 +110,8 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
 
 def llm_triggers(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """Appendix: post-hoc trigger rates and the Planner's mean thresholds."""
-    title = "Detailed LLM trigger diagnostics and mean Planner thresholds"
+    layer = governance_layer(data.metrics, data.metadata)
+    title = f"Detailed trigger diagnostics and mean Planner thresholds ({layer})"
     groups = _agentic_groups(data, "llm_triggers", title)
     if isinstance(groups, Skipped):
         return groups
@@ -130,7 +132,8 @@ def llm_triggers(data: ReportData, options: ReportOptions) -> ReportTable | Skip
         label="tab:app-llm-triggers",
         title=title,
         caption=(
-            "Detailed LLM post-hoc trigger diagnostics and mean Planner thresholds. Trigger columns report the "
+            f"Detailed post-hoc trigger diagnostics and mean Planner thresholds of the {layer}. Trigger columns "
+            "report the "
             "fraction of logged steps satisfying each trigger condition, audited or not."
         ),
         columns=columns,
@@ -146,7 +149,8 @@ def _action(values) -> str:
 
 def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """A representative audit trace from ``agentic_logs.jsonl`` (field/value rows)."""
-    title = "Representative LLM audit trace"
+    layer = governance_layer(data.metrics, data.metadata)
+    title = f"Representative audit trace ({layer})"
     if data.logs.empty:
         return Skipped("case_study", title, "the run has no agentic_logs.jsonl (no agentic setting)")
     case, rule = select_case(data.logs, options)
@@ -155,6 +159,7 @@ def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skippe
     reason = case["reason"] if isinstance(case["reason"], str) and case["reason"] else "(none logged)"
     fields = [
         ("policy / setting", f"{policy_label(case['policy'])} / {setting_label(case['setting'])}"),
+        ("Planner / auditor", layer),
         (
             "Episode and step",
             f"Episode {int(case['episode'])}, step {int(case['step'])}, hour {int(case['hour'])} "
@@ -176,7 +181,7 @@ def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skippe
         label="tab:app-case-study",
         title=title,
         caption=(
-            "Representative LLM audit trace selected from agentic_logs.jsonl. The row records the market "
+            f"Representative audit trace of the {layer}, selected from agentic_logs.jsonl. The row records the market "
             "context, proposed RL action, audited final action, and action delta."
         ),
         columns=[
