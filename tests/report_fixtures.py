@@ -116,6 +116,33 @@ def _agentic_metrics(rng: np.random.Generator, steps: list[dict]) -> dict:
     }
 
 
+def _diagnostics(rng: np.random.Generator, logs: list[dict]) -> pd.DataFrame:
+    """Counterfactual step records for the logged steps (governance_diagnostics.csv columns)."""
+    rows = []
+    for s in logs:
+        least = float(rng.uniform(0.0, 0.05))
+        proposal = least + float(rng.exponential(0.03))
+        final = proposal - (float(rng.uniform(0.0, proposal - least)) if s["decision"] == "revise" else 0.0)
+        reward = float(rng.normal())
+        row = {k: s[k] for k in ("policy", "setting", "run_seed", "episode", "episode_seed")}
+        row |= {"start_hour": s["absolute_hour"] - s["step"], "planner": "rule", "auditor": "rule", "step": s["step"]}
+        row |= {"audited": s["audited"], "decision": s["decision"], "hard_trigger": s["hard_trigger"]}
+        row |= {"soft_trigger": s["soft_trigger"]}
+        for role, cost, gain in (
+            ("proposal", proposal, 0.0),
+            ("bounded", proposal, 0.0),
+            ("final", final, proposal - final),
+        ):
+            row |= {
+                f"{role}_cost": cost,
+                f"{role}_reward": reward + gain,
+                f"{role}_artificial_liquidity_MWh": cost / 10,
+            }
+        row["least_cost"] = least
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
 def make_paper_root(root: Path, seed: int = 5) -> Path:
     """Write the synthetic paper root under ``root`` and return it."""
     rng = np.random.default_rng(seed)
@@ -177,6 +204,10 @@ def make_paper_root(root: Path, seed: int = 5) -> Path:
         pd.DataFrame(city_rows).to_csv(folder / "city_hour_policy.csv", index=False)
         if logs:
             (folder / "agentic_logs.jsonl").write_text("".join(json.dumps(s) + "\n" for s in logs), encoding="utf-8")
+            # its own stream, so the other files' values are those of the fixture without it
+            _diagnostics(np.random.default_rng([seed, 1]), logs).to_csv(
+                folder / "governance_diagnostics.csv", index=False
+            )
     return write_paper_metadata(root)
 
 

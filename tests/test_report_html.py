@@ -26,7 +26,7 @@ def full_report(tmp_path_factory: pytest.TempPathFactory):
 def test_every_figure_is_drawn_as_png_and_svg(full_report):
     figures = full_report.figures
     assert all(isinstance(f, FigureFile) for f in figures), [f for f in figures if not isinstance(f, FigureFile)]
-    assert len(figures) == 16
+    assert len(figures) == 18  # with the two governance figures
     for figure in figures:
         assert figure.png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert b"<svg" in figure.svg.read_bytes()[:2000]
@@ -57,7 +57,7 @@ def test_index_html_is_self_contained(full_report):
     assert "<script" not in page
     assert not re.search(r'(href|src)="(https?:)?//', page)
     tables = [t for t in full_report.tables if isinstance(t, ReportTable)]
-    assert page.count('<figure class="table"') == len(tables) == 13
+    assert page.count('<figure class="table"') == len(tables) == 14
     for section in ("Dataset provenance", "Run metadata", "Rollouts overlap"):
         assert section in page
     assert "market_liquidity.csv" in page and "missing" in page  # recorded checksum, data dir gone
