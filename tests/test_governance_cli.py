@@ -115,6 +115,13 @@ def test_governance_command_writes_a_ranked_leaderboard(tiny_dataset, tmp_path):
     outcome = build_report(run, tmp_path / "report", formats=("md",), figures=False)
     table = next(t for t in outcome.tables if t.key == "governance_diagnostics")
     assert isinstance(table, ReportTable) and set(table.data["policy"]) == {"random", "myopic"}
+    # ... and reads the same figures as the leaderboard's rows of that combination
+    detail = pd.read_csv(out / "leaderboard_by_policy.csv")
+    detail = detail[(detail["planner"] == "calibrated-rule") & (detail["auditor"] == "oracle")]
+    columns = ["policy", "audit_rate", "precision", "recall", "delta_cost_per_step", "delta_reward_per_step"]
+    mine = table.data[columns].sort_values("policy").reset_index(drop=True)
+    theirs = detail[columns].sort_values("policy").reset_index(drop=True)
+    pd.testing.assert_frame_equal(mine, theirs, check_exact=False, rtol=1e-12)
     assert "Governance diagnostics" in (tmp_path / "report" / "report.md").read_text()
 
 

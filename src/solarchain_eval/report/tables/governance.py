@@ -12,7 +12,7 @@ import pandas as pd
 from ...agentic.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from ..governance import audit_quality
 from ..loading import ReportData
-from ..naming import policy_label, setting_label
+from ..naming import AGENTIC_REWARD_LABELS, policy_label, setting_label
 from ..options import ReportOptions
 from .model import Column, ReportTable, Row, Skipped, fixed, integer, text, with_interval
 
@@ -50,14 +50,14 @@ def rank(quality: pd.DataFrame) -> pd.DataFrame:
 def quality_columns(frame: pd.DataFrame, usage: bool) -> list[Column]:
     """Printed columns: identifiers present in ``frame``, rates and effects, LLM usage if asked."""
     columns = [Column("#", integer("rank"), align="r")] if "rank" in frame.columns else []
-    labels = {"planner": "Planner", "auditor": "Auditor", "setting": "Setting", "policy": "Policy"}
+    labels = {"planner": "Planner", "auditor": "Auditor", "setting": "Reward", "policy": "Policy"}
     for key, header in labels.items():
         if key in frame.columns:
             render = text(key)
             if key == "policy":
                 render = lambda row: policy_label(str(row["policy"]))  # noqa: E731
-            if key == "setting":
-                render = lambda row: setting_label(str(row["setting"]))  # noqa: E731
+            if key == "setting":  # the reward of the agentic setting: the layer is named in its own columns
+                render = lambda row: AGENTIC_REWARD_LABELS.get(str(row["setting"]), setting_label(str(row["setting"])))  # noqa: E731
             columns.append(Column(header, render, align="l"))
     columns += [
         Column("Audit rate", _plain("audit_rate", 3)),
