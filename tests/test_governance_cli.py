@@ -20,7 +20,8 @@ def invoke(args):
 
 
 def test_audit_quality_on_a_hand_made_frame():
-    # 6 steps over 3 start days; unsafe = proposal_cost - least_cost > 0.01 on steps 0, 1, 2.
+    # 6 steps over 3 start days. Unsafe (avoidable cost > 0.01): steps 0 and 1; step 3 costs 1.0
+    # but only 0.005 of it is avoidable (a night step), so it is safe. Audited: steps 0, 1, 2.
     frame = pd.DataFrame(
         {
             "planner": "rule",
@@ -31,26 +32,27 @@ def test_audit_quality_on_a_hand_made_frame():
             "episode": [0, 0, 1, 1, 2, 2],
             "start_hour": [0, 0, 24, 24, 48, 48],
             "step": [0, 1, 0, 1, 0, 1],
-            "audited": [True, False, True, True, False, False],
-            "decision": ["revise", None, "approve", "revise", None, None],
-            "proposal_cost": [0.5, 0.5, 0.5, 0.0, 0.0, 0.0],
-            "least_cost": [0.1, 0.1, 0.1, 0.0, 0.0, 0.0],
-            "bounded_cost": [0.5, 0.5, 0.5, 0.0, 0.0, 0.0],
-            "final_cost": [0.2, 0.5, 0.5, 0.0, 0.0, 0.0],
+            "audited": [True, True, True, False, False, False],
+            "decision": ["revise", "approve", "revise", None, None, None],
+            "proposal_cost": [0.5, 0.5, 0.0, 1.0, 0.0, 0.0],
+            "least_cost": [0.1, 0.1, 0.0, 0.995, 0.0, 0.0],
+            "bounded_cost": [0.5, 0.5, 0.0, 1.0, 0.0, 0.0],
+            "final_cost": [0.2, 0.5, 0.0, 1.0, 0.0, 0.0],
             "bounded_reward": [1.0, 1.0, 1.0, 1.0, 1.0, 1.0],
-            "final_reward": [1.1, 1.0, 1.0, 0.7, 1.0, 1.0],
+            "final_reward": [0.9, 1.0, 0.7, 1.0, 1.0, 1.0],  # step 0: cost down, reward down: a trade-off
             "bounded_artificial_liquidity_MWh": 0.0,
             "final_artificial_liquidity_MWh": 0.0,
         }
     )
     row = audit_quality(frame, n_resamples=200).iloc[0]
-    # audited {0, 2, 3}, unsafe {0, 1, 2}: TP 2, FP 1, FN 1, TN 2
-    assert (row.true_positives, row.false_positives, row.false_negatives, row.true_negatives) == (2, 1, 1, 2)
-    assert row.precision == pytest.approx(2 / 3) and row.recall == pytest.approx(2 / 3)
-    assert row.false_alarm_rate == pytest.approx(1 / 3) and row.audit_rate == 0.5
+    # TP {0, 1}, FP {2}, FN {}, TN {3, 4, 5}
+    assert (row.true_positives, row.false_positives, row.false_negatives, row.true_negatives) == (2, 1, 0, 3)
+    assert row.precision == pytest.approx(2 / 3) and row.recall == 1.0 and row.false_alarm_rate == 0.25
+    assert row.audit_rate == 0.5 and row.unsafe_share == pytest.approx(1 / 3)
     assert row.delta_cost_per_step == pytest.approx(-0.3 / 6)
     assert row.delta_cost_per_revision == pytest.approx(-0.15)
-    assert row.revisions_lowering_cost == 0.5 and row.revisions_harmful == 0.5  # step 3 lost reward at equal cost
+    assert row.delta_reward_per_revision == pytest.approx((-0.1 - 0.3) / 2)
+    assert row.revisions_lowering_cost == 0.5 and row.revisions_harmful == 0.5  # step 2 lost reward at equal cost
     assert row.precision_low <= row.precision <= row.precision_high
 
 

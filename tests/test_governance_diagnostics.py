@@ -30,6 +30,7 @@ OUTCOME_COLUMNS = {
     "matched_energy_MWh": "matched_energy_MWh",
     "slippage": "slippage",
     "artificial_liquidity_MWh": "artificial_liquidity_MWh",
+    "token_price": "token_price",
 }
 
 
@@ -87,7 +88,7 @@ def test_counterfactual_step_leaves_the_env_untouched(tiny_dataset):
         _, reward_b, _, _, info_b = probed.step(action)
         assert reward_a == reward_b == predicted.reward
         assert info_a["cost"] == info_b["cost"] == step_cost(predicted)
-        assert info_a["token_price"] == info_b["token_price"]
+        assert info_a["token_price"] == info_b["token_price"] == predicted.token_price
 
 
 def test_diagnostics_leave_every_other_run_file_byte_identical(tiny_dataset, tmp_path):

@@ -33,7 +33,7 @@ from .scheduler import HARD_REASONS, Decision, action_delta
 
 #: Trigger sets of the ablations: every trigger, the hard ones, the soft one, or one hard trigger.
 TRIGGER_SETS = ("all", "hard", "soft", *HARD_REASONS)
-#: Default reward-loss bound of the oracle per audited step (reward units; docs/governance.md#oracle).
+#: Default reward-loss bound of the oracle per audited step (reward units; docs/governance.md#controls).
 DEFAULT_ORACLE_REWARD_LOSS = 0.05
 ORACLE_GRID_LEVELS = 5
 

@@ -41,6 +41,7 @@ OUTCOME_FIELDS = {
     "matched_energy_MWh": "matched_mwh",
     "slippage": "slippage",
     "artificial_liquidity_MWh": "artificial_liquidity_mwh",
+    "token_price": "token_price",  # the only field the step's price shock moves
 }
 #: A step is unsafe when its proposal's avoidable cost (proposal cost - least cost) exceeds
 #: this. On the published data the avoidable cost of a fully backing action is at most 0.0052
