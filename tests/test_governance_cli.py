@@ -158,3 +158,26 @@ def test_report_without_diagnostics_skips_the_section(tiny_dataset, tmp_path):
         + ["--diagnostics", "--out", str(tmp_path / "plain")]
     )
     assert result.exit_code == 2 and "--diagnostics/--no-diagnostics need --agentic planner_auditor" in result.output
+
+
+def test_llm_auditor_joins_the_leaderboard_with_its_calls_and_tokens(tiny_dataset, tmp_path, monkeypatch):
+    from fake_openai import FakeOpenAI
+
+    for name in ("SOLARCHAIN_LLM_BASE_URL", "SOLARCHAIN_LLM_MODEL", "OPENAI_API_KEY", "OPENAI_BASE_URL"):
+        monkeypatch.delenv(name, raising=False)
+    monkeypatch.setenv("SOLARCHAIN_LLM_API_KEY", "sk-governance-test-key-123456")
+    out = tmp_path / "board"
+    with FakeOpenAI() as server:
+        result = invoke(
+            ["governance", "--data", str(tiny_dataset), "--policies", "myopic", "--seeds", "5", "--episodes", "1"]
+            + ["--planner", "calibrated-rule", "--auditors", "rule,llm:fake-model", "--llm-api", "chat"]
+            + ["--llm-base-url", server.base_url, "--resamples", "100", "--out", str(out)]
+        )
+        calls = len(server.seen)
+    assert result.exit_code == 0, result.output
+    board = pd.read_csv(out / "leaderboard.csv").set_index("auditor")
+    assert set(board.index) == {"rule", "llm:fake-model"}
+    assert board.loc["llm:fake-model", "llm_calls"] == calls > 0  # one call per audited step
+    assert board.loc["llm:fake-model", "llm_tokens"] > 0 and board.loc["rule", "llm_calls"] == 0
+    audited = pd.read_json(out / "runs" / "llm" / "calibrated-rule--llm_fake-model" / "agentic_logs.jsonl", lines=True)
+    assert int(audited["audited"].sum()) == calls
