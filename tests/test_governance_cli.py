@@ -181,3 +181,21 @@ def test_llm_auditor_joins_the_leaderboard_with_its_calls_and_tokens(tiny_datase
     assert board.loc["llm:fake-model", "llm_tokens"] > 0 and board.loc["rule", "llm_calls"] == 0
     audited = pd.read_json(out / "runs" / "llm" / "calibrated-rule--llm_fake-model" / "agentic_logs.jsonl", lines=True)
     assert int(audited["audited"].sum()) == calls
+
+
+def test_trigger_ablations_are_planner_variants_with_their_own_random_reference(tiny_dataset, tmp_path):
+    out = tmp_path / "board"
+    result = invoke(
+        ["governance", "--data", str(tiny_dataset), "--policies", "random", "--seeds", "2", "--episodes", "2"]
+        + ["--planner", "rule", "--auditors", "rule,random", "--triggers", "all,gap,soft"]
+        + ["--resamples", "100", "--out", str(out)]
+    )
+    assert result.exit_code == 0, result.output
+    board = pd.read_csv(out / "leaderboard.csv")
+    assert set(board["planner"]) == {"rule", "rule[gap]", "rule[soft]"}
+    rates = board.set_index(["planner", "auditor"])["audit_rate"]
+    for planner in ("rule", "rule[gap]", "rule[soft]"):
+        assert rates[(planner, "random")] == rates[(planner, "rule")]  # matched to its own variant
+    assert rates[("rule[soft]", "rule")] < rates[("rule", "rule")] == 1.0
+    logs = pd.read_json(out / "runs" / "llm" / "rule_gap_--rule" / "agentic_logs.jsonl", lines=True)
+    assert all(set(reasons) <= {"gap"} for reasons in logs["hard_reasons"])

@@ -163,7 +163,11 @@ def governance(
     target_audit_rate: float = typer.Option(
         DEFAULT_TARGET_AUDIT_RATE, min=0.0, max=1.0, help="The calibrated-rule planner's target audit rate."
     ),
-    triggers: str = typer.Option("all", help=f"Trigger ablation: {' | '.join(TRIGGER_SETS)}."),
+    triggers: str = typer.Option(
+        "all",
+        help=f"Comma-separated trigger ablations ({', '.join(TRIGGER_SETS)}): each one is a further planner variant, "
+        "labelled PLANNER[TRIGGERS] (all: as planned).",
+    ),
     max_audits: int | None = typer.Option(None, min=1, help="Override the plan's max audits per episode."),
     cooldown: int | None = typer.Option(None, min=0, help="Override the plan's cooldown (steps)."),
     random_seed: int = typer.Option(0, help="Seed of the random auditor's choice of steps."),
@@ -204,19 +208,24 @@ def governance(
         )
     llm_models = [_kind(n)[1] for n in (*_split(planner, "planners"), *_split(auditors, "auditors"))]
     params = dict(locals(), llm_model=next((m for m in llm_models if m), None))
-    try:
-        controls = SchedulerControls(triggers=triggers, max_audits=max_audits, cooldown_steps=cooldown)
-    except LLMConfigError as error:
-        raise CliError(str(error)) from None
-    extra = {
-        "controls": controls,
-        "target_audit_rate": target_audit_rate,
-        "oracle_reward_loss": oracle_reward_loss,
-        "random_seed": random_seed,
-    }
-    combinations = [
-        _combination(p, a, params, extra) for p in _split(planner, "planners") for a in _split(auditors, "auditors")
-    ]
+    combinations = []
+    for trigger_set in _split(triggers, "trigger sets"):
+        try:
+            controls = SchedulerControls(triggers=trigger_set, max_audits=max_audits, cooldown_steps=cooldown)
+        except LLMConfigError as error:
+            raise CliError(str(error)) from None
+        extra = {
+            "controls": controls,
+            "target_audit_rate": target_audit_rate,
+            "oracle_reward_loss": oracle_reward_loss,
+            "random_seed": random_seed,
+        }
+        for p in _split(planner, "planners"):
+            for a in _split(auditors, "auditors"):
+                combination = _combination(p, a, params, extra)
+                if trigger_set != "all":
+                    combination = dataclasses.replace(combination, planner_label=f"{p}[{trigger_set}]")
+                combinations.append(combination)
     spec = GovernanceSpec(
         policies=names,
         combinations=combinations,

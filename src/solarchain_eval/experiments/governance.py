@@ -7,7 +7,8 @@ them inside one leaderboard root published as a whole by :class:`~.rundir.RunDir
 caller (``solarchain-eval governance``) adds the ranked table and figures before publication.
 
 The ``random`` auditor matches the audits of a reference combination, episode by episode: the
-``rule`` auditor of the same planner and setting when it is asked for, else the first other one.
+``rule`` auditor of the same planner, scheduler controls and setting when it is asked for, else
+the first other one.
 """
 
 from __future__ import annotations
@@ -91,6 +92,7 @@ def _reference(done: Sequence[CombinationRun], combination: Combination, setting
         for run in done
         if run.setting == setting
         and run.combination.options.planner == combination.options.planner
+        and run.combination.options.controls == combination.options.controls
         and run.combination.options.auditor != "random"
     ]
     preferred = [run for run in candidates if run.combination.options.auditor == "rule"]
