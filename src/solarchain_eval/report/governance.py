@@ -150,16 +150,3 @@ def audit_quality(
         row["total_delta_cost_per_step"] = float(part["total_delta_cost"].mean())
         rows.append(row)
     return pd.DataFrame(rows)
-
-
-def llm_usage(logs: pd.DataFrame) -> dict[str, float]:
-    """Auditor LLM calls, tokens (input + output) and mean latency from agentic log rows
-    (each row's ``llm`` field; rule and control auditors make none)."""
-    calls, tokens, latency = 0, 0, 0.0
-    column = logs["llm"] if "llm" in logs.columns else []
-    for meta in column:
-        if isinstance(meta, dict):
-            calls += 1
-            tokens += int(meta.get("input_tokens") or 0) + int(meta.get("output_tokens") or 0)
-            latency += float(meta.get("latency_s") or 0.0)
-    return {"llm_calls": calls, "llm_tokens": tokens, "llm_mean_latency_s": latency / calls if calls else 0.0}
