@@ -18,8 +18,23 @@ def _label(row: pd.Series | dict) -> str:
     return f"{row['planner']} / {row['auditor']}"
 
 
+#: Auditor colours (colour-blind safe first, then more), planner markers: combinations stay apart.
+AUDITOR_COLOURS = ("#0072b2", "#d55e00", "#009e73", "#cc79a7", "#e69f00", "#56b4e9", *EXTRA_COLOURS)
+PLANNER_MARKERS = ("o", "s", "^", "D", "v", "P", "X", "*")
+
+
 def _colours(labels: list[str]) -> dict[str, str]:
-    return {label: EXTRA_COLOURS[i % len(EXTRA_COLOURS)] for i, label in enumerate(sorted(set(labels)))}
+    return {label: AUDITOR_COLOURS[i % len(AUDITOR_COLOURS)] for i, label in enumerate(sorted(set(labels)))}
+
+
+def _style(quality: pd.DataFrame) -> dict[str, tuple[str, str]]:
+    """(colour by auditor, marker by planner) of each "planner / auditor" label."""
+    colours = _colours([str(a) for a in quality["auditor"]])
+    planners = sorted({str(p) for p in quality["planner"]})
+    return {
+        _label(row): (colours[str(row["auditor"])], PLANNER_MARKERS[planners.index(str(row["planner"])) % 8])
+        for _, row in quality.iterrows()
+    }
 
 
 def precision_recall_figure(
@@ -29,21 +44,24 @@ def precision_recall_figure(
     precision a chance auditor reaches (dotted line)."""
     title = "Audit precision vs recall"
     labels = [_label(row) for _, row in quality.iterrows()]
-    colours = _colours(labels)
-    with new_figure() as (figure, axes):
+    style = _style(quality)
+    with new_figure(figsize=(6.4, 3.6)) as (figure, axes):
         ax = axes[0, 0]
         for label, (_, row) in zip(labels, quality.iterrows(), strict=True):
             x, y = row["recall"], row["precision"]
             xerr = [[max(x - row["recall_low"], 0)], [max(row["recall_high"] - x, 0)]]
             yerr = [[max(y - row["precision_low"], 0)], [max(row["precision_high"] - y, 0)]]
-            ax.errorbar(x, y, xerr=xerr, yerr=yerr, fmt="o", color=colours[label], label=label, capsize=2)
+            colour, marker = style[label]
+            ax.errorbar(
+                x, y, xerr=xerr, yerr=yerr, fmt=marker, color=colour, label=label, capsize=2, alpha=0.8, markersize=6
+            )
         ax.axhline(float(quality["unsafe_share"].mean()), color="#555555", linestyle=":", linewidth=1)
         ax.set_xlim(-0.02, 1.02)
         ax.set_ylim(-0.02, 1.02)
         ax.set_xlabel("Recall (unsafe steps audited)")
         ax.set_ylabel("Precision (audited steps unsafe)")
         ax.set_title(title)
-        ax.legend(loc="lower left")
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0))
         caption = (
             "Precision vs recall of each planner/auditor's audited steps against the counterfactual ground truth "
             "(95 % cluster-bootstrap intervals over start days); the dotted line is the unsafe share, the precision "
@@ -61,20 +79,21 @@ def revision_scatter_figure(
     if not revised.any():
         return Skipped(key, title, "no audited step was revised")
     labels = diagnostics.loc[revised].apply(_label, axis=1)
-    colours = _colours(list(labels))
-    with new_figure() as (figure, axes):
+    style = _style(diagnostics.loc[revised, ["planner", "auditor"]].drop_duplicates())
+    with new_figure(figsize=(6.4, 3.6)) as (figure, axes):
         ax = axes[0, 0]
         for label in sorted(set(labels)):
             chosen = steps.loc[revised][(labels == label).to_numpy()]
+            colour, marker = style[label]
             ax.scatter(
-                chosen["delta_cost"], chosen["delta_reward"], s=8, alpha=0.5, color=colours[label], label=label, lw=0
+                chosen["delta_cost"], chosen["delta_reward"], s=9, alpha=0.45, color=colour, marker=marker, label=label
             )
         ax.axhline(0.0, color="#555555", linewidth=0.8)
         ax.axvline(0.0, color="#555555", linewidth=0.8)
         ax.set_xlabel("Δ cost (final − ā)")
         ax.set_ylabel("Δ reward (final − ā)")
         ax.set_title(title)
-        ax.legend(loc="best", markerscale=2)
+        ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), markerscale=2)
         caption = (
             "Each revision's counterfactual effect from the same state and price shock: left of the vertical line it "
             "lowered cost, below the horizontal line it lost reward (harmful when both cost was not lowered and "
