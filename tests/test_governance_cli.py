@@ -153,6 +153,10 @@ def test_report_without_diagnostics_skips_the_section(tiny_dataset, tmp_path):
     outcome = build_report(run, tmp_path / "report", formats=("md",), figures=False)
     table = next(t for t in outcome.tables if t.key == "governance_diagnostics")
     assert isinstance(table, Skipped) and "--diagnostics" in table.reason
+    # the agentic tables name the components that ran, not "LLM"
+    operations = next(t for t in outcome.tables if t.key == "llm_operations")
+    assert operations.title == "Detailed governance operation rates (rule planner, rule auditor)"
+    assert "LLM" not in operations.title
     result = invoke(
         ["evaluate", "--data", str(tiny_dataset), "--policies", "random", "--seeds", "1", "--episodes", "1"]
         + ["--diagnostics", "--out", str(tmp_path / "plain")]
