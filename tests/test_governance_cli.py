@@ -203,3 +203,19 @@ def test_trigger_ablations_are_planner_variants_with_their_own_random_reference(
     assert rates[("rule[soft]", "rule")] < rates[("rule", "rule")] == 1.0
     logs = pd.read_json(out / "runs" / "llm" / "rule_gap_--rule" / "agentic_logs.jsonl", lines=True)
     assert all(set(reasons) <= {"gap"} for reasons in logs["hard_reasons"])
+
+
+def test_governance_layer_names_components_and_the_llm_model():
+    from solarchain_eval.report.naming import governance_layer
+
+    metrics = pd.DataFrame(
+        {
+            "setting": ["main", "llm", "llm"],
+            "planner": [None, "rule", "calibrated-rule"],
+            "auditor": [None, "llm", "llm"],
+        }
+    )
+    metadata = {"agentic": {"llm": {"model": "gpt-4o-mini"}}}
+    assert governance_layer(metrics, metadata) == "calibrated-rule/rule planner, llm:gpt-4o-mini auditor"
+    assert governance_layer(metrics, {}) == "calibrated-rule/rule planner, llm auditor"
+    assert governance_layer(metrics.drop(columns="auditor"), {}) == "Planner/Auditor layer"
