@@ -139,8 +139,9 @@ def governance(
     auditors: str = typer.Option(
         "rule,approve-only,random,oracle",
         "--auditors",
-        help="Comma-separated auditors: rule, approve-only, always-audit, random (the reference's audit rate), "
-        "oracle, llm:MODEL (an OpenAI-compatible endpoint, see the LLM options).",
+        help="Comma-separated auditors: rule, approve-only, always-audit, random (seeded; as many audits per "
+        "episode as the rule auditor of the same planner), oracle (least cost at bounded reward loss), llm:MODEL "
+        "(an OpenAI-compatible endpoint, see the LLM options).",
     ),
     planner: str = typer.Option(
         "rule", "--planner", help="Comma-separated planners: rule, calibrated-rule, default, llm:MODEL."
