@@ -7,6 +7,7 @@ import json
 from pathlib import Path
 from typing import Any
 
+import pandas as pd
 import typer
 from rich.table import Table
 
@@ -69,7 +70,7 @@ def _combination(planner: str, auditor: str, params: dict[str, Any], extra: dict
     return Combination(planner, auditor, options)
 
 
-def _leaderboard_table(frame, title: str) -> Table:
+def _leaderboard_table(frame: pd.DataFrame, title: str) -> Table:
     table = Table(title=title, title_justify="left")
     columns = (
         ("#", "rank", "{:.0f}"),
@@ -93,9 +94,11 @@ def _leaderboard_table(frame, title: str) -> Table:
     return table
 
 
-def _write_outputs(staging: Path, runs, threshold: float, resamples: int) -> dict[str, Path]:
-    """Ranked tables (CSV, Markdown) and figures of the leaderboard into ``staging``."""
+def _write_outputs(staging: Path, runs, threshold: float, resamples: int) -> tuple[dict[str, Path], pd.DataFrame]:
+    """Ranked tables (CSV, Markdown) and figures of the leaderboard into ``staging``; the files
+    and the ranked leaderboard frame."""
     from ..report.figures.governance import precision_recall_figure, revision_scatter_figure
+    from ..report.figures.style import FigureFile
     from ..report.governance import audit_quality, step_frame
     from ..report.tables.governance import quality_table, rank
     from ..report.tables.model import to_markdown
@@ -123,11 +126,10 @@ def _write_outputs(staging: Path, runs, threshold: float, resamples: int) -> dic
         revision_scatter_figure(step_frame(diagnostics, threshold), diagnostics, figures),
     ]
     for figure in made:
-        if hasattr(figure, "png"):
+        if isinstance(figure, FigureFile):  # the revision scatter is skipped when nothing was revised
             files[f"figures/{figure.png.name}"] = figure.png
             files[f"figures/{figure.svg.name}"] = figure.svg
-    files["_pooled"] = pooled  # type: ignore[assignment]
-    return files
+    return files, pooled
 
 
 @app.command("governance")
@@ -250,8 +252,7 @@ def governance(
                 on_combination=lambda c, s: say(f"{s}: {c.planner_label} planner, {c.auditor_label} auditor"),
                 command=invoked_command(),
             )
-        files = _write_outputs(writer.staging, runs, unsafe_threshold, resamples)
-        pooled = files.pop("_pooled")
+        files, pooled = _write_outputs(writer.staging, runs, unsafe_threshold, resamples)
         metadata = {
             "complete": True,
             "command": invoked_command(),
