@@ -68,6 +68,7 @@ def quality_columns(frame: pd.DataFrame, usage: bool) -> list[Column]:
         Column("Δ Cost / step", _ci("delta_cost_per_step", 4)),
         Column("Δ Reward / step", _ci("delta_reward_per_step", 4)),
         Column("Δ Art. Liq. / step", _plain("delta_artificial_liquidity_per_step", 5)),
+        Column("Δ Cost vs none / step", _plain("total_delta_cost_per_step", 4)),
         Column("Lowered cost", _plain("revisions_lowering_cost", 3)),
         Column("Harmful", _plain("revisions_harmful", 3)),
     ]
@@ -93,7 +94,8 @@ def quality_table(
             f"{title}. Ground truth: a step is unsafe when its proposal's avoidable cost (proposal cost minus the "
             f"least cost any action reaches from the same state) exceeds {threshold:g}. Precision, recall and the "
             "false-alarm rate compare audited with unsafe steps. Δ columns are the executed final action minus the "
-            "bounded action ā, evaluated from the same state and price shock, averaged over all governed steps; "
+            "bounded action ā, evaluated from the same state and price shock, averaged over all governed steps ('vs none': "
+            "final minus the proposal, i.e. bounds and audits against no governance at the same states); "
             "'Lowered cost' and 'Harmful' (cost not lowered, reward lost) are shares of revisions. Brackets are 95 % "
             "cluster-bootstrap intervals over start days."
         ),
