@@ -83,6 +83,7 @@ def _leaderboard_table(frame: pd.DataFrame, title: str) -> Table:
         ("Δcost/step", "delta_cost_per_step", "{:+.5f}"),
         ("Δreward/step", "delta_reward_per_step", "{:+.5f}"),
         ("Δart.liq/step", "delta_artificial_liquidity_per_step", "{:+.6f}"),
+        ("Δcost vs none", "total_delta_cost_per_step", "{:+.5f}"),
         ("calls", "llm_calls", "{:.0f}"),
         ("tokens", "llm_tokens", "{:.0f}"),
         ("latency s", "llm_mean_latency_s", "{:.3f}"),
