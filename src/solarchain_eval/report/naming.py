@@ -55,7 +55,6 @@ __all__ = [
     "setting_label",
     "is_learned",
     "paper_order",
-    "alphabetical_order",
     "learned_order",
 ]
 
@@ -76,15 +75,14 @@ def is_learned(policy: str) -> bool:
 
 
 def paper_order(policies: Iterable[str]) -> list[str]:
-    """``policies`` in the paper's order: Static, Random, Myopic, PPO, SAC, DQN, then others by name."""
+    """``policies`` in the report's one order: Static, Random, Myopic, PPO, SAC, DQN, then others by name.
+
+    Every table and figure lists policies in this order (the paper's appendix tables sort by name;
+    the report does not, so a policy is found in the same place everywhere).
+    """
     present = set(policies)
     known = [p for p in PAPER_POLICY_ORDER if p in present]
     return known + sorted(present - set(known))
-
-
-def alphabetical_order(policies: Iterable[str]) -> list[str]:
-    """``policies`` sorted by display name (the appendix tables' order: DQN, Myopic, PPO, ...)."""
-    return sorted(set(policies), key=lambda p: (policy_label(p), p))
 
 
 def learned_order(policies: Iterable[str]) -> list[str]:

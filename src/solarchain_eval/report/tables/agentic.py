@@ -7,7 +7,7 @@ import pandas as pd
 from ...experiments.rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS
 from ..casestudy import select_case
 from ..loading import ReportData
-from ..naming import AGENTIC_REWARD_LABELS, alphabetical_order, policy_label, setting_label
+from ..naming import AGENTIC_REWARD_LABELS, paper_order, policy_label, setting_label
 from ..options import ReportOptions
 from .common import agentic_rollouts, means, pooled_revision_rate, size_fields, sizes_of
 from .model import Column, ReportTable, Skipped, basis_sentence, cell, fixed, integer, text
@@ -36,7 +36,7 @@ def _agentic_groups(data: ReportData, key: str, title: str):
     groups = []
     for setting in AGENTIC_SETTINGS:
         in_setting = frame[frame["setting"] == setting]
-        for policy in alphabetical_order(in_setting["policy"]):
+        for policy in paper_order(in_setting["policy"]):
             groups.append((setting, policy, in_setting[in_setting["policy"] == policy]))
     return groups
 
