@@ -117,9 +117,9 @@ def test_agentic_effects_rates_agree_with_the_logs(paper_root, tables):
 def test_llm_operations_and_triggers(paper_root, tables):
     ops = tables["llm_operations"]
     assert [(r["setting"], r["policy"]) for r in ops.data.to_dict("records")][:3] == [
-        ("Main", "DQN"),
         ("Main", "PPO"),
         ("Main", "SAC"),
+        ("Main", "DQN"),
     ]
     steps = [s for s in _logs(paper_root, "llm_no_physics") if s["policy"] == "sac"]
     row = _row(ops, setting="No-physics", policy="SAC")
