@@ -168,6 +168,14 @@ def test_unreachable_endpoint_is_a_transport_error():
         StructuredLLM(settings).request(MESSAGES, AuditorOutput, SITE)
 
 
+def test_a_status_the_sdk_does_not_retry_is_reported_as_one_attempt():
+    with FakeOpenAI([Reply(401, {"error": {"message": "bad key"}})] * 3) as server:
+        with pytest.raises(LLMTransportError) as caught:
+            client(server, "chat", max_retries=2).request(MESSAGES, AuditorOutput, SITE)
+        assert len(server.seen) == 1  # the SDK does not retry a 401 ...
+    assert "HTTP 401 after 1 attempt(s)" in str(caught.value)  # ... and the message does not claim it did
+
+
 def test_api_key_echoed_by_the_server_is_redacted():
     echo = Reply(401, {"error": {"message": f"Incorrect API key provided: {KEY} (also {KEY[:14]}...)"}})
     with FakeOpenAI([echo]) as server, pytest.raises(LLMTransportError) as caught:

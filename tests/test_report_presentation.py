@@ -67,11 +67,8 @@ def test_every_table_lists_policies_in_the_one_order(reports):
         frame = table.data
         groups = [frame] if "setting" not in frame.columns else [g for _, g in frame.groupby("setting", sort=False)]
         for group in groups:
-            if "comparison" in group.columns:
-                group_list = [g for _, g in group.groupby("comparison", sort=False)]
-            else:
-                group_list = [group]
-            for rows in group_list:
+            by_comparison = "comparison" in group.columns
+            for rows in [g for _, g in group.groupby("comparison", sort=False)] if by_comparison else [group]:
                 shown = [p for p in rows["policy"] if p in ONE_ORDER]
                 assert shown == sorted(shown, key=ONE_ORDER.index), (table.key, list(rows["policy"]))
                 checked += 1

@@ -178,6 +178,16 @@ class LLMReply:
     meta: dict[str, Any]
 
 
+def _sdk_retries(error: Any) -> bool:  # an openai.APIStatusError (the SDK is imported lazily)
+    """Whether the openai SDK retried this status (its rule: the server's ``x-should-retry`` header,
+    else 408, 409, 429 and 5xx), so the message counts the attempts actually made: a 401 is one.
+    """
+    hint = error.response.headers.get("x-should-retry")
+    if hint in ("true", "false"):
+        return hint == "true"
+    return error.status_code in (408, 409, 429) or error.status_code >= 500
+
+
 class StructuredLLM:
     """Structured-output calls with an optional record/replay cache.
 
@@ -327,8 +337,9 @@ class StructuredLLM:
                 f"{safe_url(s.base_url) or 'the default endpoint'}"
             ) from None
         except openai.APIStatusError as error:
+            attempts = s.max_retries + 1 if _sdk_retries(error) else 1
             raise LLMTransportError(
-                f"HTTP {error.status_code} after {s.max_retries + 1} attempt(s): {self._hide(_short(error.message))}"
+                f"HTTP {error.status_code} after {attempts} attempt(s): {self._hide(_short(error.message))}"
             ) from None
         except openai.APIConnectionError as error:
             raise LLMTransportError(
