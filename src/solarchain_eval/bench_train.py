@@ -130,7 +130,7 @@ def unit_duration(unit: Unit, times: UnitTimes, spec: GridSpec) -> float:
 
 
 def simulate_wall_time(units: Sequence[Unit], durations: dict[str, float], workers: int) -> float:
-    """Makespan of list scheduling as :func:`~.experiments.scheduler.run_units` does it."""
+    """Makespan of list scheduling as :func:`~.experiments.pool.run_units` does it."""
     pending = list(units)
     done: set[str] = set()
     running: list[tuple[float, str]] = []

@@ -32,6 +32,7 @@ from typing import Any
 import numpy as np
 
 from .config import BenchmarkConfig
+from .experiments.settings import setting_name
 from .io import atomic_write_csv, atomic_write_json, atomic_write_with
 from .redaction import redact_command
 from .versions import git_commit, package_versions
@@ -330,7 +331,7 @@ def train(
         total_timesteps=max(spec.timesteps - steps_before, 0),
         callback=monitor,
         reset_num_timesteps=checkpoint is None,
-        tb_log_name=f"{algo}-{'no_physics' if spec.no_physics_penalty else 'main'}-{spec.seed}",
+        tb_log_name=f"{algo}-{setting_name(agentic=False, no_physics_penalty=spec.no_physics_penalty)}-{spec.seed}",
     )
     learn_s = time.perf_counter() - learn_started
     env.close()

@@ -246,7 +246,7 @@ def agentic_table(summary: list[dict[str, Any]], title: str) -> Table:
         ("modification rate", "modification_rate"),
         ("mean action delta", "mean_action_delta"),
         ("hard trigger rate", "hard_trigger_rate"),
-        ("LLM retries", "llm_failure_count"),
+        ("LLM retries", "llm_retry_count"),
     )
     table.add_column("policy")
     table.add_column("setting")

@@ -117,7 +117,8 @@ def results_table(summary: list[dict], title: str) -> Table:
         m = entry["metrics"]
 
         def fmt(name: str, digits: int, m: dict = m) -> str:
-            return f"{m[name]['mean']:.{digits}f} ± {m[name]['std']:.{digits}f}"
+            std = m[name]["std"]  # None for a single episode (undefined, see summarize)
+            return f"{m[name]['mean']:.{digits}f} ± " + ("–" if std is None else f"{std:.{digits}f}")
 
         table.add_row(
             entry["policy"],

@@ -26,21 +26,19 @@ from ..env import SolarChainEnv
 from ..io import atomic_write_json, sha256_file
 from ..policies.base import Policy
 from ..policies.registry import make_policy
+from ..records_schema import RECORDS_SCHEMA_VERSION
 from ..redaction import redact_command
 from ..versions import git_commit, package_versions
 from .records import METADATA_FILE, write_records
-from .rollout import (
+from .rollout import EpisodeResult, paper_episode_seeds, run_policy
+from .rundir import RunDirWriter, kill_point
+from .settings import (
     SETTING_AGENTIC,
     SETTING_AGENTIC_NO_PHYSICS,
-    SETTING_MAIN,
-    SETTING_NO_PHYSICS,
-    EpisodeResult,
-    paper_episode_seeds,
-    run_policy,
     setting_has_physics_penalty,
     setting_is_agentic,
+    setting_name,
 )
-from .rundir import RunDirWriter, kill_point
 
 PAPER_SEEDS = (20260511, 20260512, 20260513)
 PAPER_EPISODES = 30
@@ -67,9 +65,7 @@ class EvaluationSpec:
 
     @property
     def setting(self) -> str:
-        if self.agentic is not None:
-            return SETTING_AGENTIC_NO_PHYSICS if self.no_physics_penalty else SETTING_AGENTIC
-        return SETTING_NO_PHYSICS if self.no_physics_penalty else SETTING_MAIN
+        return setting_name(agentic=self.agentic is not None, no_physics_penalty=self.no_physics_penalty)
 
 
 @dataclass
@@ -184,6 +180,7 @@ def _metadata(
         "git_commit": git_commit(),
         "package_versions": package_versions(),
         "setting": setting,
+        "records_schema_version": RECORDS_SCHEMA_VERSION,
         "policies": [p if isinstance(p, str) else p.name for p in spec.policies],
         "agentic": spec.agentic.describe() if spec.agentic is not None else None,
         "run_seeds": [int(s) for s in spec.run_seeds],

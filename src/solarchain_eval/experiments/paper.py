@@ -32,7 +32,8 @@ from .combine import combine_setting
 from .evaluate import dataset_provenance
 from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, plan_units
 from .layout import PAPER_METADATA_FILE, UNITS_DIR
-from .scheduler import Executor, InlineExecutor, LocalPool, RunReport, run_units
+from .pool import Executor, InlineExecutor, LocalPool, RunReport, run_units
+from .settings import setting_has_physics_penalty
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
 
 
@@ -228,7 +229,7 @@ def _task(
     spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit, command: list[str] | None
 ) -> UnitTask:
     setting = SETTING_REGISTRY.get(unit.setting)
-    no_physics = setting.no_physics_penalty if setting is not None else unit.setting == "no_physics"
+    no_physics = setting.no_physics_penalty if setting is not None else not setting_has_physics_penalty(unit.setting)
     models: dict[str, Path] = {}
     unit_identity: dict[str, Any] = {
         "grid": identity,

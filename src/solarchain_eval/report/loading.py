@@ -28,9 +28,9 @@ from ..experiments.layout import (
     is_paper_root,
     run_table_paths,
 )
-from ..experiments.records import EPISODE_KEYS, SUMMARY_FILE
+from ..experiments.records import SUMMARY_FILE
 from ..experiments.rundir import verify_files, verify_run_dir
-from ..metrics import METRIC_NAMES
+from ..records_schema import EPISODE_KEYS, METRIC_NAMES, upgrade_columns
 from ..redaction import redact_command
 from .naming import SETTINGS
 
@@ -114,6 +114,11 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
         frame = pd.read_csv(path)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
         raise ReportDataError(f"{path}: not a readable CSV ({error})") from None
+    # Files written before a column was renamed or removed (records_schema's version history).
+    upgrade = upgrade_columns(list(frame.columns))
+    if upgrade:
+        frame = frame.drop(columns=[c for c, new in upgrade.items() if new is None])
+        frame = frame.rename(columns={c: new for c, new in upgrade.items() if new is not None})
     missing = [c for c in required if c not in frame.columns]
     if missing:
         raise ReportDataError(f"{path}: missing column(s) {', '.join(missing)}")
