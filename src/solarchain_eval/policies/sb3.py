@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..config import BenchmarkConfig
+from ..market.observation import OBSERVATION_SHAPE
 from ..training import ACTION_MODES, MODEL_FILE, TRAIN_CONFIG_FILE, algorithm_class
 
 #: Learned policy name -> the env action mode it acts in.
@@ -116,8 +117,10 @@ class SB3Policy:
 
     def _check_spaces(self) -> None:
         obs_shape = tuple(self.model.observation_space.shape or ())
-        if obs_shape != (12,):
-            raise ValueError(f"{self.model_path}: the model observes shape {obs_shape}, the env gives (12,)")
+        if obs_shape != OBSERVATION_SHAPE:
+            raise ValueError(
+                f"{self.model_path}: the model observes shape {obs_shape}, the env gives {OBSERVATION_SHAPE}"
+            )
         space = self.model.action_space
         if self.action_mode == "discrete":
             expected = self.config.discrete_levels**3
