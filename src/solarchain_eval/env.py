@@ -10,7 +10,7 @@ import numpy as np
 from gymnasium import spaces
 
 from .config import BenchmarkConfig, check_episode_fits, load_config
-from .data.default import default_dataset_dir
+from .data.default import resolve_data_dir
 from .data.table import HourlyTable, load_table
 from .episodes import PRICE_NOISE_STD, EpisodeStream
 from .market.actions import ActionCodec, DiscreteActions, action_jitter_f32, check_action_mode, initial_action
@@ -110,8 +110,7 @@ def resolve_config(config: BenchmarkConfig | str | Path | None) -> BenchmarkConf
 
 def resolve_table(data_dir: str | Path | None, config: BenchmarkConfig) -> HourlyTable:
     """Explicit ``data_dir``, else the config's, else the embedded default dataset."""
-    chosen = data_dir if data_dir is not None else config.data_dir
-    return load_table(chosen if chosen is not None else default_dataset_dir())
+    return load_table(resolve_data_dir(data_dir, config.data_dir))
 
 
 def env_config(

@@ -31,31 +31,24 @@ from typing import Any
 
 import numpy as np
 
+from .algorithms import (  # re-exported: their home is .algorithms
+    ACTION_MODES,
+    MODEL_FILE,
+    TRAIN_CONFIG_FILE,
+    TrainingError,
+    algorithm_class,
+    check_algo,
+)
 from .config import BenchmarkConfig
 from .experiments.settings import setting_name
 from .io import atomic_write_csv, atomic_write_json, atomic_write_with
 from .redaction import redact_command
 from .versions import git_commit, package_versions
 
-ALGOS = ("ppo", "sac", "dqn")
-ACTION_MODES = {"ppo": "continuous", "sac": "continuous", "dqn": "discrete"}
-MODEL_FILE = "model.zip"
-TRAIN_CONFIG_FILE = "train_config.json"
 TRAIN_LOG_FILE = "training_log.csv"
 TRAIN_METADATA_FILE = "train_metadata.json"
 CHECKPOINT_DIR = "checkpoints"
 DEFAULT_CHECKPOINT_EVERY = 25_000
-
-
-class TrainingError(ValueError):
-    """A training request that cannot be carried out as given (reported without a traceback)."""
-
-
-def check_algo(algo: str) -> str:
-    key = algo.strip().lower()
-    if key not in ALGOS:
-        raise TrainingError(f"unknown algorithm '{algo}' (choose from {', '.join(ALGOS)})")
-    return key
 
 
 def dqn_learning_starts(timesteps: int) -> int:
@@ -70,12 +63,6 @@ def hyperparameters(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[
     if check_algo(algo) == "dqn":
         params["learning_starts"] = dqn_learning_starts(timesteps)
     return params
-
-
-def algorithm_class(algo: str) -> type:
-    from stable_baselines3 import DQN, PPO, SAC
-
-    return {"ppo": PPO, "sac": SAC, "dqn": DQN}[check_algo(algo)]
 
 
 def set_torch_threads(threads: int) -> None:
@@ -230,15 +217,15 @@ def train(
         ``out_dir`` holds a different training (the message lists what differs), or
         TensorBoard logging was asked for without the tensorboard package.
     """
-    from .data.default import default_dataset_dir
+    from .data.default import resolve_data_dir
+    from .data.provenance import dataset_provenance
     from .data.table import load_table
-    from .experiments.evaluate import dataset_provenance
 
     algo = check_algo(spec.algo)
     if spec.timesteps < 1:
         raise TrainingError(f"timesteps must be at least 1, got {spec.timesteps}")
     cfg = spec.resolved_config()
-    data_dir = spec.data_dir or (Path(cfg.data_dir) if cfg.data_dir else default_dataset_dir())
+    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir)
     table = load_table(data_dir)
     dataset = dataset_provenance(table)
     identity = _identity(spec, dataset)

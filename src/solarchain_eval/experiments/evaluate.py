@@ -19,8 +19,8 @@ from pathlib import Path
 
 from ..agentic.build import AgenticOptions, Governance
 from ..config import BenchmarkConfig
-from ..data.default import default_dataset_dir
-from ..data.files import DATASET_FILES, MANIFEST_FILE
+from ..data.default import resolve_data_dir
+from ..data.provenance import dataset_provenance as dataset_provenance  # re-exported
 from ..data.table import HourlyTable, load_table
 from ..env import SolarChainEnv
 from ..io import atomic_write_json, sha256_file
@@ -76,19 +76,6 @@ class EvaluationOutcome:
     wall_s: float
 
 
-def dataset_provenance(table: HourlyTable) -> dict:
-    root = Path(table.source)
-    info: dict = {"data_dir": str(root.resolve()), "files": {}}
-    for name in DATASET_FILES:
-        path = root / name
-        if path.is_file():
-            info["files"][name] = sha256_file(path)
-    manifest = root / MANIFEST_FILE
-    if manifest.is_file():
-        info["manifest_sha256"] = sha256_file(manifest)
-    return info
-
-
 def run_evaluation(
     spec: EvaluationSpec,
     run_dir: Path,
@@ -118,7 +105,7 @@ def run_evaluation(
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
-    data_dir = spec.data_dir or (Path(config.data_dir) if config.data_dir else default_dataset_dir())
+    data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
     table = load_table(data_dir)  # validates before anything is written
     policies = [p if not isinstance(p, str) else make_policy(p, config, spec.models) for p in spec.policies]
     setting = spec.setting

@@ -25,9 +25,10 @@ from typing import Any
 import numpy as np
 
 from ..agentic.build import AgenticOptions
+from ..algorithms import ALGOS
 from ..config import BenchmarkConfig
 from ..policies.baselines import BASELINES
-from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY
+from ..training import DEFAULT_CHECKPOINT_EVERY
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS
 from .layout import eval_unit_dir, train_unit_dir
 from .rollout import paper_episode_seeds

@@ -22,14 +22,15 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..data.default import default_dataset_dir
+from ..algorithms import ALGOS, MODEL_FILE
+from ..data.default import resolve_data_dir
+from ..data.provenance import dataset_provenance
 from ..data.table import load_table
 from ..io import atomic_write_json
 from ..redaction import redact_command
-from ..training import ALGOS, MODEL_FILE, differences
+from ..training import differences
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
-from .evaluate import dataset_provenance
 from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, plan_units
 from .layout import PAPER_METADATA_FILE, UNITS_DIR
 from .pool import Executor, InlineExecutor, LocalPool, RunReport, run_units
@@ -146,7 +147,7 @@ def run_paper(
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     cfg = spec.config
-    data_dir = Path(spec.data_dir or cfg.data_dir or default_dataset_dir()).resolve()
+    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir).resolve()
     table = load_table(data_dir)  # validates the dataset before any work
     dataset = dataset_provenance(table)
     identity = grid_identity(spec, dataset)

@@ -24,9 +24,9 @@ from typing import Any
 
 import numpy as np
 
+from ..algorithms import ACTION_MODES, MODEL_FILE, TRAIN_CONFIG_FILE, algorithm_class
 from ..config import BenchmarkConfig
 from ..market.observation import OBSERVATION_SHAPE
-from ..training import ACTION_MODES, MODEL_FILE, TRAIN_CONFIG_FILE, algorithm_class
 
 #: Learned policy name -> the env action mode it acts in.
 LEARNED_POLICIES = dict(ACTION_MODES)
