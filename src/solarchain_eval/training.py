@@ -31,8 +31,9 @@ from typing import Any
 
 import numpy as np
 
-from .algorithms import (  # re-exported: their home is .algorithms
+from .algorithms import (  # noqa: F401  (re-exported: their home is .algorithms)
     ACTION_MODES,
+    ALGOS,
     MODEL_FILE,
     TRAIN_CONFIG_FILE,
     TrainingError,
