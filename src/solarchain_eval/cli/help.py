@@ -14,6 +14,7 @@ from typer.core import TyperGroup
 
 try:  # typer >= 0.22 runs on its own vendored copy of click
     from typer import _click as click
+    from typer._click.utils import make_default_short_help  # noqa: F401  (used by cli/__init__)
 except ImportError:  # pragma: no cover - older typer uses click itself
     import click  # type: ignore[no-redef]
 
