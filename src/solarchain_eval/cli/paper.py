@@ -9,6 +9,7 @@ from pathlib import Path
 import typer
 from rich.text import Text
 
+from ..agentic.request import GovernanceRequest
 from ..config import BenchmarkConfig, load_config
 from ..experiments.grid import SETTING_REGISTRY, GridSpec, Unit, plan_units
 from ..experiments.layout import combined_dir
@@ -18,6 +19,7 @@ from ..experiments.units import UnitResult
 from ..policies.registry import parse_policy_list
 from . import agentic as agentic_cli
 from . import app
+from .agentic import GOVERNANCE
 from .common import (
     CliError,
     console,
@@ -55,6 +57,7 @@ def _settings(text: str | None) -> tuple[str, ...]:
 
 @app.command("paper")
 @reports_errors
+@agentic_cli.governance_options(fixed={"agentic": "planner_auditor"})
 def paper(
     out: Path = typer.Option(..., "--out", help="The paper root (created; re-run the same command to resume)."),
     data: Path | None = typer.Option(
@@ -97,18 +100,7 @@ def paper(
     write_report: bool = typer.Option(
         True, "--report/--no-report", help="Write ROOT/report (tables, figures, index.html) after a complete grid."
     ),
-    llm_backend: str = agentic_cli.LLM_BACKEND,
-    planner: str | None = agentic_cli.PLANNER,
-    auditor: str | None = agentic_cli.AUDITOR,
-    llm_api: str | None = agentic_cli.LLM_API,
-    llm_model: str | None = agentic_cli.LLM_MODEL,
-    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
-    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
-    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
-    llm_max_retries: int = agentic_cli.LLM_MAX_RETRIES,
-    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
-    llm_cache: Path | None = agentic_cli.LLM_CACHE,
-    llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
+    governance: GovernanceRequest = GOVERNANCE,
 ) -> None:
     """The paper's experiment matrix: train, evaluate, combine, report.
 
@@ -125,8 +117,7 @@ def paper(
     and redoes the ones that were in flight (training resumes from its last checkpoint).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
-    params = dict(locals())
-    governance = agentic_cli.options_from(params, "planner_auditor")
+    options = agentic_cli.resolve(governance)
     try:
         spec = GridSpec.from_preset(
             preset.value,
@@ -139,7 +130,7 @@ def paper(
             data_dir=data,
             config=cfg,
             checkpoint_every=checkpoint_every,
-            agentic=governance,
+            agentic=options,
         )
         spec.validate()
     except ValueError as error:
@@ -152,7 +143,7 @@ def paper(
     )
     from ..experiments.ray_executor import RayUnavailableError
 
-    with agentic_cli.serving(params, governance), progress_bar("units", len(plan_units(spec))) as advance:
+    with agentic_cli.serving(governance, options), progress_bar("units", len(plan_units(spec))) as advance:
 
         def on_plan(units: list[Unit], already: list[str]) -> None:
             if already:
