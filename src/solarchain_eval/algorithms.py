@@ -8,6 +8,8 @@ other. Stable-Baselines3 itself is imported only by :func:`algorithm_class`.
 
 from __future__ import annotations
 
+from .option_errors import NamesOptions
+
 ALGOS = ("ppo", "sac", "dqn")
 #: Algorithm -> the env action mode it trains and acts in.
 ACTION_MODES = {"ppo": "continuous", "sac": "continuous", "dqn": "discrete"}
@@ -15,7 +17,7 @@ MODEL_FILE = "model.zip"
 TRAIN_CONFIG_FILE = "train_config.json"
 
 
-class TrainingError(ValueError):
+class TrainingError(NamesOptions, ValueError):
     """A training request that cannot be carried out as given (reported without a traceback)."""
 
 

@@ -237,9 +237,10 @@ def train(
     if previous is not None and previous.get("identity") != identity:
         if not overwrite:
             diffs = differences(previous.get("identity") or {}, identity)
-            raise TrainingError(
-                f"{out_dir} holds a different training ({'; '.join(diffs[:6])}); "
-                "choose another output directory or pass --overwrite"
+            raise TrainingError.about(
+                "{out_dir} holds a different training ({diffs}); choose another output directory or pass {opt_overwrite}",
+                out_dir=out_dir,
+                diffs="; ".join(diffs[:6]),
             )
         _clear_training_dir(out_dir)
         previous = None
@@ -261,8 +262,8 @@ def train(
         import importlib.util
 
         if importlib.util.find_spec("tensorboard") is None:
-            raise TrainingError(
-                "--tensorboard needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'"
+            raise TrainingError.about(
+                "{opt_tensorboard_dir} needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'"
             )
 
     set_torch_threads(spec.torch_threads)

@@ -19,7 +19,7 @@ from ..config import ConfigError, check_seeds
 from ..data.errors import DatasetError
 from ..data.weather import WeatherError
 from ..option_errors import NamesOptions, flag_of
-from .help import click
+from .help import get_current_context
 
 # Every text printed comes from users, files or servers somewhere (paths, city names, server
 # errors), so rich never interprets markup or emoji codes: "[/x]" cannot crash, "[bold]" and
@@ -47,9 +47,20 @@ def register_user_error(*types: type[BaseException]) -> None:
     USER_ERRORS = tuple(dict.fromkeys((*USER_ERRORS, *types)))
 
 
+#: Library field names whose command-line option has another name.
+FIELD_FLAGS = {"run_dir": "--out", "root": "--out", "tensorboard_dir": "--tensorboard"}
+
+
+def cli_error(error: Exception) -> CliError:
+    """A :class:`CliError` with ``error``'s message, its options named by flag."""
+    return CliError(error.message_for(_flag_of) if isinstance(error, NamesOptions) else str(error))
+
+
 def _flag_of(field: str) -> str:
     """The flag of the running command's parameter ``field`` (typer's convention if it has none)."""
-    context = click.get_current_context(silent=True)
+    if field in FIELD_FLAGS:
+        return FIELD_FLAGS[field]
+    context = get_current_context(silent=True)
     if context is not None:
         for param in context.command.params:
             if param.name == field and param.opts:

@@ -25,7 +25,7 @@ from ..data.published import matches_published
 from ..data.weather import read_weather_cache, write_weather_cache
 from ..io import sha256_file
 from . import app
-from .common import CliError, console, progress_bar, reports_errors, say
+from .common import CliError, cli_error, console, progress_bar, reports_errors, say
 from .help import HelpGroup
 
 data_app = typer.Typer(help="Build and validate datasets.", cls=HelpGroup, no_args_is_help=True, rich_markup_mode=None)
@@ -43,7 +43,7 @@ def _cities(specs: list[str] | None) -> tuple[City, ...]:
     try:
         return tuple(parse_city(spec) for spec in specs)
     except ValueError as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None
 
 
 def _open_meteo_cache_path(cities: tuple[City, ...], start: str, end: str) -> Path:
@@ -119,7 +119,7 @@ def build(
         try:
             payload = synthesize_weather(cities, start, end, seed, timezone)
         except ValueError as error:
-            raise CliError(str(error)) from None
+            raise cli_error(error) from None
         source = SYNTHETIC_SOURCE
 
     from ..data.build import build_dataset

@@ -18,7 +18,7 @@ from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
 from .common import (
-    CliError,
+    cli_error,
     console,
     invoked_command,
     parse_seeds,
@@ -116,7 +116,7 @@ def evaluate(
     try:
         names = parse_policy_list(policies)
     except ValueError as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None
     options = agentic_cli.resolve(governance)
     spec = EvaluationSpec(
         policies=names,
@@ -134,7 +134,7 @@ def evaluate(
         for name in names:  # fail on unknown names or missing models before any work
             make_policy(name, cfg.with_updates(no_physics_penalty=no_physics_penalty), spec.models)
     except (ValueError, FileNotFoundError) as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None
     label = "evaluate" if options is None else f"evaluate-{spec.setting}"
     with agentic_cli.serving(governance, options):  # --llm-backend local: started here, always stopped
         _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite)

@@ -22,6 +22,7 @@ from . import app
 from .agentic import GOVERNANCE
 from .common import (
     CliError,
+    cli_error,
     console,
     err_console,
     invoked_command,
@@ -134,7 +135,7 @@ def paper(
         )
         spec.validate()
     except ValueError as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None
     where = f"Ray ({ray_address})" if ray_address else f"{workers} worker(s)"
     err_console.print(
         f"grid: {spec.timesteps:,} training steps, {spec.episodes} episodes × {len(spec.seeds)} seed(s), "
@@ -174,7 +175,7 @@ def paper(
                 command=invoked_command(),
             )
         except RayUnavailableError as error:
-            raise CliError(str(error)) from None
+            raise cli_error(error) from None
     report = outcome.report
     for setting in outcome.combined:
         summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))

@@ -27,6 +27,7 @@ from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
 from ..io import atomic_write_json
+from ..option_errors import NamesOptions
 from ..redaction import redact_command
 from ..training import differences
 from ..versions import git_commit, package_versions
@@ -38,7 +39,7 @@ from .settings import setting_has_physics_penalty
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
 
 
-class GridError(ValueError):
+class GridError(NamesOptions, ValueError):
     """The grid cannot run as asked (a different grid in ROOT, a busy ROOT, bad arguments)."""
 
 
@@ -143,7 +144,7 @@ def run_paper(
     except ValueError as error:
         raise GridError(str(error)) from None
     if workers < 1:
-        raise GridError(f"--workers must be at least 1, got {workers}")
+        raise GridError.about("{opt_workers} must be at least 1, got {workers}", workers=workers)
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     cfg = spec.config
@@ -155,7 +156,9 @@ def run_paper(
         previous = _read_metadata(root)
         if previous is not None and previous.get("identity") != identity:
             diffs = differences(previous.get("identity") or {}, identity)
-            raise GridError(f"{root} holds a different grid ({'; '.join(diffs[:5])}); use another --out")
+            raise GridError.about(
+                "{root} holds a different grid ({diffs}); use another {opt_root}", root=root, diffs="; ".join(diffs[:5])
+            )
         units = plan_units(spec)
         done = set()
         for unit in units:

@@ -27,6 +27,7 @@ import numpy as np
 from ..algorithms import ACTION_MODES, MODEL_FILE, TRAIN_CONFIG_FILE, algorithm_class
 from ..config import BenchmarkConfig
 from ..market.observation import OBSERVATION_SHAPE
+from ..option_errors import NamesOptions
 
 #: Learned policy name -> the env action mode it acts in.
 LEARNED_POLICIES = dict(ACTION_MODES)
@@ -69,19 +70,26 @@ def resolve_model_path(name: str, models: dict[str, Path]) -> Path:
         No model was given, or none of the candidates exists (the message lists them).
     """
     if not models:
-        raise FileNotFoundError(
-            f"policy '{name}' needs a trained model: pass --models DIR or --models {name}=PATH "
-            f"(train one with: solarchain-eval train --algo {name} --out DIR/{name})"
+        raise ModelNotFoundError.about(
+            "policy '{name}' needs a trained model: pass {opt_models} DIR or {opt_models} {name}=PATH "
+            "(train one with: solarchain-eval train --algo {name} --out DIR/{name})",
+            name=name,
         )
     candidates = model_candidates(name, models)
     for path in candidates:
         if path.is_file():
             return path
     looked = ", ".join(str(p) for p in candidates) or "(no path given for it)"
-    raise FileNotFoundError(
-        f"no trained model for policy '{name}': looked for {looked} "
-        f"(pass --models {name}=PATH, or train one with: solarchain-eval train --algo {name})"
+    raise ModelNotFoundError.about(
+        "no trained model for policy '{name}': looked for {looked} "
+        "(pass {opt_models} {name}=PATH, or train one with: solarchain-eval train --algo {name})",
+        name=name,
+        looked=looked,
     )
+
+
+class ModelNotFoundError(NamesOptions, FileNotFoundError):
+    """No trained model for a learned policy (the message lists where it looked)."""
 
 
 def load_model(name: str, path: Path) -> Any:
