@@ -10,10 +10,11 @@ import typer
 from ..agentic.request import GovernanceRequest
 from ..config import BenchmarkConfig, load_config
 from ..data.default import default_dataset_dir
-from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, run_evaluation
+from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, make_policies, run_evaluation
 from ..experiments.records import metrics_frame, summarize
 from ..experiments.rundir import RunDirError, check_target
 from ..policies.registry import known_policies, parse_policy_list
+from ..policies.sb3 import parse_models
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
@@ -42,18 +43,6 @@ _SEEDS = ",".join(str(s) for s in PAPER_SEEDS)
 
 def _default_run_dir(config: BenchmarkConfig, label: str) -> Path:
     return Path(config.output_dir) / f"{datetime.now().strftime('%Y%m%d-%H%M%S')}_{label}"
-
-
-def _models(spec: list[str] | None) -> dict[str, Path]:
-    """``--models DIR`` or ``--models ppo=PATH`` (repeatable)."""
-    models: dict[str, Path] = {}
-    for item in spec or []:
-        if "=" in item:
-            name, path = item.split("=", 1)
-            models[name.strip().lower()] = Path(path)
-        else:
-            models["*"] = Path(item)
-    return models
 
 
 def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> None:
@@ -125,14 +114,11 @@ def evaluate(
         data_dir=data,
         no_physics_penalty=no_physics_penalty,
         config=cfg,
-        models=_models(models),
+        models=parse_models(models or []),
         agentic=options,
     )
     try:
-        from ..policies.registry import make_policy
-
-        for name in names:  # fail on unknown names or missing models before any work
-            make_policy(name, cfg.with_updates(no_physics_penalty=no_physics_penalty), spec.models)
+        make_policies(spec)  # fail on unknown names or missing models before any work
     except (ValueError, FileNotFoundError) as error:
         raise cli_error(error) from None
     label = "evaluate" if options is None else f"evaluate-{spec.setting}"

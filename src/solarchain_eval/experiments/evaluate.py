@@ -76,6 +76,21 @@ class EvaluationOutcome:
     wall_s: float
 
 
+def make_policies(spec: EvaluationSpec) -> list[Policy]:
+    """The spec's policies, built: names through ``make_policy`` with the spec's config (its reward
+    setting applied) and models, ready policies as they are.
+
+    Raises
+    ------
+    ValueError
+        An unknown policy name or a model that cannot be loaded.
+    FileNotFoundError
+        A learned policy without a trained model (the message lists where it looked).
+    """
+    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    return [p if not isinstance(p, str) else make_policy(p, config, spec.models) for p in spec.policies]
+
+
 def run_evaluation(
     spec: EvaluationSpec,
     run_dir: Path,
@@ -107,7 +122,7 @@ def run_evaluation(
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
     data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
     table = load_table(data_dir)  # validates before anything is written
-    policies = [p if not isinstance(p, str) else make_policy(p, config, spec.models) for p in spec.policies]
+    policies = make_policies(spec)
     setting = spec.setting
 
     envs: dict[str, SolarChainEnv] = {}

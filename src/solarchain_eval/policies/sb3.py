@@ -41,6 +41,19 @@ def _trained_algo(directory: Path) -> str | None:
         return None
 
 
+def parse_models(items: list[str]) -> dict[str, Path]:
+    """The ``models`` mapping from ``DIR`` and ``NAME=PATH`` items (the ``--models`` values): a bare
+    directory is ``{"*": DIR}`` (the last one wins), ``NAME=PATH`` is ``{name: PATH}``."""
+    models: dict[str, Path] = {}
+    for item in items:
+        if "=" in item:
+            name, path = item.split("=", 1)
+            models[name.strip().lower()] = Path(path)
+        else:
+            models["*"] = Path(item)
+    return models
+
+
 def model_candidates(name: str, models: dict[str, Path]) -> list[Path]:
     """The paths searched for policy ``name``'s model, in order (see the module docstring)."""
     candidates: list[Path] = []
