@@ -5,6 +5,7 @@ from __future__ import annotations
 import json
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.text import Text
@@ -54,6 +55,62 @@ def _settings(text: str | None) -> tuple[str, ...]:
     if unknown:
         raise CliError(f"unknown setting(s) {', '.join(unknown)} (available: {', '.join(SETTING_REGISTRY)})")
     return names
+
+
+def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
+    """``run_paper`` with a progress bar over the units and a line per finished unit."""
+    from ..experiments.ray_executor import RayUnavailableError
+
+    with progress_bar("units", len(plan_units(spec))) as advance:
+
+        def on_plan(units: list[Unit], already: list[str]) -> None:
+            if already:
+                err_console.print(f"{len(already)} of {len(units)} units already done: skipped")
+                advance(len(already))
+
+        def on_result(result: UnitResult) -> None:
+            advance(1)
+            if result.ok:
+                err_console.print(
+                    Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True
+                )
+            else:
+                err_console.print(
+                    Text.assemble(("FAILED", "bold red"), f" {result.unit}: {result.error}\n  log: {result.log}"),
+                    soft_wrap=True,
+                )
+
+        try:
+            return run_paper(spec, out, on_plan=on_plan, on_result=on_result, command=invoked_command(), **run_options)
+        except RayUnavailableError as error:
+            raise cli_error(error) from None
+
+
+def _show_outcome(outcome) -> None:
+    """Each combined setting's results table, the root's status, and the failed units (exit 1)."""
+    report = outcome.report
+    for setting in outcome.combined:
+        summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
+        console.print(results_table(summary, f"setting {setting}"))
+    console.print(
+        f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)",
+        soft_wrap=True,
+    )
+    if report.failed:
+        lines = [f"  {r.unit}: {r.error} (log: {r.log})" for r in report.failed]
+        extra = ""
+        if report.stopped:
+            extra = (
+                f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. "
+                f"Re-run to resume, or add --keep-going."
+            )
+        elif report.blocked:
+            extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
+        err_console.print(
+            Text.assemble((f"{len(report.failed)} unit(s) failed:", "bold red"), "\n" + "\n".join(lines) + extra),
+            soft_wrap=True,
+        )
+        raise typer.Exit(1)
 
 
 @app.command("paper")
@@ -142,63 +199,9 @@ def paper(
         f"settings {', '.join(spec.settings)}, on {where} -> {out}",
         soft_wrap=True,
     )
-    from ..experiments.ray_executor import RayUnavailableError
-
-    with agentic_cli.serving(governance, options), progress_bar("units", len(plan_units(spec))) as advance:
-
-        def on_plan(units: list[Unit], already: list[str]) -> None:
-            if already:
-                err_console.print(f"{len(already)} of {len(units)} units already done: skipped")
-                advance(len(already))
-
-        def on_result(result: UnitResult) -> None:
-            advance(1)
-            if result.ok:
-                err_console.print(
-                    Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True
-                )
-            else:
-                err_console.print(
-                    Text.assemble(("FAILED", "bold red"), f" {result.unit}: {result.error}\n  log: {result.log}"),
-                    soft_wrap=True,
-                )
-
-        try:
-            outcome = run_paper(
-                spec,
-                out,
-                workers=workers,
-                ray_address=ray_address,
-                keep_going=keep_going,
-                on_plan=on_plan,
-                on_result=on_result,
-                command=invoked_command(),
-            )
-        except RayUnavailableError as error:
-            raise cli_error(error) from None
-    report = outcome.report
-    for setting in outcome.combined:
-        summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
-        console.print(results_table(summary, f"setting {setting}"))
-    console.print(
-        f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)",
-        soft_wrap=True,
-    )
-    if report.failed:
-        lines = [f"  {r.unit}: {r.error} (log: {r.log})" for r in report.failed]
-        extra = ""
-        if report.stopped:
-            extra = (
-                f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. "
-                f"Re-run to resume, or add --keep-going."
-            )
-        elif report.blocked:
-            extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
-        err_console.print(
-            Text.assemble((f"{len(report.failed)} unit(s) failed:", "bold red"), "\n" + "\n".join(lines) + extra),
-            soft_wrap=True,
-        )
-        raise typer.Exit(1)
+    with agentic_cli.serving(governance, options):
+        outcome = _run_with_progress(spec, out, workers=workers, ray_address=ray_address, keep_going=keep_going)
+    _show_outcome(outcome)
     if outcome.complete and write_report:
         from ..report import build_report
 

@@ -160,14 +160,7 @@ def run_paper(
                 "{root} holds a different grid ({diffs}); use another {opt_root}", root=root, diffs="; ".join(diffs[:5])
             )
         units = plan_units(spec)
-        done = set()
-        for unit in units:
-            if read_done(unit.directory(root)) is None:
-                continue
-            if unit.kind == "eval" and _stale_eval(root, unit):
-                undo(unit.directory(root))
-            else:
-                done.add(unit.name)
+        done = _finished_units(root, units)
         already = [u.name for u in units if u.name in done]
         meta = _metadata(spec, identity, dataset, data_dir, command, workers, ray_address)
         atomic_write_json(root / PAPER_METADATA_FILE, {**meta, "status": "running", "complete": False})
@@ -177,41 +170,59 @@ def run_paper(
         def make_task(unit: Unit) -> UnitTask:
             return _task(spec, root, data_dir, identity, unit, command)
 
-        executor: Executor
-        if ray_address:
-            from .ray_executor import RayExecutor
-
-            executor = RayExecutor(ray_address, root, data_dir, transfer=ray_transfer, workers=workers)
-        elif workers > 1:
-            executor = LocalPool(workers)
-        else:
-            executor = InlineExecutor()
+        executor = _executor(ray_address, root, data_dir, ray_transfer, workers)
         report = run_units(
             units, done, make_task, executor, keep_going=keep_going, on_result=on_result, on_start=on_start
         )
-
         outcome = PaperOutcome(root, units, already, report)
-        for setting in spec.settings:
-            evals = [u for u in units if u.kind == "eval" and u.setting == setting]
-            if all(u.name in done for u in evals):
-                outcome.combined[setting] = combine_setting(root, setting, [u.directory(root) for u in evals])
-        outcome.complete = all(u.name in done for u in units)
-        outcome.wall_s = time.perf_counter() - started
-        status = "complete" if outcome.complete else ("stopped" if report.stopped else "incomplete")
-        atomic_write_json(
-            root / PAPER_METADATA_FILE,
-            {
-                **meta,
-                "status": status,
-                "complete": outcome.complete,
-                "wall_s": round(outcome.wall_s, 3),
-                "units": _unit_table(root, units, report),
-                "combined": outcome.combined,
-                "combined_sha256": _combined_sha256(root, outcome.combined),
-                "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed],
-            },
-        )
+        _combine_and_record(spec, outcome, done, meta, started)
     return outcome
+
+
+def _finished_units(root: Path, units: list[Unit]) -> set[str]:
+    """Names of the units already done; an eval unit whose model was retrained since is undone."""
+    done = set()
+    for unit in units:
+        if read_done(unit.directory(root)) is None:
+            continue
+        if unit.kind == "eval" and _stale_eval(root, unit):
+            undo(unit.directory(root))
+        else:
+            done.add(unit.name)
+    return done
+
+
+def _executor(ray_address: str | None, root: Path, data_dir: Path, ray_transfer: str, workers: int) -> Executor:
+    if ray_address:
+        from .ray_executor import RayExecutor
+
+        return RayExecutor(ray_address, root, data_dir, transfer=ray_transfer, workers=workers)
+    return LocalPool(workers) if workers > 1 else InlineExecutor()
+
+
+def _combine_and_record(spec: GridSpec, outcome: PaperOutcome, done: set[str], meta: dict, started: float) -> None:
+    """Combine every setting whose eval units are all done, then write the final paper metadata."""
+    root, units, report = outcome.root, outcome.units, outcome.report
+    for setting in spec.settings:
+        evals = [u for u in units if u.kind == "eval" and u.setting == setting]
+        if all(u.name in done for u in evals):
+            outcome.combined[setting] = combine_setting(root, setting, [u.directory(root) for u in evals])
+    outcome.complete = all(u.name in done for u in units)
+    outcome.wall_s = time.perf_counter() - started
+    status = "complete" if outcome.complete else ("stopped" if report.stopped else "incomplete")
+    atomic_write_json(
+        root / PAPER_METADATA_FILE,
+        {
+            **meta,
+            "status": status,
+            "complete": outcome.complete,
+            "wall_s": round(outcome.wall_s, 3),
+            "units": _unit_table(root, units, report),
+            "combined": outcome.combined,
+            "combined_sha256": _combined_sha256(root, outcome.combined),
+            "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed],
+        },
+    )
 
 
 def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str, str]]:
