@@ -362,7 +362,7 @@ class SolarChainEnv(gym.Env):
 
     def decode_action(self, action: Any) -> tuple[float, float, float]:
         """The executed (α, ℓ, b) for a policy action (float32 values)."""
-        if self._discrete_actions is not None:
+        if self.action_mode == "discrete":
             return self._discrete_actions.decode(action)
         return self.codec.decode(action)
 
