@@ -194,8 +194,9 @@ def test_settings_resolution_order_and_explicit_api():
     assert (s.model, s.base_url, s.api_key.get_secret_value()) == ("m2", "http://127.0.0.1:2/v1", "k2")
     s = resolve_llm_settings(api="chat", model="m3", base_url="http://127.0.0.1:3/v1", environ=env)
     assert (s.model, s.base_url) == ("m3", "http://127.0.0.1:3/v1")
-    with pytest.raises(LLMConfigError, match="--llm-api"):
+    with pytest.raises(LLMConfigError, match="with llm_api responses") as caught:  # the library names the field
         resolve_llm_settings(api=None, environ=env)
+    assert "with --llm-api responses" in caught.value.message_for()  # the command line names the flag
     with pytest.raises(LLMConfigError, match="no model"):
         resolve_llm_settings(api="chat", environ={})
     with pytest.raises(LLMConfigError, match="no API key"):

@@ -127,7 +127,7 @@ def test_llm_operations_and_triggers(paper_root, tables):
     assert row["mean_action_delta"] == pytest.approx(sum(s["action_delta"] for s in steps) / len(steps), abs=1e-9)
     not_triggered = sum(not (s["hard_trigger"] or s["soft_trigger"]) for s in steps) / len(steps)
     assert row["not_triggered_rate"] == pytest.approx(not_triggered, abs=1e-12)
-    assert "The LLM failure count is zero for every row and is therefore not shown." in ops.notes
+    assert "The LLM retry count is zero for every row and is therefore not shown." in ops.notes
     triggers = tables["llm_triggers"]
     thresholds = [float(r["plan_gap_threshold"]) for r in _metrics(paper_root, "llm") if r["policy"] == "dqn"]
     assert _row(triggers, setting="Main", policy="DQN")["plan_gap_threshold"] == pytest.approx(

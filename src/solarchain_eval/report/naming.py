@@ -7,7 +7,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from ..experiments.rollout import (
+from ..experiments.settings import (
+    KNOWN_SETTINGS,
     SETTING_AGENTIC,
     SETTING_AGENTIC_NO_PHYSICS,
     SETTING_LABELS,
@@ -25,12 +26,7 @@ PAPER_POLICY_ORDER = ("static", "random", "myopic", "ppo", "sac", "dqn")
 LEARNED_ORDER = ("ppo", "sac", "dqn")
 
 #: Setting labels of the four-setting tables ("Governance" / "Setting" columns of the body).
-GOVERNANCE_LABELS = {
-    SETTING_MAIN: "RL",
-    SETTING_NO_PHYSICS: "RL no-physics",
-    SETTING_AGENTIC: "RL+LLM",
-    SETTING_AGENTIC_NO_PHYSICS: "RL+LLM no-physics",
-}
+GOVERNANCE_LABELS = {name: KNOWN_SETTINGS[name].governance_label for name in SETTINGS}
 #: Row order of the four-setting appendix tables (RL, RL+LLM, RL no-physics, RL+LLM no-physics).
 GOVERNANCE_ORDER = (SETTING_MAIN, SETTING_AGENTIC, SETTING_NO_PHYSICS, SETTING_AGENTIC_NO_PHYSICS)
 #: The LLM appendix tables name an agentic setting by its reward ("Main" / "No-physics").
