@@ -161,7 +161,7 @@ def test_report_without_diagnostics_skips_the_section(tiny_dataset, tmp_path):
         ["evaluate", "--data", str(tiny_dataset), "--policies", "random", "--seeds", "1", "--episodes", "1"]
         + ["--diagnostics", "--out", str(tmp_path / "plain")]
     )
-    assert result.exit_code == 2 and "--diagnostics/--no-diagnostics need --agentic planner_auditor" in result.output
+    assert result.exit_code == 2 and "--diagnostics (on or off) needs --agentic planner_auditor" in result.output
 
 
 def test_llm_auditor_joins_the_leaderboard_with_its_calls_and_tokens(tiny_dataset, tmp_path, monkeypatch):

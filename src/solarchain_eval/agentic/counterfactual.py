@@ -26,14 +26,15 @@ from typing import Any
 
 from ..market.actions import ActionCodec
 from ..market.dynamics import StepOutcome
+from ..records_schema import DIAGNOSTIC_NAMES, DIAGNOSTIC_OUTCOMES, DIAGNOSTIC_ROLES, DIAGNOSTIC_STEP_COLUMNS, names
 
 Action = tuple[float, float, float]
 Evaluator = Callable[[Action], StepOutcome]
 
-#: The three evaluated actions, as column prefixes.
-ACTION_ROLES = ("proposal", "bounded", "final")
-#: Outcome fields per role: column suffix -> :class:`StepOutcome` attribute (None: cost = V + A).
-OUTCOME_FIELDS = {
+#: The three evaluated actions, as column prefixes (records_schema.DIAGNOSTIC_ROLES).
+ACTION_ROLES = tuple(DIAGNOSTIC_ROLES)
+#: :class:`StepOutcome` attribute of each outcome column suffix (None: cost = V + A).
+_ATTRIBUTES = {
     "violation_rate": "violation_rate",
     "unsafe_backed_MWh": "unsafe_backed_mwh",
     "cost": None,
@@ -43,18 +44,18 @@ OUTCOME_FIELDS = {
     "artificial_liquidity_MWh": "artificial_liquidity_mwh",
     "token_price": "token_price",  # the only field the step's price shock moves
 }
+#: Outcome fields per role, in the schema's order: column suffix -> attribute (a suffix the
+#: schema adds without an attribute here fails at import).
+OUTCOME_FIELDS = {c.name: _ATTRIBUTES[c.name] for c in DIAGNOSTIC_OUTCOMES}
 #: A step is unsafe when its proposal's avoidable cost (proposal cost - least cost) exceeds
 #: this. On the published data the avoidable cost of a fully backing action is at most 0.0052
 #: in the night hours (no verified supply: V = 1 whatever the action) and at least 0.039 in 90 %
 #: of the day hours; 0.01 lies in that gap (docs/governance.md#ground-truth).
 DEFAULT_UNSAFE_THRESHOLD = 0.01
 #: Step identifiers copied from the agentic log row into the diagnostics row.
-STEP_KEYS = ("step", "audited", "decision", "hard_trigger", "soft_trigger")
-DIAGNOSTIC_COLUMNS = (
-    *STEP_KEYS,
-    *(f"{role}_{name}" for role in ACTION_ROLES for name in OUTCOME_FIELDS),
-    "least_cost",
-)
+STEP_KEYS = names(DIAGNOSTIC_STEP_COLUMNS)
+#: The row's columns (records_schema.DIAGNOSTIC_NAMES).
+DIAGNOSTIC_COLUMNS = DIAGNOSTIC_NAMES
 
 
 def executed_form(action: Action, codec: ActionCodec) -> Action:

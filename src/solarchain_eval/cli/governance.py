@@ -15,6 +15,7 @@ from ..agentic.calibrated import DEFAULT_TARGET_AUDIT_RATE
 from ..agentic.controls import DEFAULT_ORACLE_REWARD_LOSS, TRIGGER_SETS, SchedulerControls
 from ..agentic.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from ..agentic.errors import LLMConfigError
+from ..agentic.request import GovernanceRequest
 from ..config import BenchmarkConfig, load_config
 from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS
 from ..experiments.governance import (
@@ -27,14 +28,39 @@ from ..experiments.governance import (
 from ..experiments.rundir import RunDirWriter, check_target
 from ..io import atomic_write_csv, atomic_write_json, atomic_write_text, sha256_file
 from ..policies.registry import known_policies, parse_policy_list
+from ..policies.sb3 import parse_models
 from . import agentic as agentic_cli
 from . import app
-from .common import CliError, console, invoked_command, parse_seeds, progress_bar, reports_errors, say, show_files
-from .evaluate import OVERWRITE, _models
+from .agentic import GOVERNANCE
+from .common import (
+    CliError,
+    cli_error,
+    console,
+    invoked_command,
+    parse_seeds,
+    progress_bar,
+    reports_errors,
+    say,
+    show_files,
+)
+from .evaluate import OVERWRITE
 
 LEADERBOARD = "leaderboard"
 BY_POLICY = "leaderboard_by_policy"
 METADATA = "governance_metadata.json"
+#: The Planner/Auditor options this command offers as they are: the LLM endpoint and its cache
+#: (planners, auditors and the model come from --planner/--auditors; diagnostics are always on).
+LLM_FIELDS = (
+    "llm_backend",
+    "llm_api",
+    "llm_base_url",
+    "llm_temperature",
+    "llm_timeout",
+    "llm_max_retries",
+    "llm_max_output_tokens",
+    "llm_cache",
+    "llm_cache_mode",
+)
 
 
 def _split(text: str, what: str) -> list[str]:
@@ -54,20 +80,28 @@ def _kind(name: str) -> tuple[str, str | None]:
     return name, None
 
 
-def _combination(planner: str, auditor: str, params: dict[str, Any], extra: dict[str, Any]) -> Combination:
+def _combination(
+    planner: str, auditor: str, governance: GovernanceRequest, extra: dict[str, Any]
+) -> tuple[Combination, GovernanceRequest]:
+    """The combination of ``planner`` and ``auditor`` (``llm:MODEL`` names allowed) and the request behind it."""
     planner_kind, planner_model = _kind(planner)
     auditor_kind, auditor_model = _kind(auditor)
     if planner_model and auditor_model and planner_model != auditor_model:
         raise CliError(f"planner {planner} and auditor {auditor} name different models; one run uses one model")
-    values = {name: params.get(name) for name in agentic_cli.OPTION_NAMES}
-    values.update(planner=planner_kind, auditor=auditor_kind, llm_model=planner_model or auditor_model)
-    options = agentic_cli.agentic_options(agentic="planner_auditor", **values)
+    request = dataclasses.replace(
+        governance,
+        agentic="planner_auditor",
+        planner=planner_kind,
+        auditor=auditor_kind,
+        llm_model=planner_model or auditor_model or governance.llm_model,
+    )
+    options = agentic_cli.resolve(request)
     assert options is not None
     try:
         options = dataclasses.replace(options, **extra)
     except LLMConfigError as error:
-        raise CliError(str(error)) from None
-    return Combination(planner, auditor, options)
+        raise cli_error(error) from None
+    return Combination(planner, auditor, options), request
 
 
 def _leaderboard_table(frame: pd.DataFrame, title: str) -> Table:
@@ -135,6 +169,7 @@ def _write_outputs(staging: Path, runs, threshold: float, resamples: int) -> tup
 
 @app.command("governance")
 @reports_errors
+@agentic_cli.governance_options(only=LLM_FIELDS)
 def governance(
     data: Path | None = typer.Option(
         None, "--data", help="Dataset directory (default: the config's data_dir, else the embedded default dataset)."
@@ -178,15 +213,7 @@ def governance(
     resamples: int = typer.Option(2000, min=100, help="Bootstrap resamples per interval."),
     out: Path = typer.Option(..., "--out", help="Leaderboard directory (published as a whole)."),
     config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
-    llm_backend: str = agentic_cli.LLM_BACKEND,
-    llm_api: str | None = agentic_cli.LLM_API,
-    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
-    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
-    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
-    llm_max_retries: int = agentic_cli.LLM_MAX_RETRIES,
-    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
-    llm_cache: Path | None = agentic_cli.LLM_CACHE,
-    llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
+    governance: GovernanceRequest = GOVERNANCE,
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Score planners and auditors against counterfactual ground truth.
@@ -203,21 +230,20 @@ def governance(
     try:
         names = parse_policy_list(policies)
     except ValueError as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None
     chosen_settings = _split(settings, "settings")
     unknown = [s for s in chosen_settings if s not in GOVERNANCE_SETTINGS]
     if unknown:
         raise CliError(
             f"--settings: unknown setting(s) {', '.join(unknown)} (choose from {', '.join(GOVERNANCE_SETTINGS)})"
         )
-    llm_models = [_kind(n)[1] for n in (*_split(planner, "planners"), *_split(auditors, "auditors"))]
-    params = dict(locals(), llm_model=next((m for m in llm_models if m), None))
     combinations = []
+    llm_request: GovernanceRequest | None = None  # the request of the first combination that calls an LLM
     for trigger_set in _split(triggers, "trigger sets"):
         try:
             controls = SchedulerControls(triggers=trigger_set, max_audits=max_audits, cooldown_steps=cooldown)
         except LLMConfigError as error:
-            raise CliError(str(error)) from None
+            raise cli_error(error) from None
         extra = {
             "controls": controls,
             "target_audit_rate": target_audit_rate,
@@ -226,7 +252,9 @@ def governance(
         }
         for p in _split(planner, "planners"):
             for a in _split(auditors, "auditors"):
-                combination = _combination(p, a, params, extra)
+                combination, request = _combination(p, a, governance, extra)
+                if llm_request is None and combination.options.uses_llm:
+                    llm_request = request
                 if trigger_set != "all":
                     combination = dataclasses.replace(combination, planner_label=f"{p}[{trigger_set}]")
                 combinations.append(combination)
@@ -238,12 +266,15 @@ def governance(
         episodes=episodes,
         data_dir=data,
         config=cfg,
-        models=_models(models),
+        models=parse_models(models or []),
     )
     _check_models(spec, cfg)
     total = len(combinations) * len(chosen_settings) * len(names) * len(spec.run_seeds) * episodes
     llm_options = next((c.options for c in combinations if c.options.uses_llm), None)
-    with RunDirWriter(out, overwrite=overwrite) as writer, agentic_cli.serving(params, llm_options):
+    with (
+        RunDirWriter(out, overwrite=overwrite) as writer,
+        agentic_cli.serving(llm_request or governance, llm_options),
+    ):
         assert writer.staging is not None
         with progress_bar("governing", total) as advance:
             runs = run_governance(
@@ -284,4 +315,4 @@ def _check_models(spec: GovernanceSpec, cfg: BenchmarkConfig) -> None:
         for name in spec.policies:
             make_policy(name, cfg, spec.models)
     except (ValueError, FileNotFoundError) as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None

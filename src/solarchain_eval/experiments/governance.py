@@ -28,7 +28,8 @@ from ..agentic.policy import EXTRA_LOG_KEY
 from ..config import BenchmarkConfig
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, run_evaluation
 from .records import diagnostics_frame
-from .rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS, EpisodeResult, setting_has_physics_penalty
+from .rollout import EpisodeResult
+from .settings import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS, setting_has_physics_penalty
 
 RUNS_DIR = "runs"
 GOVERNANCE_SETTINGS = (SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS)

@@ -15,7 +15,7 @@ import pandas as pd
 from ..agentic.counterfactual import DIAGNOSTIC_COLUMNS
 from ..agentic.policy import EXTRA_DIAGNOSTICS_KEY, EXTRA_LOG_KEY, EXTRA_METRICS_KEY
 from ..io import atomic_write_csv, atomic_write_json, atomic_write_text
-from ..metrics import METRIC_NAMES
+from ..records_schema import EPISODE_KEYS, METRIC_NAMES
 from .rollout import STEP_FIELDS, EpisodeResult
 
 METRICS_FILE = "metrics.csv"
@@ -25,8 +25,6 @@ SUMMARY_FILE = "summary.json"
 METADATA_FILE = "run_metadata.json"
 AGENTIC_LOG_FILE = "agentic_logs.jsonl"
 DIAGNOSTICS_FILE = "governance_diagnostics.csv"
-
-EPISODE_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "start_hour")
 
 
 def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
@@ -112,7 +110,7 @@ def diagnostics_csv(results: Sequence[EpisodeResult]) -> str | None:
     writes for these columns: floats as ``repr``, None empty; several times faster)."""
     if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
         return None
-    ids = (*EPISODE_KEYS[:5], "start_hour")
+    ids = EPISODE_KEYS
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
     writer.writerow([*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
@@ -129,7 +127,7 @@ def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
     when no episode recorded diagnostics."""
     if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
         return None
-    ids = (*EPISODE_KEYS[:5], "start_hour")
+    ids = EPISODE_KEYS
     rows = []
     for r in results:
         metrics = r.extras.get(EXTRA_METRICS_KEY, {})
@@ -138,10 +136,16 @@ def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
     return pd.DataFrame(rows, columns=[*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
 
 
+def _finite_or_none(value: float) -> float | None:
+    return value if np.isfinite(value) else None
+
+
 def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
     """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric.
 
-    ``std`` is the sample standard deviation (ddof=1), as in the paper's tables.
+    ``std`` is the sample standard deviation (ddof=1), as in the paper's tables. Of a single
+    episode it is undefined: NaN, written as ``null`` (strict JSON), as the report's
+    :func:`~solarchain_eval.report.statistics.mean_std` has NaN (docs/metrics.md#summaries).
     """
     if metrics.empty:
         return []
@@ -163,7 +167,7 @@ def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
             "metrics": {
                 name: {
                     "mean": float(group[name].mean()),
-                    "std": float(group[name].std(ddof=1)) if len(group) > 1 else 0.0,
+                    "std": _finite_or_none(float(group[name].std(ddof=1))),
                     "min": float(group[name].min()),
                     "max": float(group[name].max()),
                 }
