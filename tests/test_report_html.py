@@ -33,6 +33,14 @@ def test_every_figure_is_drawn_as_png_and_svg(full_report):
         assert b"<dc:date>" not in figure.svg.read_bytes()
 
 
+def test_agentic_figures_name_the_planner_and_auditor_that_ran(full_report):
+    by_key = {f.key: f for f in full_report.figures}
+    for key in ("jitter_change", "agentic_paired_deltas", "audit_step_delta", "case_action_revision", "case_context"):
+        assert by_key[key].title.endswith("(rule planner, rule auditor)"), key
+        assert by_key[key].caption.endswith("Planner/Auditor: rule planner, rule auditor."), key
+    assert "planner" not in by_key["reward_distribution"].title
+
+
 def test_policy_colours_are_the_same_in_every_figure(full_report):
     by_key = {f.key: f.svg.read_text(encoding="utf-8").lower() for f in full_report.figures}
     for key in (
