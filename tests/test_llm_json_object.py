@@ -3,9 +3,8 @@ against the scripted server on 127.0.0.1 (no model needed)."""
 
 from __future__ import annotations
 
-import re
-
 import json
+import re
 
 import pytest
 

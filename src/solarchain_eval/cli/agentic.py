@@ -100,6 +100,17 @@ LLM_CACHE_MODE = typer.Option(
     rich_help_panel=_PANEL,
 )
 
+LLM_CONCURRENCY = typer.Option(
+    1,
+    "--llm-concurrency",
+    min=1,
+    help="Episodes in flight (threads) while waiting for the model, for servers that answer requests in parallel "
+    "(vLLM, OpenAI, llama-server -np N). The files are the same as with 1 when replies are deterministic "
+    "(temperature 0 and a seed, or a replayed cache). With --llm-backend local the server accepts N requests "
+    "without interrupting one (it answers them one at a time).",
+    rich_help_panel=_PANEL,
+)
+
 
 def agentic_options(
     *,
@@ -203,7 +214,8 @@ def local_server_spec(params: dict[str, Any], options: AgenticOptions | None) ->
     if path is None:
         local_server.default_model_path()  # raises with the install hint
     port = int(str(settings.base_url).rsplit(":", 1)[1].split("/", 1)[0])
-    return local_server.ServerSpec(model_path=path, model_name=settings.model, port=port)
+    parallel = int(params.get("llm_concurrency") or 1)  # concurrent requests must not interrupt each other
+    return local_server.ServerSpec(model_path=path, model_name=settings.model, port=port, parallel=parallel)
 
 
 #: The command parameters :func:`agentic_options` takes besides ``agentic``.

@@ -106,6 +106,7 @@ def evaluate(
     llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
     llm_cache: Path | None = agentic_cli.LLM_CACHE,
     llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
+    llm_concurrency: int = agentic_cli.LLM_CONCURRENCY,
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
@@ -128,6 +129,8 @@ def evaluate(
         raise CliError(str(error)) from None
     params = dict(locals())
     governance = agentic_cli.options_from(params, agentic)
+    if llm_concurrency > 1 and governance is None:
+        raise CliError("--llm-concurrency needs --agentic planner_auditor")
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_seeds(seeds),
@@ -137,6 +140,7 @@ def evaluate(
         config=cfg,
         models=_models(models),
         agentic=governance,
+        concurrency=llm_concurrency,
     )
     try:
         from ..policies.registry import make_policy
