@@ -71,7 +71,9 @@ def test_json_object_request_carries_the_capped_schema_max_tokens_and_seed():
 def test_free_text_pattern_admits_printable_text_only():
     # llama-cpp-python's grammar for a plain string admits raw control characters (invalid JSON);
     # the pattern, which its grammar compiler prefers, must not.
-    pattern = re.compile(response_format(AuditorOutput, "chat-json-object")["schema"]["properties"]["reason"]["pattern"])
+    pattern = re.compile(
+        response_format(AuditorOutput, "chat-json-object")["schema"]["properties"]["reason"]["pattern"]
+    )
     limit = SCHEMA_TEXT_MAX_CHARS["reason"]
     assert pattern.fullmatch("Violation rate 0.30 > 0.01; cut alpha (-15%), keep l.")
     assert pattern.fullmatch("x" * limit) and not pattern.fullmatch("x" * (limit + 1))
