@@ -96,7 +96,8 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         columns += LLM_CALL_COLUMNS
         notes.append(
             "LLM calls, latencies (median per call, seconds, as recorded) and tokens (mean per call) are read "
-            "from agentic_logs.jsonl; a replayed run shows the recorded calls' figures."
+            "from agentic_logs.jsonl; a call answered from the record/replay cache counts with the recorded "
+            "call's figures."
         )
     return ReportTable(
         key="llm_operations",
