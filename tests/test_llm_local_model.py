@@ -27,7 +27,7 @@ from solarchain_eval.agentic import (
 )
 from solarchain_eval.agentic.bench import episode_situation, step_situation
 from solarchain_eval.agentic.prompts import auditor_messages, planner_messages
-from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput
+from solarchain_eval.agentic.schemas import SCHEMA_TEXT_MAX_CHARS, AuditorOutput, PlannerOutput
 from solarchain_eval.cli import app
 from solarchain_eval.config import MarketConfig
 from solarchain_eval.market.actions import ActionCodec
@@ -121,7 +121,10 @@ def test_planner_and_auditor_answers_of_the_real_model_validate(server):
     finally:
         client.close()
     assert isinstance(plan.output, PlannerOutput) and isinstance(audit.output, AuditorOutput)
-    assert len(plan.output.rationale) <= 200 and len(audit.output.reason) <= 160  # maxLength held by the grammar
+    # maxLength and the printable-ASCII pattern held by the grammar
+    caps = SCHEMA_TEXT_MAX_CHARS
+    assert len(plan.output.rationale) <= caps["rationale"] and len(audit.output.reason) <= caps["reason"]
+    assert all(" " <= c <= "~" for c in plan.output.rationale + audit.output.reason)
     for reply in (plan, audit):
         assert reply.meta["output_tokens"] > 0 and reply.meta["latency_s"] > 0
 
