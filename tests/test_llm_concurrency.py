@@ -181,3 +181,28 @@ def test_concurrency_needs_the_agentic_layer(tiny_dataset, tmp_path):
         ],
     )
     assert result.exit_code == 2 and "--llm-concurrency needs --agentic planner_auditor" in result.output
+
+
+class _Started(Exception):
+    """Raised by the stand-in server start: the test needs the spec, not a run."""
+
+
+@pytest.mark.parametrize("concurrency", ["1", "3"])
+def test_local_server_takes_one_request_per_episode_in_flight(tiny_dataset, tmp_path, clean_env, concurrency):
+    """--llm-concurrency is evaluate's own option (not a GovernanceRequest field), yet the local
+    server it starts must get that many parallel slots, else a request interrupts another."""
+    from solarchain_eval.cli import agentic as agentic_cli
+
+    gguf = tmp_path / "tiny-model.gguf"
+    gguf.write_bytes(b"GGUF")
+    started = []
+
+    def serving(spec, log_path=None):
+        started.append(spec)
+        raise _Started
+
+    clean_env.setattr(agentic_cli.local_server, "serving", serving)
+    extra = ["--planner", "llm", "--llm-backend", "local", "--llm-model", str(gguf), "--llm-concurrency", concurrency]
+    result = CliRunner().invoke(app, args(tiny_dataset, tmp_path / "run", *extra))
+    assert isinstance(result.exception, _Started), result.output
+    assert [(s.model_path, s.parallel) for s in started] == [(gguf, int(concurrency))]

@@ -141,6 +141,8 @@ def test_local_backend_settings_need_no_key_and_pin_api_temperature_seed(tmp_pat
     assert (
         spec.model_path == gguf and spec.model_name == "tiny-model" and s.base_url == f"http://127.0.0.1:{spec.port}/v1"
     )
+    # one request slot per episode in flight (evaluate's --llm-concurrency)
+    assert spec.parallel == 1 and agentic_cli.local_server_spec({**params, "llm_concurrency": 3}, options).parallel == 3
     # a replay starts no server; the remote backend never does
     replay = local_params(llm_model=str(gguf), llm_cache=tmp_path / "c", llm_cache_mode="replay")
     assert agentic_cli.local_server_spec(replay, agentic_cli.agentic_options(**replay)) is None

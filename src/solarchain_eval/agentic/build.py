@@ -54,7 +54,9 @@ class AgenticOptions:
         if self.auditor not in AUDITOR_KINDS:
             raise LLMConfigError(f"unknown auditor {self.auditor!r} (choose from {', '.join(AUDITOR_KINDS)})")
         if self.uses_llm and self.llm is None:
-            raise LLMConfigError("an LLM planner or auditor needs LLM settings (--llm-api, --llm-model, ...)")
+            raise LLMConfigError.about(
+                "an LLM planner or auditor needs LLM settings ({opt_llm_api}, {opt_llm_model}, ...)"
+            )
 
     @property
     def uses_llm(self) -> bool:

@@ -17,6 +17,7 @@ from typing import Any
 
 import numpy as np
 
+from ..market.actions import DiscreteActions, initial_action
 from ..market.observation import OBS_GAP, OBS_SLIPPAGE, OBS_VIOLATION, OBSERVATION_NAMES
 from ..policies.base import Policy
 from .auditor import Auditor, StepContext
@@ -86,10 +87,7 @@ class GovernedPolicy:
         self._budget = audit_budget(self._plan.max_audits_per_episode, self._plan.target_audit_rate, self._steps)
         self._scheduler = AuditScheduler(self._budget, self._plan.cooldown_steps)
         m = env.config.market
-        # a_prev at reset: the configured static action in float32, as the env starts from it.
-        self._previous = tuple(
-            float(np.float32(v)) for v in (m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate)
-        )
+        self._previous = initial_action(m)  # a_prev at reset, as the env starts from it
         self._recent: dict[str, float] | None = None
         self._step = 0
         self._rows = []
@@ -194,15 +192,7 @@ class GovernedPolicy:
 def _proposal_decoder(env: Any, action_mode: str) -> Callable[[Any], tuple[float, float, float]]:
     """Decode a base-policy action to market units (float32 values), by the base's mode."""
     if action_mode == "discrete":
-        table = env.codec.discrete_table(env.config.discrete_levels)
-
-        def decode_index(action: Any) -> tuple[float, float, float]:
-            index = int(np.asarray(action).reshape(-1)[0])
-            if not 0 <= index < len(table):
-                raise ValueError(f"discrete action {index} is outside 0..{len(table) - 1}")
-            return table[index]
-
-        return decode_index
+        return DiscreteActions.from_codec(env.codec, env.config.discrete_levels).decode
     if action_mode != "continuous":
         raise ValueError(f"unknown action mode {action_mode!r}")
     return env.codec.decode

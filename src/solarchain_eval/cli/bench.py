@@ -35,11 +35,11 @@ def bench(
     Targets on a 2-core machine: (a) >= 50,000 steps/s, (b) >= 3,000,000 env-steps/s, (c) < 10 s.
     """
     from .. import bench as measure
-    from ..data.default import default_dataset_dir
+    from ..data.default import resolve_data_dir
 
     if backend not in ("numpy", "jax"):
         raise typer.BadParameter(f"--backend must be numpy or jax, not {backend!r}")
-    data_dir = data or default_dataset_dir()
+    data_dir = resolve_data_dir(data)
     measure.warm_table(data_dir)
     results = []
     if backend == "jax":

@@ -8,8 +8,10 @@ import typer
 from rich.table import Table
 
 from ..agentic import local_server
+from ..agentic.request import GovernanceRequest
 from . import agentic as agentic_cli
 from . import app
+from .agentic import GOVERNANCE
 from .common import CliError, console, err_console, progress_bar, reports_errors
 
 llm_app = typer.Typer(
@@ -60,6 +62,16 @@ def serve(
 
 @app.command("bench-llm")
 @reports_errors
+@agentic_cli.governance_options(
+    fixed={
+        "agentic": "planner_auditor",
+        "planner": "llm",
+        "auditor": "llm",
+        "llm_max_retries": 0,
+        "llm_cache": None,
+        "llm_cache_mode": "off",
+    }
+)
 def bench_llm(
     calls: int = typer.Option(
         4, "--calls", min=1, help="Planner calls (simulated episodes), alternating calm and risky situations."
@@ -70,13 +82,7 @@ def bench_llm(
         min=0,
         help="Auditor calls after each planner call, as in an episode (calm and risky steps alternating).",
     ),
-    llm_backend: str = agentic_cli.LLM_BACKEND,
-    llm_api: str | None = agentic_cli.LLM_API,
-    llm_model: str | None = agentic_cli.LLM_MODEL,
-    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
-    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
-    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
-    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
+    governance: GovernanceRequest = GOVERNANCE,
 ) -> None:
     """Median and p90 latency per planner and auditor call, tokens/s and schema validity.
 
@@ -89,10 +95,9 @@ def bench_llm(
     from ..agentic import StructuredLLM
     from ..agentic.bench import run_llm_bench
 
-    params = dict(locals(), planner="llm", auditor="llm", llm_max_retries=0, llm_cache=None, llm_cache_mode="off")
-    options = agentic_cli.options_from(params, "planner_auditor")
+    options = agentic_cli.resolve(governance)
     assert options is not None and options.llm is not None
-    with agentic_cli.serving(params, options) as server:
+    with agentic_cli.serving(governance, options) as server:
         client = StructuredLLM(options.llm.settings)
         cpu = server.cpu_seconds if server is not None and server.cpu_seconds() is not None else None
         try:

@@ -12,7 +12,7 @@ import pandas as pd
 
 from ..agentic.policy import EXTRA_LOG_KEY, EXTRA_METRICS_KEY
 from ..io import atomic_write_csv, atomic_write_json, atomic_write_text
-from ..metrics import METRIC_NAMES
+from ..records_schema import EPISODE_KEYS, METRIC_NAMES
 from .rollout import STEP_FIELDS, EpisodeResult
 
 METRICS_FILE = "metrics.csv"
@@ -21,8 +21,6 @@ CITY_HOUR_FILE = "city_hour_policy.csv"
 SUMMARY_FILE = "summary.json"
 METADATA_FILE = "run_metadata.json"
 AGENTIC_LOG_FILE = "agentic_logs.jsonl"
-
-EPISODE_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "start_hour")
 
 
 def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
@@ -103,10 +101,16 @@ def agentic_log_text(results: Sequence[EpisodeResult]) -> str | None:
     return "".join(line + "\n" for line in lines)
 
 
+def _finite_or_none(value: float) -> float | None:
+    return value if np.isfinite(value) else None
+
+
 def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
     """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric.
 
-    ``std`` is the sample standard deviation (ddof=1), as in the paper's tables.
+    ``std`` is the sample standard deviation (ddof=1), as in the paper's tables. Of a single
+    episode it is undefined: NaN, written as ``null`` (strict JSON), as the report's
+    :func:`~solarchain_eval.report.statistics.mean_std` has NaN (docs/metrics.md#summaries).
     """
     if metrics.empty:
         return []
@@ -128,7 +132,7 @@ def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
             "metrics": {
                 name: {
                     "mean": float(group[name].mean()),
-                    "std": float(group[name].std(ddof=1)) if len(group) > 1 else 0.0,
+                    "std": _finite_or_none(float(group[name].std(ddof=1))),
                     "min": float(group[name].min()),
                     "max": float(group[name].max()),
                 }

@@ -28,9 +28,10 @@ from ..experiments.layout import (
     is_paper_root,
     run_table_paths,
 )
-from ..experiments.records import EPISODE_KEYS, SUMMARY_FILE
+from ..experiments.records import SUMMARY_FILE
 from ..experiments.rundir import verify_files, verify_run_dir
-from ..metrics import METRIC_NAMES
+from ..option_errors import NamesOptions
+from ..records_schema import EPISODE_KEYS, METRIC_NAMES, upgrade_columns
 from ..redaction import redact_command
 from .naming import SETTINGS
 
@@ -63,7 +64,7 @@ CITY_HOUR_KEYS = ("policy", "setting", "run_seed", "episode", "step", "hour", "c
 ROLLOUT_KEY = ["setting", "policy", "run_seed", "episode"]
 
 
-class ReportDataError(ValueError):
+class ReportDataError(NamesOptions, ValueError):
     """The run's files are missing, malformed or inconsistent (the message names file, column, row)."""
 
 
@@ -114,6 +115,11 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
         frame = pd.read_csv(path)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
         raise ReportDataError(f"{path}: not a readable CSV ({error})") from None
+    # Files written before a column was renamed or removed (records_schema's version history).
+    upgrade = upgrade_columns(list(frame.columns))
+    if upgrade:
+        frame = frame.drop(columns=[c for c, new in upgrade.items() if new is None])
+        frame = frame.rename(columns={c: new for c, new in upgrade.items() if new is not None})
     missing = [c for c in required if c not in frame.columns]
     if missing:
         raise ReportDataError(f"{path}: missing column(s) {', '.join(missing)}")
@@ -318,8 +324,10 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     unverified = verify_report_inputs(root, kind)
     if unverified and not allow_unverified:
         more = f" (and {len(unverified) - 1} more problem(s))" if len(unverified) > 1 else ""
-        raise ReportDataError(
-            f"{unverified[0]}{more}; refusing to report (--allow-unverified reports anyway, with warnings)"
+        raise ReportDataError.about(
+            "{problem}{more}; refusing to report ({opt_allow_unverified} reports anyway, with warnings)",
+            problem=unverified[0],
+            more=more,
         )
     return ReportData(
         root=root,

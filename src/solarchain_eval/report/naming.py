@@ -7,7 +7,8 @@ from __future__ import annotations
 
 from collections.abc import Iterable
 
-from ..experiments.rollout import (
+from ..experiments.settings import (
+    KNOWN_SETTINGS,
     SETTING_AGENTIC,
     SETTING_AGENTIC_NO_PHYSICS,
     SETTING_LABELS,
@@ -25,12 +26,7 @@ PAPER_POLICY_ORDER = ("static", "random", "myopic", "ppo", "sac", "dqn")
 LEARNED_ORDER = ("ppo", "sac", "dqn")
 
 #: Setting labels of the four-setting tables ("Governance" / "Setting" columns of the body).
-GOVERNANCE_LABELS = {
-    SETTING_MAIN: "RL",
-    SETTING_NO_PHYSICS: "RL no-physics",
-    SETTING_AGENTIC: "RL+LLM",
-    SETTING_AGENTIC_NO_PHYSICS: "RL+LLM no-physics",
-}
+GOVERNANCE_LABELS = {name: KNOWN_SETTINGS[name].governance_label for name in SETTINGS}
 #: Row order of the four-setting appendix tables (RL, RL+LLM, RL no-physics, RL+LLM no-physics).
 GOVERNANCE_ORDER = (SETTING_MAIN, SETTING_AGENTIC, SETTING_NO_PHYSICS, SETTING_AGENTIC_NO_PHYSICS)
 #: The LLM appendix tables name an agentic setting by its reward ("Main" / "No-physics").
@@ -55,7 +51,6 @@ __all__ = [
     "setting_label",
     "is_learned",
     "paper_order",
-    "alphabetical_order",
     "learned_order",
 ]
 
@@ -76,15 +71,14 @@ def is_learned(policy: str) -> bool:
 
 
 def paper_order(policies: Iterable[str]) -> list[str]:
-    """``policies`` in the paper's order: Static, Random, Myopic, PPO, SAC, DQN, then others by name."""
+    """``policies`` in the report's one order: Static, Random, Myopic, PPO, SAC, DQN, then others by name.
+
+    Every table and figure lists policies in this order (the paper's appendix tables sort by name;
+    the report does not, so a policy is found in the same place everywhere).
+    """
     present = set(policies)
     known = [p for p in PAPER_POLICY_ORDER if p in present]
     return known + sorted(present - set(known))
-
-
-def alphabetical_order(policies: Iterable[str]) -> list[str]:
-    """``policies`` sorted by display name (the appendix tables' order: DQN, Myopic, PPO, ...)."""
-    return sorted(set(policies), key=lambda p: (policy_label(p), p))
 
 
 def learned_order(policies: Iterable[str]) -> list[str]:

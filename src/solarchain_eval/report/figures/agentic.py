@@ -12,7 +12,7 @@ from scipy import stats
 from ...experiments.rollout import SETTING_AGENTIC, SETTING_MAIN
 from ..casestudy import episode_steps, select_case
 from ..loading import ReportData
-from ..naming import GOVERNANCE_LABELS, learned_order, policy_label, setting_label
+from ..naming import GOVERNANCE_LABELS, learned_order, paper_order, policy_label, setting_label
 from ..options import ReportOptions
 from ..statistics import paired_deltas
 from ..tables.model import Skipped
@@ -111,7 +111,7 @@ def audit_step_delta(data: ReportData, options: ReportOptions, out_dir: Path) ->
     audited = logs[logs["audited"].astype(bool)] if not logs.empty else logs
     if audited.empty:
         return Skipped(key, title, "the run has no audited agentic log steps")
-    policies = learned_order(audited["policy"]) + sorted(set(audited["policy"]) - set(learned_order(audited["policy"])))
+    policies = paper_order(audited["policy"])
     kappa, delta = audited["kappa"].to_numpy(float), audited["action_delta"].to_numpy(float)
     rho = stats.spearmanr(kappa, delta).statistic if len(audited) > 2 else float("nan")
     with new_figure() as (figure, axes):

@@ -7,7 +7,7 @@ import pandas as pd
 from ...experiments.rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS
 from ..casestudy import select_case
 from ..loading import ReportData
-from ..naming import AGENTIC_REWARD_LABELS, alphabetical_order, policy_label, setting_label
+from ..naming import AGENTIC_REWARD_LABELS, paper_order, policy_label, setting_label
 from ..options import ReportOptions
 from .common import agentic_rollouts, means, pooled_revision_rate, size_fields, sizes_of
 from .model import Column, ReportTable, Skipped, basis_sentence, cell, fixed, integer, text
@@ -17,7 +17,7 @@ TRIGGER_COLUMNS = (
     ("physics_trigger_rate", "Physics Trig."),
     ("gap_trigger_rate", "Gap Trig."),
     ("slippage_trigger_rate", "Slippage Trig."),
-    ("jitter_trigger_rate", "Jitter Trig."),
+    ("soft_trigger_rate", "Jitter Trig."),  # the soft trigger is the jitter condition κ > τκ
     ("plan_violation_threshold", "Viol. Thr."),
     ("plan_gap_threshold", "Gap Thr."),
     ("plan_jitter_threshold", "Jitter Thr."),
@@ -36,7 +36,7 @@ def _agentic_groups(data: ReportData, key: str, title: str):
     groups = []
     for setting in AGENTIC_SETTINGS:
         in_setting = frame[frame["setting"] == setting]
-        for policy in alphabetical_order(in_setting["policy"]):
+        for policy in paper_order(in_setting["policy"]):
             groups.append((setting, policy, in_setting[in_setting["policy"] == policy]))
     return groups
 
@@ -70,7 +70,7 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
                 "audit_rate": float(group["audit_rate"].mean()),
                 "revision_given_audit": pooled_revision_rate(group),
                 **means(group, ["modification_rate", "mean_action_delta", "not_triggered_rate", "plan_validity_rate"]),
-                "llm_failure_count": int(group["llm_failure_count"].sum()),
+                "llm_retry_count": int(group["llm_retry_count"].sum()),
             }
         )
         rows[-1].update(_llm_call_figures(data.logs, setting, policy))
@@ -86,10 +86,10 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         Column("Not Triggered", cell("not_triggered_rate", 3)),
     ]
     notes = []
-    if (frame["llm_failure_count"] == 0).all():
-        notes.append("The LLM failure count is zero for every row and is therefore not shown.")
+    if (frame["llm_retry_count"] == 0).all():
+        notes.append("The LLM retry count is zero for every row and is therefore not shown.")
     else:
-        columns.append(Column("LLM Failures", integer("llm_failure_count")))
+        columns.append(Column("LLM Retries", integer("llm_retry_count")))
     if sources - {"agentic_logs.jsonl"}:
         notes.append("Steps count actions.csv rows where a group has no agentic log.")
     if frame["llm_calls"].sum() > 0:
