@@ -258,6 +258,18 @@ class LocalServer:
             signal.signal(signal.SIGTERM, self._previous_sigterm)  # type: ignore[arg-type]
             self._previous_sigterm = None
 
+    def cpu_seconds(self) -> float | None:
+        """CPU time (user + system, s) the server process has used so far; None when it is
+        not running or the platform has no ``/proc`` (the machine is shared: CPU time per call
+        is steadier than latency)."""
+        if self.process is None:
+            return None
+        try:
+            fields = Path(f"/proc/{self.process.pid}/stat").read_text().split(") ", 1)[1].split()
+        except (OSError, IndexError):
+            return None
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
     def __enter__(self) -> LocalServer:
         return self.start()
 

@@ -74,22 +74,24 @@ class EpisodeContext:
     hourly_signals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
     def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
+        # Run-constant keys first: they form a prefix shared with the previous planner call.
         return {
+            "benchmark_ranges": benchmark_ranges(codec),
             "episode_steps": self.episode_steps,
-            "start_hour_of_day": self.start_hour % 24,
             "physics_penalty_in_reward": self.physics_penalty,
-            "benchmark_ranges": {
-                "reward_ratio": list(_range(codec, 0)),
-                "liquidity_ratio": list(_range(codec, 1)),
-                "burn_rate": list(_range(codec, 2)),
-                "max_total_allocation": codec.max_total_allocation,
-            },
+            "start_hour_of_day": self.start_hour % 24,
             "episode_statistics": {name: _sig(value) for name, value in self.statistics.items()},
         }
 
 
-def _range(codec: ActionCodec, i: int) -> tuple[float, float]:
-    return (codec.lo[i], codec.hi[i])
+def benchmark_ranges(codec: ActionCodec) -> dict[str, Any]:
+    """The action ranges and the allocation cap, as both prompts show them."""
+    return {
+        "reward_ratio": [codec.lo[0], codec.hi[0]],
+        "liquidity_ratio": [codec.lo[1], codec.hi[1]],
+        "burn_rate": [codec.lo[2], codec.hi[2]],
+        "max_total_allocation": codec.max_total_allocation,
+    }
 
 
 def episode_context(env: Any, start_hour: int) -> EpisodeContext:

@@ -193,9 +193,10 @@ class GovernanceRequest:
             seed=local_server.LOCAL_SEED,
         )
 
-    def server_spec(self, options: AgenticOptions | None) -> local_server.ServerSpec | None:
+    def server_spec(self, options: AgenticOptions | None, *, parallel: int = 1) -> local_server.ServerSpec | None:
         """The local model server this request needs (None: remote backend, no LLM component, or a
-        pure replay, which needs no server)."""
+        pure replay, which needs no server), taking ``parallel`` requests at once (one per episode
+        in flight) so that concurrent requests never interrupt each other."""
         if self.llm_backend != "local" or options is None or options.llm is None or options.llm.cache_mode == "replay":
             return None
         settings = options.llm.settings
@@ -203,7 +204,7 @@ class GovernanceRequest:
         if path is None:
             local_server.default_model_path()  # raises with the install hint
         port = int(str(settings.base_url).rsplit(":", 1)[1].split("/", 1)[0])
-        return local_server.ServerSpec(model_path=path, model_name=settings.model, port=port)
+        return local_server.ServerSpec(model_path=path, model_name=settings.model, port=port, parallel=parallel)
 
 
 __all__ = ["AGENTIC_MODES", "LLM_BACKENDS", "GovernanceRequest", "GovernanceRequestError", "LLMError"]

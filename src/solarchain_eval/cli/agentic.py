@@ -28,7 +28,8 @@ from .common import CliError, register_user_error
 register_user_error(LLMError, GovernanceRequestError)
 
 __all__ = ["AGENTIC_MODES", "agentic_options", "governance_options", "serving", "agentic_table"]
-_PANEL = "Planner/Auditor (agentic settings)"
+#: The help panel of the governance options (and of options that go with them, e.g. evaluate's --llm-concurrency).
+PANEL = "Planner/Auditor (agentic settings)"
 #: Default of a command's ``governance`` parameter, which :func:`governance_options` replaces.
 GOVERNANCE: Any = None
 
@@ -58,7 +59,7 @@ def governance_options(
                 continue
             for f in offered:
                 decls = f.metadata.get("param_decls", (flag_of(f.name),))  # e.g. an on/off pair of flags
-                option = typer.Option(f.default, *decls, help=f.metadata["help"], rich_help_panel=_PANEL)
+                option = typer.Option(f.default, *decls, help=f.metadata["help"], rich_help_panel=PANEL)
                 parameters.append(inspect.Parameter(f.name, parameter.kind, default=option, annotation=hints[f.name]))
 
         @functools.wraps(func)
@@ -87,16 +88,19 @@ def agentic_options(**values: Any) -> AgenticOptions | None:
 
 
 def local_server_spec(params: dict[str, Any], options: AgenticOptions | None) -> local_server.ServerSpec | None:
-    """The server to start for option values by field name (see :meth:`GovernanceRequest.server_spec`)."""
+    """The server to start for option values by field name (see :meth:`GovernanceRequest.server_spec`);
+    ``llm_concurrency`` (evaluate's, not a request field) sets the server's parallel requests."""
     names = GovernanceRequest.field_names()
-    return GovernanceRequest(**{k: v for k, v in params.items() if k in names}).server_spec(options)
+    request = GovernanceRequest(**{k: v for k, v in params.items() if k in names})
+    return request.server_spec(options, parallel=int(params.get("llm_concurrency") or 1))
 
 
-def serving(request: GovernanceRequest, options: AgenticOptions | None):
-    """Context manager: the local model server the command needs, running (or nothing)."""
+def serving(request: GovernanceRequest, options: AgenticOptions | None, *, parallel: int = 1):
+    """Context manager: the local model server the command needs, running (or nothing); it takes
+    ``parallel`` requests at once (``evaluate --llm-concurrency``) without interrupting one."""
     import tempfile
 
-    spec = request.server_spec(options)
+    spec = request.server_spec(options, parallel=parallel)
     log = Path(tempfile.gettempdir()) / f"solarchain-llm-server-{spec.port}.log" if spec is not None else None
     return local_server.serving(spec, log_path=log)
 

@@ -19,6 +19,7 @@ from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
 from .common import (
+    CliError,
     cli_error,
     console,
     invoked_command,
@@ -36,6 +37,19 @@ OVERWRITE = typer.Option(
     False,
     "--overwrite",
     help="Replace an existing run directory as a whole (its old files are removed, never mixed in).",
+)
+
+# An evaluate option, not a GovernanceRequest field: it schedules this command's episodes (paper and
+# bench-llm run theirs in order), so it lives here, shown in the governance options' help panel.
+LLM_CONCURRENCY = typer.Option(
+    1,
+    "--llm-concurrency",
+    min=1,
+    help="Episodes in flight (threads) while waiting for the model, for servers that answer requests in parallel "
+    "(vLLM, OpenAI, llama-server -np N); needs --agentic planner_auditor. The files are the same as with 1 when "
+    "replies are deterministic (temperature 0 and a seed, or a replayed cache). With --llm-backend local the server "
+    "accepts N requests without interrupting one (it answers them one at a time).",
+    rich_help_panel=agentic_cli.PANEL,
 )
 
 _SEEDS = ",".join(str(s) for s in PAPER_SEEDS)
@@ -82,6 +96,7 @@ def evaluate(
         help="Trained models: a directory, or NAME=PATH per learned policy (repeatable).",
     ),
     governance: GovernanceRequest = GOVERNANCE,
+    llm_concurrency: int = LLM_CONCURRENCY,
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
@@ -103,6 +118,8 @@ def evaluate(
     except ValueError as error:
         raise cli_error(error) from None
     options = agentic_cli.resolve(governance)
+    if llm_concurrency > 1 and options is None:
+        raise CliError("--llm-concurrency needs --agentic planner_auditor")
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_seeds(seeds),
@@ -112,13 +129,15 @@ def evaluate(
         config=cfg,
         models=parse_models(models or []),
         agentic=options,
+        concurrency=llm_concurrency,
     )
     try:
         make_policies(spec)  # fail on unknown names or missing models before any work
     except (ValueError, FileNotFoundError) as error:
         raise cli_error(error) from None
     label = "evaluate" if options is None else f"evaluate-{spec.setting}"
-    with agentic_cli.serving(governance, options):  # --llm-backend local: started here, always stopped
+    # --llm-backend local: started here, always stopped; one server slot per episode in flight
+    with agentic_cli.serving(governance, options, parallel=llm_concurrency):
         _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite)
 
 

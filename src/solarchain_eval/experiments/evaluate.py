@@ -29,6 +29,7 @@ from ..policies.registry import make_policy
 from ..records_schema import RECORDS_SCHEMA_VERSION
 from ..redaction import redact_command
 from ..versions import git_commit, package_versions
+from .inflight import run_in_flight
 from .records import METADATA_FILE, write_records
 from .rollout import EpisodeResult, paper_episode_seeds, run_policy
 from .rundir import RunDirWriter, kill_point
@@ -62,6 +63,8 @@ class EvaluationSpec:
     models: dict[str, Path] = field(default_factory=dict)
     episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds
     agentic: AgenticOptions | None = None
+    #: Episodes in flight (threads; see :mod:`.inflight`). The results do not depend on it.
+    concurrency: int = 1
 
     @property
     def setting(self) -> str:
@@ -125,30 +128,24 @@ def run_evaluation(
     policies = make_policies(spec)
     setting = spec.setting
 
-    envs: dict[str, SolarChainEnv] = {}
-    results: list[EpisodeResult] = []
     with ExitStack() as stack:
         writer = stack.enter_context(RunDirWriter(run_dir, overwrite=overwrite, keep=keep))
-        if spec.agentic is not None:
-            governance = stack.enter_context(Governance(spec.agentic, config.market))
-            policies = [governance.wrap(policy) for policy in policies]
-        for policy in policies:
-            env = envs.get(policy.action_mode)
-            if env is None:
-                env = envs[policy.action_mode] = SolarChainEnv(
-                    config=config, table=table, action_mode=policy.action_mode
-                )
-            results.extend(
-                run_policy(
-                    env,
-                    policy,
-                    setting=setting,
-                    run_seeds=spec.run_seeds,
-                    episodes=spec.episodes,
-                    episode_seeds=spec.episode_seeds,
-                    on_episode=on_episode,
-                )
+        governance = stack.enter_context(Governance(spec.agentic, config.market)) if spec.agentic is not None else None
+        if spec.concurrency > 1:
+            results = run_in_flight(
+                policies,
+                lambda mode: SolarChainEnv(config=config, table=table, action_mode=mode),
+                setting=setting,
+                run_seeds=spec.run_seeds,
+                episodes=spec.episodes,
+                episode_seeds=spec.episode_seeds,
+                workers=spec.concurrency,
+                wrap=governance.wrap if governance is not None else None,
+                on_episode=on_episode,
             )
+        else:
+            wrapped = [governance.wrap(p) for p in policies] if governance is not None else policies
+            results = _run_sequentially(wrapped, spec, config, table, setting, on_episode)
         assert writer.staging is not None
         files = write_records(writer.staging, results, table.cities)
         kill_point("staged")
@@ -158,6 +155,35 @@ def run_evaluation(
         writer.publish()
     files = {name: Path(run_dir) / name for name in [*files, METADATA_FILE]}
     return EvaluationOutcome(run_dir=run_dir, results=results, files=files, wall_s=wall_s)
+
+
+def _run_sequentially(
+    policies: Sequence[Policy],
+    spec: EvaluationSpec,
+    config: BenchmarkConfig,
+    table: HourlyTable,
+    setting: str,
+    on_episode: Callable[[EpisodeResult], None] | None,
+) -> list[EpisodeResult]:
+    """Every policy's runs and episodes in protocol order, one env per action mode."""
+    envs: dict[str, SolarChainEnv] = {}
+    results: list[EpisodeResult] = []
+    for policy in policies:
+        env = envs.get(policy.action_mode)
+        if env is None:
+            env = envs[policy.action_mode] = SolarChainEnv(config=config, table=table, action_mode=policy.action_mode)
+        results.extend(
+            run_policy(
+                env,
+                policy,
+                setting=setting,
+                run_seeds=spec.run_seeds,
+                episodes=spec.episodes,
+                episode_seeds=spec.episode_seeds,
+                on_episode=on_episode,
+            )
+        )
+    return results
 
 
 def _metadata(
@@ -185,6 +211,7 @@ def _metadata(
         "records_schema_version": RECORDS_SCHEMA_VERSION,
         "policies": [p if isinstance(p, str) else p.name for p in spec.policies],
         "agentic": spec.agentic.describe() if spec.agentic is not None else None,
+        "concurrency": int(spec.concurrency),
         "run_seeds": [int(s) for s in spec.run_seeds],
         "episodes": int(spec.episodes),
         "episode_seed_protocol": getattr(spec.episode_seeds, "__name__", "custom"),

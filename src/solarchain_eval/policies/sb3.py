@@ -130,6 +130,7 @@ class SB3Policy:
     model_path: Path
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     action_mode: str = ""
+    stateless = True  # deterministic predict, no recurrent state: episodes may run concurrently
 
     def __post_init__(self) -> None:
         self.action_mode = LEARNED_POLICIES[self.name]

@@ -183,10 +183,35 @@ def _read_table(
     return pd.concat(frames, ignore_index=True), paths
 
 
+#: Per-row figures of the model calls a log row records (NaN where it records none): the
+#: auditor's call at this step, and the planner's call on the episode's first row only (the plan,
+#: with its call, is repeated on every row).
+LLM_CALL_FIELDS = tuple(
+    f"{kind}_{name}" for kind in ("planner", "auditor") for name in ("latency_s", "input_tokens", "output_tokens")
+)
+
+
+def _llm_call_fields(record: dict[str, Any]) -> dict[str, float]:
+    out = dict.fromkeys(LLM_CALL_FIELDS, float("nan"))
+    plan = record.get("plan")
+    calls = {
+        "auditor": record.get("llm"),
+        "planner": plan.get("llm") if isinstance(plan, dict) and record.get("step") == 0 else None,
+    }
+    for kind, meta in calls.items():
+        if isinstance(meta, dict):
+            for name in ("latency_s", "input_tokens", "output_tokens"):
+                value = meta.get(name)
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    out[f"{kind}_{name}"] = float(value)
+    return out
+
+
 def _flatten_log(record: dict[str, Any]) -> dict[str, Any]:
     row = {key: record[key] for key in LOG_KEYS}
     for key in ("proposed_action", "final_action"):
         row[key] = tuple(float(v) for v in record[key])
+    row.update(_llm_call_fields(record))
     return row
 
 
@@ -215,7 +240,7 @@ def read_agentic_logs(path: Path) -> pd.DataFrame:
                 if not (isinstance(value, list) and len(value) == 3):
                     raise ReportDataError(f"{path}: line {number} field {key} is not a list of 3 numbers")
             rows.append(_flatten_log(record))
-    frame = pd.DataFrame(rows, columns=list(LOG_KEYS))
+    frame = pd.DataFrame(rows, columns=[*LOG_KEYS, *LLM_CALL_FIELDS])
     if not frame.empty:
         _check_settings(frame, path, "paper" if path.parent.parent.name == COMBINED_DIR else "run")
     return frame
@@ -310,7 +335,7 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     city_hour, city_paths = _read_table(root, CITY_HOUR_FILE, CITY_HOUR_KEYS, kind)
     log_paths = run_table_paths(root, AGENTIC_LOG_FILE)
     logs = [read_agentic_logs(path) for path in log_paths]
-    log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=list(LOG_KEYS))
+    log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=[*LOG_KEYS, *LLM_CALL_FIELDS])
     # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
     log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
     diagnostics, diagnostic_paths = _read_table(root, DIAGNOSTICS_FILE, DIAGNOSTICS_REQUIRED, kind)

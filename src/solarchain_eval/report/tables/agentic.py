@@ -74,6 +74,7 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
                 "llm_retry_count": int(group["llm_retry_count"].sum()),
             }
         )
+        rows[-1].update(_llm_call_figures(data.logs, setting, policy))
     frame = pd.DataFrame(rows)
     columns = [
         Column("Setting", text("setting"), align="l"),
@@ -92,6 +93,13 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         columns.append(Column("LLM Retries", integer("llm_retry_count")))
     if sources - {"agentic_logs.jsonl"}:
         notes.append("Steps count actions.csv rows where a group has no agentic log.")
+    if frame["llm_calls"].sum() > 0:
+        columns += LLM_CALL_COLUMNS
+        notes.append(
+            "LLM calls, latencies (median per call, seconds, as recorded) and tokens (mean per call) are read "
+            "from agentic_logs.jsonl; a call answered from the record/replay cache counts with the recorded "
+            "call's figures."
+        )
     return ReportTable(
         key="llm_operations",
         label="tab:app-llm-ops",
@@ -106,6 +114,38 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         basis=basis_sentence(sizes_of(frame), "rollouts"),
         notes=notes,
     )
+
+
+LLM_CALL_COLUMNS = [
+    Column("LLM Calls", integer("llm_calls")),
+    Column("Planner Median s", cell("planner_median_s", 2)),
+    Column("Auditor Median s", cell("auditor_median_s", 2)),
+    Column("Prompt Tokens", cell("mean_prompt_tokens", 0)),
+    Column("Completion Tokens", cell("mean_completion_tokens", 0)),
+]
+
+
+def _llm_call_figures(logs: pd.DataFrame, setting: str, policy: str) -> dict[str, float]:
+    """Model calls of a group (planner and auditor), their median latencies and mean tokens.
+
+    ``logs`` has the per-row call columns of :data:`~..loading.LLM_CALL_FIELDS` (NaN: no call).
+    """
+    group = logs[(logs["setting"] == setting) & (logs["policy"] == policy)]
+
+    def values(kind: str, name: str) -> pd.Series:
+        return pd.to_numeric(group[f"{kind}_{name}"], errors="coerce").dropna()
+
+    planner, auditor = values("planner", "latency_s"), values("auditor", "latency_s")
+    prompt = pd.concat([values("planner", "input_tokens"), values("auditor", "input_tokens")])
+    completion = pd.concat([values("planner", "output_tokens"), values("auditor", "output_tokens")])
+    nan = float("nan")
+    return {
+        "llm_calls": len(planner) + len(auditor),
+        "planner_median_s": float(planner.median()) if len(planner) else nan,
+        "auditor_median_s": float(auditor.median()) if len(auditor) else nan,
+        "mean_prompt_tokens": float(prompt.mean()) if len(prompt) else nan,
+        "mean_completion_tokens": float(completion.mean()) if len(completion) else nan,
+    }
 
 
 def llm_triggers(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
