@@ -18,10 +18,10 @@ from typing import Any
 
 import jax
 
+from ..algorithms import ACTION_MODES
 from ..bench import Throughput
 from ..config import BenchmarkConfig
 from ..policies.jax_policy import JAX_MODEL_FILE
-from ..training import ACTION_MODES
 from .env import make_env_params
 from .train import compile_training, rejax_config, save_network, seed_keys, write_train_config
 

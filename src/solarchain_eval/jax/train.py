@@ -26,20 +26,12 @@ import jax
 import numpy as np
 from flax import serialization
 
+from ..algorithms import ACTION_MODES, TRAIN_CONFIG_FILE, TrainingError, check_algo
 from ..config import BenchmarkConfig
 from ..io import atomic_write_bytes, atomic_write_json
 from ..policies.jax_policy import JAX_MODEL_FILE
 from ..redaction import redact_command
-from ..training import (
-    ACTION_MODES,
-    TRAIN_CONFIG_FILE,
-    TRAIN_METADATA_FILE,
-    TrainingError,
-    TrainSpec,
-    check_algo,
-    differences,
-    dqn_learning_starts,
-)
+from ..training import TRAIN_METADATA_FILE, TrainSpec, differences, dqn_learning_starts
 from ..versions import git_commit, package_versions
 from .alignment import SB3_ALIGNMENT, sb3_variant
 from .env import EnvParams, SolarChainJaxEnv, make_env_params
@@ -324,15 +316,15 @@ def train_jax(
     TrainingError
         An unknown algorithm, a bad step count, or a directory holding a different training.
     """
-    from ..data.default import default_dataset_dir
+    from ..data.default import resolve_data_dir
+    from ..data.provenance import dataset_provenance
     from ..data.table import load_table
-    from ..experiments.evaluate import dataset_provenance
 
     algo = check_algo(spec.algo)
     if algo not in ACTION_MODES or spec.timesteps < 1 or not spec.seeds or set(out_dirs) != set(spec.seeds):
         raise TrainingError(f"cannot train {algo} with the JAX backend for seeds {list(spec.seeds)}")
     cfg = spec.config
-    data_dir = Path(spec.data_dir or cfg.data_dir or default_dataset_dir())
+    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir)
     table = load_table(data_dir)
     dataset = dataset_provenance(table)
     identities = {s: _identity(spec, s, dataset) for s in spec.seeds}

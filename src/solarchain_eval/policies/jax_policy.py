@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
+from ..algorithms import ACTION_MODES, TRAIN_CONFIG_FILE
 from ..config import BenchmarkConfig
-from ..training import ACTION_MODES, TRAIN_CONFIG_FILE
 
 JAX_MODEL_FILE = "jax_model.msgpack"
 JAX_BACKEND = "jax"
