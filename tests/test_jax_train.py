@@ -73,6 +73,7 @@ def test_train_cli_writes_one_checkpoint_per_seed_and_refuses_a_different_traini
         "--timesteps", "800", "--data", str(tiny_dataset), "--out", str(root),
     )  # fmt: skip
     assert other.returncode == 2 and "holds a different training" in other.stderr and "timesteps" in other.stderr
+    assert "pass --overwrite" in " ".join(other.stderr.split())  # the field rendered as the CLI's flag
     assert json.loads((root / "seed_3" / "train_metadata.json").read_text())["timesteps_done"] == 400
     bad = _cli("train", "--algo", "ppo", "--seeds", "1,2", "--out", str(root / "sb3"))
     assert bad.returncode == 2 and "--backend jax" in bad.stderr

@@ -285,9 +285,10 @@ def _finished(directory: Path, identity: dict[str, Any], overwrite: bool) -> boo
     previous = _read_json(directory / TRAIN_CONFIG_FILE)
     if previous is not None and previous.get("identity") != identity and not overwrite:
         diffs = differences(previous.get("identity") or {}, identity)
-        raise TrainingError(
-            f"{directory} holds a different training ({'; '.join(diffs[:6])}); "
-            "choose another output directory or pass --overwrite"
+        raise TrainingError.about(
+            "{out_dir} holds a different training ({diffs}); choose another output directory or pass {opt_overwrite}",
+            out_dir=directory,
+            diffs="; ".join(diffs[:6]),
         )
     meta = _read_json(directory / TRAIN_METADATA_FILE) or {}
     same = previous is not None and previous.get("identity") == identity
