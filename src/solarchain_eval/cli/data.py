@@ -20,12 +20,13 @@ from ..data.cities import (
     parse_city,
 )
 from ..data.default import cache_dir
+from ..data.fdia import FdiaError, FdiaScenario, parse_severity
 from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.published import matches_published
 from ..data.weather import read_weather_cache, write_weather_cache
 from ..io import sha256_file
 from . import app
-from .common import CliError, console, progress_bar, reports_errors, say
+from .common import CliError, console, progress_bar, register_user_error, reports_errors, say
 from .help import HelpGroup
 
 data_app = typer.Typer(help="Build and validate datasets.", cls=HelpGroup, no_args_is_help=True, rich_markup_mode=None)
@@ -35,6 +36,27 @@ app.add_typer(data_app, name="data")
 class WeatherSource(StrEnum):
     synthetic = "synthetic"
     open_meteo = "open-meteo"
+
+
+register_user_error(FdiaError)
+
+
+class FdiaPattern(StrEnum):
+    uniform = "uniform"
+    clustered = "clustered"
+    stealthy = "stealthy"
+
+
+def _scenario(rate: float, severity: str | None, pattern: str, burst_hours: int) -> FdiaScenario:
+    try:
+        return FdiaScenario(
+            rate=rate,
+            severity=parse_severity(severity) if severity is not None else None,
+            pattern=pattern,
+            burst_hours=burst_hours,
+        )
+    except ValueError as error:
+        raise CliError(f"--fdia-*: {error}") from None
 
 
 def _cities(specs: list[str] | None) -> tuple[City, ...]:
@@ -80,15 +102,35 @@ def build(
     refresh_weather: bool = typer.Option(False, help="Re-download Open-Meteo weather even if it is cached."),
     retries: int = typer.Option(4, min=0, help="Retries per Open-Meteo request (exponential back-off from 1 s)."),
     force: bool = typer.Option(False, "--force", help="Overwrite an existing dataset in --out."),
+    fdia_rate: float = typer.Option(
+        0.05, "--fdia-rate", min=0.0, max=1.0, help="Fraction of generation records injected with false data."
+    ),
+    fdia_severity: str | None = typer.Option(
+        None,
+        "--fdia-severity",
+        metavar="LO:HI",
+        help="Injection multiplier range: an injected daylight reading is P_max x uniform(LO, HI) "
+        "(default: the paper's multipliers 0.42, 1.38, 1.55, 1.82).",
+    ),
+    fdia_pattern: FdiaPattern = typer.Option(
+        FdiaPattern.uniform,
+        "--fdia-pattern",
+        help="uniform: records drawn uniformly (the paper's). clustered: bursts of --fdia-burst-hours consecutive "
+        "hours in one city, all its nodes. stealthy: daylight records reported at min(m, 1) x P_max, invisible to "
+        "the physics check, marked only by the verification flag.",
+    ),
+    fdia_burst_hours: int = typer.Option(6, "--fdia-burst-hours", min=1, help="Hours per clustered burst."),
 ) -> None:
     """Build a dataset: nodes, hourly PV generation, false-data injection, market, trades.
 
     Writes the four CSVs and manifest.json (row counts, sha256, seed, weather source,
     versions). With --weather-cache pointing at the paper's cached weather
     (open_meteo_weather_2026-04-01_2026-05-01.json) and the defaults, the four CSVs are
-    byte-identical to the paper's published dataset.
+    byte-identical to the paper's published dataset. The --fdia-* options choose the attack
+    scenario (docs/dataset.md#attack-scenarios); the manifest records it.
     """
     cities = _cities(city)
+    scenario = _scenario(fdia_rate, fdia_severity, fdia_pattern.value, fdia_burst_hours)
     if not force and ((out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES)):
         raise CliError(f"{out} already holds a dataset; pass --force to overwrite it")
     weather_sha = None
@@ -145,6 +187,7 @@ def build(
             weather_source=source,
             weather_sha256=weather_sha,
             progress=on_progress,
+            fdia=scenario,
         )
     files = result.manifest["files"]
     table = Table(title=f"dataset written to {out}", title_justify="left")
@@ -155,6 +198,8 @@ def build(
         table.add_row(name, f"{info['rows']:,}", info["sha256"])
     console.print(table)
     say(f"weather: {source}; seed {seed}; {result.manifest['hours']} hours; {len(cities)} cities", err=False)
+    fdia = result.manifest["fdia"]
+    say(f"false data: {fdia['injected_records']:,} records, {fdia['pattern']}, rate {fdia['rate']}", err=False)
     if matches_published({name: info["sha256"] for name, info in files.items()}):
         say("byte-identical to the paper's published dataset", style="bold green", err=False)
 
