@@ -32,12 +32,18 @@ from typing import Any
 import numpy as np
 
 from .config import BenchmarkConfig
+from .lagrangian import LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 from .io import atomic_write_csv, atomic_write_json, atomic_write_with
 from .redaction import redact_command
 from .versions import git_commit, package_versions
 
 ALGOS = ("ppo", "sac", "dqn")
 ACTION_MODES = {"ppo": "continuous", "sac": "continuous", "dqn": "discrete"}
+#: Everything ``train`` accepts: the paper's algorithms plus the opt-in PPO-Lagrangian
+#: (docs/training.md#ppo-lagrangian; its model.zip is a plain PPO model).
+TRAINABLE_ACTION_MODES = {**ACTION_MODES, "ppo-lag": "continuous"}
+TRAINABLE_ALGOS = tuple(TRAINABLE_ACTION_MODES)
+OPT_IN_ALGOS = tuple(a for a in TRAINABLE_ALGOS if a not in ALGOS)
 MODEL_FILE = "model.zip"
 TRAIN_CONFIG_FILE = "train_config.json"
 TRAIN_LOG_FILE = "training_log.csv"
@@ -52,8 +58,8 @@ class TrainingError(ValueError):
 
 def check_algo(algo: str) -> str:
     key = algo.strip().lower()
-    if key not in ALGOS:
-        raise TrainingError(f"unknown algorithm '{algo}' (choose from {', '.join(ALGOS)})")
+    if key not in TRAINABLE_ALGOS:
+        raise TrainingError(f"unknown algorithm '{algo}' (choose from {', '.join(TRAINABLE_ALGOS)})")
     return key
 
 
@@ -74,7 +80,7 @@ def hyperparameters(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[
 def algorithm_class(algo: str) -> type:
     from stable_baselines3 import DQN, PPO, SAC
 
-    return {"ppo": PPO, "sac": SAC, "dqn": DQN}[check_algo(algo)]
+    return {"ppo": PPO, "sac": SAC, "dqn": DQN, "ppo-lag": PPO}[check_algo(algo)]
 
 
 def set_torch_threads(threads: int) -> None:
@@ -121,10 +127,11 @@ class TrainSpec:
     tensorboard_dir: Path | None = None
     torch_threads: int = 1
     device: str = "cpu"
+    lagrangian: LagrangianSettings | None = None  # required by (and only used for) "ppo-lag"
 
     def resolved_config(self) -> BenchmarkConfig:
         cfg = self.config.with_updates(
-            action_mode=ACTION_MODES[check_algo(self.algo)], no_physics_penalty=self.no_physics_penalty
+            action_mode=TRAINABLE_ACTION_MODES[check_algo(self.algo)], no_physics_penalty=self.no_physics_penalty
         )
         payload = cfg.model_dump()
         payload["training"]["timesteps"] = int(self.timesteps)
@@ -156,7 +163,9 @@ def _read_json(path: Path) -> dict[str, Any] | None:
 def _identity(spec: TrainSpec, dataset: dict[str, Any]) -> dict[str, Any]:
     """Everything that decides the trained model; a resume must match it exactly."""
     cfg = spec.resolved_config()
+    extra = {"lagrangian": spec.lagrangian.describe()} if spec.algo == LAGRANGIAN_ALGO and spec.lagrangian else {}
     return {
+        **extra,
         "algo": check_algo(spec.algo),
         "seed": int(spec.seed),
         "timesteps": int(spec.timesteps),
@@ -236,6 +245,8 @@ def train(
     algo = check_algo(spec.algo)
     if spec.timesteps < 1:
         raise TrainingError(f"timesteps must be at least 1, got {spec.timesteps}")
+    if algo == LAGRANGIAN_ALGO and spec.lagrangian is None:
+        raise TrainingError("ppo-lag needs a cost limit: pass --cost-limit D (the limit on the episode cost)")
     cfg = spec.resolved_config()
     data_dir = spec.data_dir or (Path(cfg.data_dir) if cfg.data_dir else default_dataset_dir())
     table = load_table(data_dir)
@@ -288,6 +299,10 @@ def train(
     env = _make_vec_env(cfg, table, cfg.training.n_envs)
     store = CheckpointStore(out_dir / CHECKPOINT_DIR)
     checkpoint = store.latest()
+    callbacks: list[Any] = []
+    if algo == LAGRANGIAN_ALGO:
+        env, dual = _lagrangian(spec, env, out_dir, checkpoint.steps if checkpoint else 0)
+        callbacks.append(dual)
     tb_dir = str(spec.tensorboard_dir) if spec.tensorboard_dir is not None else None
     resumed_from = list((metadata or {}).get("resumed_from", []))
     if checkpoint is None:
@@ -328,7 +343,7 @@ def train(
     learn_started = time.perf_counter()
     model.learn(
         total_timesteps=max(spec.timesteps - steps_before, 0),
-        callback=monitor,
+        callback=[monitor, *callbacks] if callbacks else monitor,
         reset_num_timesteps=checkpoint is None,
         tb_log_name=f"{algo}-{'no_physics' if spec.no_physics_penalty else 'main'}-{spec.seed}",
     )
@@ -363,6 +378,19 @@ def train(
     return TrainOutcome(out_dir, model_path, steps_done, wall_s, steps_per_s, resumed_from)
 
 
+def _lagrangian(spec: TrainSpec, env: Any, out_dir: Path, resumed_at: int) -> tuple[Any, Any]:
+    """``env`` wrapped in the penalised reward, and the dual-ascent callback (λ and its log
+    restored from ``lagrangian_log.csv`` when resuming at step ``resumed_at``)."""
+    from .lagrangian import resume_multiplier
+    from .lagrangian_monitor import LagrangianCallback, Multiplier, PenalisedReward
+
+    assert spec.lagrangian is not None
+    value, rows = resume_multiplier(out_dir / LAGRANGIAN_LOG_FILE, spec.lagrangian, resumed_at)
+    multiplier = Multiplier(value)
+    callback = LagrangianCallback(spec.lagrangian, multiplier, out_dir / LAGRANGIAN_LOG_FILE, rows)
+    return PenalisedReward(env, multiplier), callback
+
+
 def _remove_tree(path: Path) -> None:
     import shutil
 
@@ -370,6 +398,6 @@ def _remove_tree(path: Path) -> None:
 
 
 def _clear_training_dir(out_dir: Path) -> None:
-    for name in (MODEL_FILE, TRAIN_LOG_FILE, TRAIN_METADATA_FILE, TRAIN_CONFIG_FILE):
+    for name in (MODEL_FILE, TRAIN_LOG_FILE, TRAIN_METADATA_FILE, TRAIN_CONFIG_FILE, LAGRANGIAN_LOG_FILE):
         (out_dir / name).unlink(missing_ok=True)
     _remove_tree(out_dir / CHECKPOINT_DIR)

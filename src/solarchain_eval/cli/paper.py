@@ -15,6 +15,8 @@ from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
 from ..experiments.records import SUMMARY_FILE
 from ..experiments.units import UnitResult
+from ..lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
+from ..training import OPT_IN_ALGOS
 from ..policies.registry import parse_policy_list
 from . import agentic as agentic_cli
 from . import app
@@ -53,6 +55,21 @@ def _settings(text: str | None) -> tuple[str, ...]:
     return names
 
 
+def _policies(text: str | None, extra: str | None, settings: tuple[str, ...]) -> tuple[str, ...] | None:
+    """``--policies`` plus ``--extra-policies`` (None: every non-opt-in policy of the settings)."""
+    extras = parse_policy_list(extra) if extra else []
+    unknown = [p for p in extras if p not in OPT_IN_ALGOS]
+    if unknown:
+        raise ValueError(f"--extra-policies: {', '.join(unknown)} is not an opt-in policy ({', '.join(OPT_IN_ALGOS)})")
+    if not text and not extras:
+        return None
+    if text:
+        base = parse_policy_list(text)
+    else:
+        base = list(dict.fromkeys(p for s in settings for p in SETTING_REGISTRY[s].policies if p not in OPT_IN_ALGOS))
+    return tuple(dict.fromkeys([*base, *extras]))
+
+
 @app.command("paper")
 @reports_errors
 def paper(
@@ -77,6 +94,18 @@ def paper(
     ),
     policies: str | None = typer.Option(
         None, "--policies", help="Comma-separated subset of the policies to run (default: all; train units follow)."
+    ),
+    extra_policies: str | None = typer.Option(
+        None,
+        "--extra-policies",
+        help=f"Comma-separated opt-in policies added to the run ({', '.join(OPT_IN_ALGOS)}: PPO-Lagrangian, "
+        "evaluated in main and no_physics).",
+    ),
+    cost_limit: float = typer.Option(
+        DEFAULT_COST_LIMIT, "--cost-limit", min=0.0, help="ppo-lag: the episode-cost limit D."
+    ),
+    multiplier_lr: float = typer.Option(
+        DEFAULT_MULTIPLIER_LR, "--multiplier-lr", min=0.0, help="ppo-lag: the dual-ascent step size."
     ),
     workers: int = typer.Option(1, "--workers", min=1, help="Local worker processes (one torch thread each)."),
     ray_address: str | None = typer.Option(
@@ -126,6 +155,7 @@ def paper(
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     params = dict(locals())
+    chosen_settings = _settings(settings)
     governance = agentic_cli.options_from(params, "planner_auditor")
     try:
         spec = GridSpec.from_preset(
@@ -133,13 +163,14 @@ def paper(
             timesteps=timesteps,
             episodes=episodes,
             seeds=tuple(parse_seeds(seeds)) if seeds else None,
-            settings=_settings(settings),
-            policies=tuple(parse_policy_list(policies)) if policies else None,
+            settings=chosen_settings,
+            policies=_policies(policies, extra_policies, chosen_settings),
             episode_seed_protocol=episode_seeds.value,
             data_dir=data,
             config=cfg,
             checkpoint_every=checkpoint_every,
             agentic=governance,
+            lagrangian=LagrangianSettings(cost_limit, multiplier_lr),
         )
         spec.validate()
     except ValueError as error:

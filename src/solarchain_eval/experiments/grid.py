@@ -27,7 +27,8 @@ import numpy as np
 from ..agentic.build import AgenticOptions
 from ..config import BenchmarkConfig
 from ..policies.baselines import BASELINES
-from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY
+from ..lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
+from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY, OPT_IN_ALGOS, TRAINABLE_ALGOS
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS
 from .layout import eval_unit_dir, train_unit_dir
 from .rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS, SETTING_MAIN, SETTING_NO_PHYSICS, paper_episode_seeds
@@ -83,7 +84,7 @@ class GridSetting:
     agentic: bool = False
 
 
-_POLICIES = (*BASELINES, *ALGOS)
+_POLICIES = (*BASELINES, *TRAINABLE_ALGOS)  # opt-in ones (ppo-lag) only when asked for
 SETTING_REGISTRY: dict[str, GridSetting] = {
     SETTING_MAIN: GridSetting(SETTING_MAIN, False, _POLICIES, SETTING_MAIN),
     SETTING_NO_PHYSICS: GridSetting(SETTING_NO_PHYSICS, True, _POLICIES, SETTING_NO_PHYSICS),
@@ -128,8 +129,9 @@ class GridSpec:
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY
     preset: str | None = None
-    policies: tuple[str, ...] | None = None  # None: every policy of each setting
+    policies: tuple[str, ...] | None = None  # None: every non-opt-in policy of each setting
     agentic: AgenticOptions = field(default_factory=AgenticOptions)  # the agentic settings' layer
+    lagrangian: LagrangianSettings = field(default_factory=lambda: LagrangianSettings(DEFAULT_COST_LIMIT))
 
     @property
     def has_agentic(self) -> bool:
@@ -137,7 +139,13 @@ class GridSpec:
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         listed = SETTING_REGISTRY[setting].policies
-        return listed if self.policies is None else tuple(p for p in listed if p in self.policies)
+        if self.policies is None:
+            return tuple(p for p in listed if p not in OPT_IN_ALGOS)
+        return tuple(p for p in listed if p in self.policies)
+
+    @property
+    def uses_lagrangian(self) -> bool:
+        return any("ppo-lag" in self.setting_policies(s) for s in self.settings)
 
     @classmethod
     def from_preset(cls, name: str, **overrides: Any) -> GridSpec:
@@ -215,11 +223,11 @@ def plan_units(spec: GridSpec) -> list[Unit]:
         for policy in spec.setting_policies(setting_name):
             for seed in spec.seeds:
                 deps: tuple[str, ...] = ()
-                if policy in ALGOS:
+                if policy in TRAINABLE_ALGOS:
                     needed.add((policy, setting.model_setting, seed))
                     deps = (train_unit(policy, setting.model_setting, seed).name,)
                 evals.append(Unit("eval", policy, setting_name, seed, deps))
-    order = {algo: i for i, algo in enumerate(("sac", "ppo", "dqn"))}
+    order = {algo: i for i, algo in enumerate(("sac", "ppo", "ppo-lag", "dqn"))}
     trains = [
         train_unit(algo, setting, seed)
         for algo, setting, seed in sorted(needed, key=lambda k: (order.get(k[0], 9), TRAIN_SETTINGS.index(k[1]), k[2]))

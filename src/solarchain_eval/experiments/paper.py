@@ -26,7 +26,7 @@ from ..data.default import default_dataset_dir
 from ..data.table import load_table
 from ..io import atomic_write_json
 from ..redaction import redact_command
-from ..training import ALGOS, MODEL_FILE, differences
+from ..training import ALGOS, MODEL_FILE, TRAINABLE_ALGOS, differences
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
 from .evaluate import dataset_provenance
@@ -53,7 +53,7 @@ class PaperOutcome:
 
 def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
     """What every unit's result depends on; a root accepts only grids with the same identity."""
-    return {
+    identity = {
         "timesteps": int(spec.timesteps),
         "episodes": int(spec.episodes),
         "episode_seed_protocol": spec.episode_seed_protocol,
@@ -61,6 +61,9 @@ def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
         "config": spec.config.model_dump(mode="json"),
         "agentic": _agentic_identity(spec),
     }
+    if spec.uses_lagrangian:  # only then: grids without ppo-lag keep their earlier identity
+        identity["lagrangian"] = spec.lagrangian.describe()
+    return identity
 
 
 def _agentic_identity(spec: GridSpec) -> dict[str, Any]:
@@ -103,7 +106,7 @@ def _read_metadata(root: Path) -> dict[str, Any] | None:
 
 def _stale_eval(root: Path, unit: Unit) -> bool:
     """A done eval unit whose model changed since it was evaluated."""
-    if unit.policy not in ALGOS or not unit.depends_on:
+    if unit.policy not in TRAINABLE_ALGOS or not unit.depends_on:
         return False
     import json
 
@@ -253,6 +256,7 @@ def _task(
         agentic=spec.agentic if (setting is not None and setting.agentic and unit.kind == "eval") else None,
         identity=unit_identity,
         command=tuple(command or sys.argv),
+        lagrangian=spec.lagrangian if unit.policy == "ppo-lag" else None,
     )
 
 

@@ -25,10 +25,10 @@ from typing import Any
 import numpy as np
 
 from ..config import BenchmarkConfig
-from ..training import ACTION_MODES, MODEL_FILE, TRAIN_CONFIG_FILE, algorithm_class
+from ..training import MODEL_FILE, TRAIN_CONFIG_FILE, TRAINABLE_ACTION_MODES, algorithm_class
 
 #: Learned policy name -> the env action mode it acts in.
-LEARNED_POLICIES = dict(ACTION_MODES)
+LEARNED_POLICIES = dict(TRAINABLE_ACTION_MODES)  # ppo-lag's model is a plain PPO model
 
 
 def _trained_algo(directory: Path) -> str | None:
