@@ -32,8 +32,8 @@ from typing import Any
 import numpy as np
 
 from .config import BenchmarkConfig
-from .lagrangian import LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 from .io import atomic_write_csv, atomic_write_json, atomic_write_with
+from .lagrangian import LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 from .redaction import redact_command
 from .versions import git_commit, package_versions
 

@@ -16,8 +16,8 @@ from ..experiments.paper import GridError, run_paper
 from ..experiments.records import SUMMARY_FILE
 from ..experiments.units import UnitResult
 from ..lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
-from ..training import OPT_IN_ALGOS
 from ..policies.registry import parse_policy_list
+from ..training import OPT_IN_ALGOS
 from . import agentic as agentic_cli
 from . import app
 from .common import (
@@ -63,10 +63,8 @@ def _policies(text: str | None, extra: str | None, settings: tuple[str, ...]) ->
         raise ValueError(f"--extra-policies: {', '.join(unknown)} is not an opt-in policy ({', '.join(OPT_IN_ALGOS)})")
     if not text and not extras:
         return None
-    if text:
-        base = parse_policy_list(text)
-    else:
-        base = list(dict.fromkeys(p for s in settings for p in SETTING_REGISTRY[s].policies if p not in OPT_IN_ALGOS))
+    defaults = dict.fromkeys(p for s in settings for p in SETTING_REGISTRY[s].policies if p not in OPT_IN_ALGOS)
+    base = parse_policy_list(text) if text else list(defaults)
     return tuple(dict.fromkeys([*base, *extras]))
 
 

@@ -26,8 +26,8 @@ import numpy as np
 
 from ..agentic.build import AgenticOptions
 from ..config import BenchmarkConfig
-from ..policies.baselines import BASELINES
 from ..lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
+from ..policies.baselines import BASELINES
 from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY, OPT_IN_ALGOS, TRAINABLE_ALGOS
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS
 from .layout import eval_unit_dir, train_unit_dir
