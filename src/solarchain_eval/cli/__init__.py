@@ -29,6 +29,7 @@ from . import data as _data  # noqa: E402, F401
 from . import evaluate as _evaluate  # noqa: E402, F401
 from . import train as _train  # noqa: E402, F401
 from . import paper as _paper  # noqa: E402, F401
+from . import sweep as _sweep  # noqa: E402, F401
 from . import report as _report  # noqa: E402, F401
 from . import bench as _bench  # noqa: E402, F401
 from . import bench_train as _bench_train  # noqa: E402, F401

@@ -191,22 +191,42 @@ class GridSpec:
 
 @dataclass(frozen=True)
 class Unit:
-    """One unit of work; ``name`` is its path under ``ROOT/units`` (``train/...`` or ``eval/...``)."""
+    """One unit of work; ``name`` is its path under ``ROOT/units`` (``train/...`` or ``eval/...``).
+
+    ``scope`` places the unit in a sub-root: a sweep point's units live in
+    ``ROOT/<scope>/units/...`` and their names start with ``<scope>/`` (empty for ``paper``).
+    """
 
     kind: str
     policy: str
     setting: str
     seed: int
     depends_on: tuple[str, ...] = ()
+    scope: str = ""
 
     @property
     def name(self) -> str:
-        return f"{self.kind}/{self.policy}-{self.setting}-{self.seed}"
+        local = f"{self.kind}/{self.policy}-{self.setting}-{self.seed}"
+        return f"{self.scope}/{local}" if self.scope else local
 
     def directory(self, root: Path) -> Path:
+        base = Path(root) / self.scope if self.scope else Path(root)
         if self.kind == "train":
-            return train_unit_dir(root, self.policy, self.setting, self.seed)
-        return eval_unit_dir(root, self.policy, self.setting, self.seed)
+            return train_unit_dir(base, self.policy, self.setting, self.seed)
+        return eval_unit_dir(base, self.policy, self.setting, self.seed)
+
+    def unscoped(self) -> Unit:
+        """The unit as its own sub-root sees it."""
+        prefix = f"{self.scope}/" if self.scope else ""
+        deps = tuple(d[len(prefix) :] if prefix and d.startswith(prefix) else d for d in self.depends_on)
+        return Unit(self.kind, self.policy, self.setting, self.seed, deps)
+
+
+def scoped(units: list[Unit], scope: str) -> list[Unit]:
+    """``units`` moved into the sub-root ``scope`` (dependencies renamed with them)."""
+    return [
+        Unit(u.kind, u.policy, u.setting, u.seed, tuple(f"{scope}/{d}" for d in u.depends_on), scope) for u in units
+    ]
 
 
 def train_unit(algo: str, setting: str, seed: int) -> Unit:

@@ -175,15 +175,7 @@ def run_paper(
         def make_task(unit: Unit) -> UnitTask:
             return _task(spec, root, data_dir, identity, unit, command)
 
-        executor: Executor
-        if ray_address:
-            from .ray_executor import RayExecutor
-
-            executor = RayExecutor(ray_address, root, data_dir, transfer=ray_transfer, workers=workers)
-        elif workers > 1:
-            executor = LocalPool(workers)
-        else:
-            executor = InlineExecutor()
+        executor = make_executor(root, data_dir, workers, ray_address, ray_transfer)
         report = run_units(
             units, done, make_task, executor, keep_going=keep_going, on_result=on_result, on_start=on_start
         )
@@ -210,6 +202,17 @@ def run_paper(
             },
         )
     return outcome
+
+
+def make_executor(root: Path, data_dir: Path, workers: int, ray_address: str | None, ray_transfer: str) -> Executor:
+    """The executor for ``--ray-address`` / ``--workers`` (shared by ``paper`` and ``sweep``)."""
+    if ray_address:
+        from .ray_executor import RayExecutor
+
+        return RayExecutor(ray_address, root, data_dir, transfer=ray_transfer, workers=workers)
+    if workers > 1:
+        return LocalPool(workers)
+    return InlineExecutor()
 
 
 def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str, str]]:
