@@ -132,6 +132,8 @@ class GridSpec:
     policies: tuple[str, ...] | None = None  # None: every non-opt-in policy of each setting
     agentic: AgenticOptions = field(default_factory=AgenticOptions)  # the agentic settings' layer
     lagrangian: LagrangianSettings = field(default_factory=lambda: LagrangianSettings(DEFAULT_COST_LIMIT))
+    #: Per-setting policy lists ((setting, policies), ...) that override ``policies`` there.
+    policies_by_setting: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     @property
     def has_agentic(self) -> bool:
@@ -139,6 +141,9 @@ class GridSpec:
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         listed = SETTING_REGISTRY[setting].policies
+        chosen = dict(self.policies_by_setting).get(setting)
+        if chosen is not None:
+            return tuple(p for p in listed if p in chosen)
         if self.policies is None:
             return tuple(p for p in listed if p not in OPT_IN_ALGOS)
         return tuple(p for p in listed if p in self.policies)
@@ -176,6 +181,11 @@ class GridSpec:
                 raise ValueError(
                     f"unknown or no policies {', '.join(unknown)} (the settings offer {', '.join(sorted(offered))})"
                 )
+        for setting, chosen in self.policies_by_setting:
+            offered = SETTING_REGISTRY[setting].policies if setting in SETTING_REGISTRY else ()
+            unknown = [p for p in chosen if p not in offered]
+            if setting not in self.settings or unknown or not chosen:
+                raise ValueError(f"policies of setting '{setting}': {', '.join(unknown) or 'none'} not offered there")
         if self.episode_seed_protocol not in EPISODE_SEED_PROTOCOLS:
             raise ValueError(
                 f"unknown episode-seed protocol '{self.episode_seed_protocol}' (choose from {', '.join(EPISODE_SEED_PROTOCOLS)})"

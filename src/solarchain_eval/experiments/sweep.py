@@ -125,7 +125,10 @@ def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path) -> GridSpec:
             config=point.config,
             checkpoint_every=g.checkpoint_every,
             preset="sweep",
-            policies=tuple(g.policies) if g.policies is not None else None,
+            policies=tuple(g.policies) if isinstance(g.policies, list) else None,
+            policies_by_setting=tuple((s, tuple(p)) for s, p in g.policies.items())
+            if isinstance(g.policies, dict)
+            else (),
             lagrangian=point.lagrangian,
         )
         spec.validate()

@@ -48,7 +48,7 @@ class SweepGrid(_Section):
     episodes: int = Field(5, ge=1, le=10**6)
     seeds: list[int] = Field(default_factory=lambda: [DEFAULT_SEED], min_length=1)
     settings: list[str] = Field(default_factory=lambda: ["main", "no_physics"], min_length=1)
-    policies: list[str] | None = None
+    policies: list[str] | dict[str, list[str]] | None = None  # a list, or a list per setting
     episode_seeds: Literal["paper", "independent"] = "paper"
     checkpoint_every: int = Field(0, ge=0)
 
