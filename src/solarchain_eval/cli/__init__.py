@@ -33,6 +33,7 @@ from . import sweep as _sweep  # noqa: E402, F401
 from . import report as _report  # noqa: E402, F401
 from . import bench as _bench  # noqa: E402, F401
 from . import bench_train as _bench_train  # noqa: E402, F401
+from . import bench_scale as _bench_scale  # noqa: E402, F401
 from . import llm as _llm  # noqa: E402, F401
 # isort: on
 
