@@ -19,7 +19,9 @@ register_user_error(SweepError)
 @app.command("sweep")
 @reports_errors
 def sweep(
-    spec_file: Path = typer.Argument(..., metavar="SWEEP.yaml", help="The sweep: grid, dataset, axes (docs/stress.md)."),
+    spec_file: Path = typer.Argument(
+        ..., metavar="SWEEP.yaml", help="The sweep: grid, dataset, axes (docs/stress.md)."
+    ),
     out: Path = typer.Option(..., "--out", help="The sweep root (created; re-run the same command to resume)."),
     workers: int = typer.Option(1, "--workers", min=1, help="Local worker processes (one torch thread each)."),
     ray_address: str | None = typer.Option(

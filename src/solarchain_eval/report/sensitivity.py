@@ -135,7 +135,7 @@ def _point_findings(frame: pd.DataFrame, resamples: int) -> list[dict]:
             iv = bootstrap_mean(
                 limit - group["episode_cost"].to_numpy(dtype=float), _days(group), n_resamples=resamples
             )
-            add("cost_within_limit", f"ppo-lag ({setting}): D - cost, D = {limit:g}", "episode_cost", iv)
+            add("cost_within_limit", f"ppo-lag ({setting}): D - cost with D = {limit:g}", "episode_cost", iv)
     return rows
 
 
