@@ -145,3 +145,16 @@ def test_ppo_lag_is_opt_in_in_the_grid():
         "eval/ppo-lag-no_physics-1",
     ]
     assert spec.uses_lagrangian and not GridSpec(timesteps=10, episodes=1, seeds=(1,)).uses_lagrangian
+
+
+def test_paper_extra_policies_accepts_only_opt_in_policies(tmp_path, tiny_dataset):
+    from solarchain_eval.cli.paper import _policies
+
+    assert _policies(None, None, ("main",)) is None
+    assert _policies(None, "ppo-lag", ("main",)) == ("static", "random", "myopic", "ppo", "sac", "dqn", "ppo-lag")
+    assert _policies("static,ppo", "ppo-lag", ("main",)) == ("static", "ppo", "ppo-lag")
+    result = CliRunner().invoke(
+        app, ["paper", "--out", str(tmp_path / "root"), "--data", str(tiny_dataset), "--extra-policies", "sac"]
+    )
+    assert result.exit_code == 2 and "not an opt-in policy" in result.output
+    assert not (tmp_path / "root").exists()

@@ -147,6 +147,9 @@ def paper(
     unless --planner/--auditor say otherwise); writes ROOT/combined/<setting>/ files,
     ROOT/paper_metadata.json and, after a complete grid, the report in ROOT/report.
 
+    --extra-policies ppo-lag adds PPO-Lagrangian (train --algo ppo-lag) in main and no_physics,
+    with --cost-limit and --multiplier-lr.
+
     Every unit (a trained model, or one policy × setting × seed evaluation) is a directory under
     ROOT/units with a DONE marker written last: re-running the same command skips finished units
     and redoes the ones that were in flight (training resumes from its last checkpoint).
