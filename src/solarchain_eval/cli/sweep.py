@@ -50,7 +50,7 @@ def sweep(
     from ..experiments.sweep import run_sweep
 
     def on_dataset(key: str, fresh: bool) -> None:
-        err_console.print(f"dataset {key}: {'built' if fresh else 'already built'}", soft_wrap=True)
+        err_console.print(f"dataset {key}: {'building...' if fresh else 'already built'}", soft_wrap=True)
 
     state = {"total": 0, "done": 0}
 

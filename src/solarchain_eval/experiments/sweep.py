@@ -150,9 +150,9 @@ def _prepare_points(
             data_dir = (root / DATASETS_DIR / point.dataset_key).resolve()
             if str(data_dir) not in tables:
                 fresh = not (data_dir / "manifest.json").is_file()
-                build_point_dataset(sweep, point.dataset, data_dir)
-                if on_dataset is not None:
+                if on_dataset is not None:  # before the build: a large one takes minutes
                     on_dataset(point.dataset_key, fresh)
+                build_point_dataset(sweep, point.dataset, data_dir)
         if str(data_dir) not in tables:
             tables[str(data_dir)] = dataset_provenance(load_table(data_dir))
         dataset = tables[str(data_dir)]
