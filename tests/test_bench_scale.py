@@ -34,7 +34,8 @@ def test_measure_scale_builds_loads_and_steps_a_small_dataset(tmp_path):
                            repeats=1)  # fmt: skip
     assert (result.cities, result.nodes, result.hours) == (2, 6, 72)
     assert result.generation_rows == 6 * 72
-    assert result.build_ms_per_node == pytest.approx(1000 * result.build_s / 6)
+    assert result.build_ms_per_node == pytest.approx(1000 * result.build_cpu_s / 6)
+    assert result.build_cpu_s > 0 and result.load_cpu_s > 0
     assert result.env_steps_per_s > 0 and result.vector_env_steps_per_s > 0
 
 
