@@ -37,8 +37,8 @@ LAGRANGIAN_LOG_COLUMNS = (
     "next_multiplier",
 )
 DEFAULT_MULTIPLIER_LR = 0.1
-#: The grid's default D: on the published month a static policy's episode cost is about 11.4
-#: and the least backing the action ranges allow gives about 9.9 (docs/training.md#ppo-lagrangian).
+#: The grid's default D: on the published month a static policy's episode cost is about 11.4 to
+#: 11.9, the least backing the action ranges allow about 10 to 10.3 (docs/training.md#ppo-lagrangian).
 DEFAULT_COST_LIMIT = 10.5
 
 
