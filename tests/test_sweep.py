@@ -179,3 +179,33 @@ def test_sensitivity_means_match_the_pooled_episodes():
     expected = frame[(frame["policy"] == "ppo") & (frame["setting"] == "main")]["cumulative_reward"].mean()
     assert row["mean"].item() == pytest.approx(expected, rel=1e-12)
     assert row["start_days"].item() == 10 and row["ci_low"].item() < expected < row["ci_high"].item()
+
+
+def test_a_sweep_trains_and_evaluates_learned_policies_inside_each_point(tmp_path):
+    text = TINY.replace("seeds: [7, 8]", "seeds: [7]").replace(
+        "policies: [static, myopic]", "policies: {main: [static, ppo], no_physics: [static, ppo, ppo-lag]}"
+    )
+    text = text.replace("  lambda_p: [0.0, 2.0]\n", "").replace("[uniform, stealthy]", "[uniform]")
+    text += "ppo_lag: {cost_limit: 0.5, multiplier_lr: 0.2}\n"
+    spec = _write(tmp_path, text)
+    root = tmp_path / "out"
+    result = CliRunner().invoke(app, ["sweep", str(spec), "--out", str(root)])
+    assert result.exit_code == 0, result.output
+    point = root / "points" / "fdia_pattern-uniform"
+    trains = sorted(p.name for p in (point / "units" / "train").iterdir())
+    assert trains == ["ppo-lag-no_physics-7", "ppo-main-7", "ppo-no_physics-7"]
+    # Each eval unit used the model of its own point's train unit.
+    from solarchain_eval.io import sha256_file
+
+    for unit, model in (("ppo-main-7", "ppo-main-7"), ("ppo-lag-no_physics-7", "ppo-lag-no_physics-7")):
+        recorded = json.loads((point / "units" / "eval" / unit / "unit.json").read_text())["model_sha256"]
+        assert list(recorded.values()) == [sha256_file(point / "units" / "train" / model / "model.zip")]
+    lag = pd.read_csv(point / "units" / "train" / "ppo-lag-no_physics-7" / "lagrangian_log.csv")
+    assert lag["cost_limit"].eq(0.5).all() and lag["next_multiplier"].iloc[-1] > 0
+    findings = pd.read_csv(root / "sensitivity" / "findings.csv")
+    assert set(findings["finding"]) == {"rl_over_heuristics", "artificial_liquidity_rise", "cost_within_limit"}
+    results = pd.read_csv(root / "results.csv")
+    assert set(results.groupby("setting")["policy"].unique().map(frozenset)) == {
+        frozenset({"static", "ppo"}),
+        frozenset({"static", "ppo", "ppo-lag"}),
+    }
