@@ -209,3 +209,24 @@ def test_a_sweep_trains_and_evaluates_learned_policies_inside_each_point(tmp_pat
         frozenset({"static", "ppo"}),
         frozenset({"static", "ppo", "ppo-lag"}),
     }
+
+
+def test_a_sweep_through_ray_ships_each_points_dataset(tmp_path):
+    ray = pytest.importorskip("ray", reason="ray is not installed (pip install 'solarchain-eval[ray]')")
+    from solarchain_eval.experiments.sweep import run_sweep
+
+    sweep = load_sweep(_write(tmp_path, TINY.replace("seeds: [7, 8]", "seeds: [7]")))
+    inline = run_sweep(sweep, tmp_path / "inline")
+    ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
+    try:
+        # ship the files through Ray as on a cluster without a shared filesystem: each task must
+        # get its own point's dataset (uniform and stealthy are different datasets)
+        shipped = run_sweep(sweep, tmp_path / "ray", ray_address="auto", ray_transfer="always")
+    finally:
+        ray.shutdown()
+    assert inline.all_points and shipped.all_points and len(shipped.report.finished) == 16
+    a = pd.read_csv(tmp_path / "inline" / "results.csv")
+    b = pd.read_csv(tmp_path / "ray" / "results.csv")
+    pd.testing.assert_frame_equal(a, b)
+    stealthy = a[a["fdia_pattern"] == "stealthy"]["episode_cost"].mean()
+    assert stealthy < 0.8 * a[a["fdia_pattern"] == "uniform"]["episode_cost"].mean()
