@@ -230,3 +230,30 @@ def test_a_sweep_through_ray_ships_each_points_dataset(tmp_path):
     pd.testing.assert_frame_equal(a, b)
     stealthy = a[a["fdia_pattern"] == "stealthy"]["episode_cost"].mean()
     assert stealthy < 0.8 * a[a["fdia_pattern"] == "uniform"]["episode_cost"].mean()
+
+
+def test_node_and_city_axes_build_synthetic_datasets(tmp_path):
+    text = """
+grid: {timesteps: 10, episodes: 1, seeds: [7], settings: [main], policies: [static]}
+dataset: {start: "2026-06-01", end: "2026-06-03", seed: 7}
+axes:
+  cities: [2, 3]
+  nodes_per_city: [1, 4]
+"""
+    sweep = load_sweep(_write(tmp_path, text))
+    assert [p.point_id for p in sweep.points] == [
+        "cities-2__nodes_per_city-1",
+        "cities-2__nodes_per_city-4",
+        "cities-3__nodes_per_city-1",
+        "cities-3__nodes_per_city-4",
+    ]
+    result = CliRunner().invoke(app, ["sweep", str(tmp_path / "sweep.yaml"), "--out", str(tmp_path / "out")])
+    assert result.exit_code == 0, result.output
+    meta = json.loads((tmp_path / "out" / "sweep_metadata.json").read_text())
+    for point in sweep.points:
+        data_dir = Path(meta["points"][point.point_id]["data_dir"])
+        nodes = pd.read_csv(data_dir / "urban_energy_nodes.csv")
+        cities, per_city = point.values["cities"], point.values["nodes_per_city"]
+        assert len(nodes) == cities * per_city and nodes["city"].nunique() == cities
+        assert json.loads((data_dir / "manifest.json").read_text())["weather_source"].startswith("synthetic")
+    assert len(pd.read_csv(tmp_path / "out" / "results.csv")) == 4
