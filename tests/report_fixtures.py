@@ -16,7 +16,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from solarchain_eval.metrics import METRIC_NAMES
+from solarchain_eval.records_schema import AGENTIC_METRIC_NAMES, DIAGNOSTIC_NAMES, EPISODE_KEYS, METRIC_NAMES
 
 SETTINGS = ("main", "no_physics", "llm", "llm_no_physics")
 BASELINES = ("static", "random", "myopic")
@@ -89,31 +89,72 @@ def _log_steps(rng: np.random.Generator, policy: str, setting: str, seed: int, e
 
 
 def _agentic_metrics(rng: np.random.Generator, steps: list[dict]) -> dict:
+    """The agentic columns of one episode, in the record schema's order (a missing or extra one fails)."""
     audits = sum(s["audited"] for s in steps)
     revisions = sum(s["decision"] == "revise" for s in steps)
-    return {
+    values = {
         "plan_validity_rate": 1.0,
         "audit_rate": audits / STEPS,
         "revision_rate": revisions / max(audits, 1),
         "modification_rate": sum(s["final_action"] != s["proposed_action"] for s in steps) / STEPS,
         "mean_action_delta": sum(s["action_delta"] for s in steps) / STEPS,
-        "llm_failure_count": 0,
+        "llm_retry_count": 0,
         "hard_trigger_rate": sum(s["hard_trigger"] for s in steps) / STEPS,
         "soft_trigger_rate": sum(s["soft_trigger"] for s in steps) / STEPS,
         "not_triggered_rate": sum(not (s["hard_trigger"] or s["soft_trigger"]) for s in steps) / STEPS,
         "physics_trigger_rate": int(rng.integers(0, 25)) / STEPS,
         "gap_trigger_rate": int(rng.integers(0, 25)) / STEPS,
         "slippage_trigger_rate": int(rng.integers(0, 25)) / STEPS,
-        "jitter_trigger_rate": int(rng.integers(0, 25)) / STEPS,
-        "plan_violation_threshold": float(rng.uniform(0.1, 0.2)),
-        "plan_gap_threshold": float(rng.uniform(-0.2, 0.0)),
-        "plan_jitter_threshold": float(rng.uniform(0.1, 0.3)),
-        "plan_slippage_threshold": float(rng.uniform(2.0, 4.0)),
-        "plan_audit_budget": 6,
-        "governance_mode": "rule_balanced",
-        "planner": "rule",
-        "auditor": "rule",
     }
+    rng.integers(0, 25)  # the dropped jitter_trigger_rate's draw, kept so the later draws stay the same
+    values.update(
+        {
+            "plan_violation_threshold": float(rng.uniform(0.1, 0.2)),
+            "plan_gap_threshold": float(rng.uniform(-0.2, 0.0)),
+            "plan_jitter_threshold": float(rng.uniform(0.1, 0.3)),
+            "plan_slippage_threshold": float(rng.uniform(2.0, 4.0)),
+            "plan_audit_budget": 6,
+            "governance_mode": "rule_balanced",
+            "planner": "rule",
+            "auditor": "rule",
+        }
+    )
+    extra = set(values) - set(AGENTIC_METRIC_NAMES)
+    assert not extra, f"fixture columns outside the record schema: {sorted(extra)}"
+    return {name: values[name] for name in AGENTIC_METRIC_NAMES}
+
+
+def _diagnostics(rng: np.random.Generator, logs: list[dict]) -> pd.DataFrame:
+    """Counterfactual step records for the logged steps (governance_diagnostics.csv columns)."""
+    rows = []
+    for s in logs:
+        least = float(rng.uniform(0.0, 0.05))
+        proposal = least + float(rng.exponential(0.03))
+        final = proposal - (float(rng.uniform(0.0, proposal - least)) if s["decision"] == "revise" else 0.0)
+        reward = float(rng.normal())
+        row = {k: s[k] for k in ("policy", "setting", "run_seed", "episode", "episode_seed")}
+        row |= {"start_hour": s["absolute_hour"] - s["step"], "planner": "rule", "auditor": "rule", "step": s["step"]}
+        row |= {"audited": s["audited"], "decision": s["decision"], "hard_trigger": s["hard_trigger"]}
+        row |= {"soft_trigger": s["soft_trigger"]}
+        for role, cost, gain in (
+            ("proposal", proposal, 0.0),
+            ("bounded", proposal, 0.0),
+            ("final", final, proposal - final),
+        ):
+            row |= {
+                f"{role}_cost": cost,
+                f"{role}_reward": reward + gain,
+                f"{role}_artificial_liquidity_MWh": cost / 10,
+                # the outcomes no table reads, consistent with the cost (no draws: the stream stays as it was)
+                f"{role}_violation_rate": cost / 2,
+                f"{role}_unsafe_backed_MWh": cost / 2,
+                f"{role}_matched_energy_MWh": 100.0,
+                f"{role}_slippage": 0.5,
+                f"{role}_token_price": 1.0,
+            }
+        row["least_cost"] = least
+        rows.append(row)
+    return pd.DataFrame(rows, columns=[*EPISODE_KEYS, "planner", "auditor", *DIAGNOSTIC_NAMES])
 
 
 def make_paper_root(root: Path, seed: int = 5) -> Path:
@@ -177,6 +218,10 @@ def make_paper_root(root: Path, seed: int = 5) -> Path:
         pd.DataFrame(city_rows).to_csv(folder / "city_hour_policy.csv", index=False)
         if logs:
             (folder / "agentic_logs.jsonl").write_text("".join(json.dumps(s) + "\n" for s in logs), encoding="utf-8")
+            # its own stream, so the other files' values are those of the fixture without it
+            _diagnostics(np.random.default_rng([seed, 1]), logs).to_csv(
+                folder / "governance_diagnostics.csv", index=False
+            )
     return write_paper_metadata(root)
 
 

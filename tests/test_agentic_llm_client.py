@@ -168,6 +168,14 @@ def test_unreachable_endpoint_is_a_transport_error():
         StructuredLLM(settings).request(MESSAGES, AuditorOutput, SITE)
 
 
+def test_a_status_the_sdk_does_not_retry_is_reported_as_one_attempt():
+    with FakeOpenAI([Reply(401, {"error": {"message": "bad key"}})] * 3) as server:
+        with pytest.raises(LLMTransportError) as caught:
+            client(server, "chat", max_retries=2).request(MESSAGES, AuditorOutput, SITE)
+        assert len(server.seen) == 1  # the SDK does not retry a 401 ...
+    assert "HTTP 401 after 1 attempt(s)" in str(caught.value)  # ... and the message does not claim it did
+
+
 def test_api_key_echoed_by_the_server_is_redacted():
     echo = Reply(401, {"error": {"message": f"Incorrect API key provided: {KEY} (also {KEY[:14]}...)"}})
     with FakeOpenAI([echo]) as server, pytest.raises(LLMTransportError) as caught:
@@ -186,8 +194,9 @@ def test_settings_resolution_order_and_explicit_api():
     assert (s.model, s.base_url, s.api_key.get_secret_value()) == ("m2", "http://127.0.0.1:2/v1", "k2")
     s = resolve_llm_settings(api="chat", model="m3", base_url="http://127.0.0.1:3/v1", environ=env)
     assert (s.model, s.base_url) == ("m3", "http://127.0.0.1:3/v1")
-    with pytest.raises(LLMConfigError, match="--llm-api"):
+    with pytest.raises(LLMConfigError, match="with llm_api responses") as caught:  # the library names the field
         resolve_llm_settings(api=None, environ=env)
+    assert "with --llm-api responses" in caught.value.message_for()  # the command line names the flag
     with pytest.raises(LLMConfigError, match="no model"):
         resolve_llm_settings(api="chat", environ={})
     with pytest.raises(LLMConfigError, match="no API key"):

@@ -36,7 +36,7 @@ def invoke(args, **env):
 def click_command(path):
     command = get_command(app)
     for name in path:
-        command = command.commands[name]
+        command = command.get_command(None, name)  # the top-level group imports a command's module on lookup
     return command
 
 

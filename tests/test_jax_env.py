@@ -27,7 +27,7 @@ pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'sol
 pytest.importorskip("gymnax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
 
 #: Fractions in [0, 1] whose natural scale is 1 (see the module docstring).
-UNIT_SCALE = {"max_drawdown", "token_drawdown", "physics_violation_rate", "cost"}
+UNIT_SCALE = {"drawdown", "token_drawdown", "physics_violation_rate", "cost"}
 SETTINGS = [("continuous", False), ("continuous", True), ("discrete", False)]
 
 
@@ -83,7 +83,7 @@ def trajectory_errors(data_dir: Path, mode: str, no_physics: bool, episodes: int
             values["reward_returned"] = reward
             reward_terms.append(
                 info["matched_energy_MWh"]
-                + w.drawdown * info["max_drawdown"]
+                + w.drawdown * info["drawdown"]
                 + w.jitter * info["action_jitter"]
                 + w.unmet * info["unmet_demand_MWh"]
                 + w.fairness * info["fairness_variance"]

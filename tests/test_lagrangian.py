@@ -32,9 +32,9 @@ def test_dual_update_follows_a_hand_computed_sequence():
 
 
 def test_settings_refuse_negative_or_nan_values():
-    with pytest.raises(ValueError, match="cost-limit"):
+    with pytest.raises(ValueError, match="cost_limit"):
         LagrangianSettings(cost_limit=-1.0)
-    with pytest.raises(ValueError, match="multiplier-lr"):
+    with pytest.raises(ValueError, match="multiplier_lr"):
         LagrangianSettings(cost_limit=1.0, multiplier_lr=math.nan)
 
 

@@ -4,6 +4,7 @@ against the scripted server on 127.0.0.1 (no model needed)."""
 from __future__ import annotations
 
 import json
+import re
 
 import pytest
 
@@ -16,6 +17,7 @@ from solarchain_eval.agentic import (
     resolve_llm_settings,
 )
 from solarchain_eval.agentic.schemas import (
+    SCHEMA_TEXT_CHARS,
     SCHEMA_TEXT_MAX_CHARS,
     AuditorOutput,
     PlannerOutput,
@@ -50,11 +52,13 @@ def test_json_object_request_carries_the_capped_schema_max_tokens_and_seed():
     fmt = seen.body["response_format"]
     assert fmt["type"] == "json_object" and set(fmt) == {"type", "schema"}
     schema = fmt["schema"]
-    # the same strict schema the chat mode sends, plus maxLength on the free text
+    # the same strict schema the chat mode sends, plus maxLength and a pattern on the free text
     strict = response_format(PlannerOutput, "chat")["json_schema"]["schema"]
+    limit = SCHEMA_TEXT_MAX_CHARS["rationale"]
     assert schema["properties"]["rationale"] == {
         **strict["properties"]["rationale"],
-        "maxLength": SCHEMA_TEXT_MAX_CHARS["rationale"],
+        "maxLength": limit,
+        "pattern": f"^{SCHEMA_TEXT_CHARS}{{0,{limit}}}$",
     }
     assert schema["properties"]["governance_mode"]["maxLength"] == SCHEMA_TEXT_MAX_CHARS["governance_mode"]
     assert schema["$defs"] == strict["$defs"] and schema["required"] == strict["required"]
@@ -62,6 +66,19 @@ def test_json_object_request_carries_the_capped_schema_max_tokens_and_seed():
     assert seen.body["seed"] == 5 and seen.body["temperature"] == 0.0
     audit_schema = response_format(AuditorOutput, "chat-json-object")["schema"]
     assert audit_schema["properties"]["reason"]["maxLength"] == SCHEMA_TEXT_MAX_CHARS["reason"]
+
+
+def test_free_text_pattern_admits_printable_text_only():
+    # llama-cpp-python's grammar for a plain string admits raw control characters (invalid JSON);
+    # the pattern, which its grammar compiler prefers, must not.
+    pattern = re.compile(
+        response_format(AuditorOutput, "chat-json-object")["schema"]["properties"]["reason"]["pattern"]
+    )
+    limit = SCHEMA_TEXT_MAX_CHARS["reason"]
+    assert pattern.fullmatch("Violation rate 0.30 > 0.01; cut alpha (-15%), keep l.")
+    assert pattern.fullmatch("x" * limit) and not pattern.fullmatch("x" * (limit + 1))
+    for bad in ("line\nbreak", "tab\there", 'a "quote"', "back\\slash", "caf\u00e9", "nul\x00"):
+        assert not pattern.fullmatch(bad), repr(bad)
 
 
 def test_seed_is_part_of_the_cache_key_only_when_set():
@@ -124,6 +141,8 @@ def test_local_backend_settings_need_no_key_and_pin_api_temperature_seed(tmp_pat
     assert (
         spec.model_path == gguf and spec.model_name == "tiny-model" and s.base_url == f"http://127.0.0.1:{spec.port}/v1"
     )
+    # one request slot per episode in flight (evaluate's --llm-concurrency)
+    assert spec.parallel == 1 and agentic_cli.local_server_spec({**params, "llm_concurrency": 3}, options).parallel == 3
     # a replay starts no server; the remote backend never does
     replay = local_params(llm_model=str(gguf), llm_cache=tmp_path / "c", llm_cache_mode="replay")
     assert agentic_cli.local_server_spec(replay, agentic_cli.agentic_options(**replay)) is None

@@ -12,6 +12,7 @@ import signal
 import subprocess
 import sys
 import time
+import uuid
 from pathlib import Path
 
 import pytest
@@ -26,7 +27,7 @@ from solarchain_eval.agentic import (
 )
 from solarchain_eval.agentic.bench import episode_situation, step_situation
 from solarchain_eval.agentic.prompts import auditor_messages, planner_messages
-from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput
+from solarchain_eval.agentic.schemas import SCHEMA_TEXT_MAX_CHARS, AuditorOutput, PlannerOutput
 from solarchain_eval.cli import app
 from solarchain_eval.config import MarketConfig
 from solarchain_eval.market.actions import ActionCodec
@@ -49,6 +50,41 @@ def _children(pid: int) -> list[int]:
         text = (task / "children").read_text().split() if (task / "children").exists() else []
         out.extend(int(c) for c in text)
     return out
+
+
+MARK_VAR = "SOLARCHAIN_TEST_SERVER_MARK"
+
+
+def _marked_servers(mark: str) -> list[int]:
+    """Live llama_cpp.server processes started under this module (they inherit ``mark``)."""
+    found = []
+    for proc in Path("/proc").iterdir():
+        if not proc.name.isdigit():
+            continue
+        try:
+            cmdline = (proc / "cmdline").read_bytes()
+            environ = (proc / "environ").read_bytes()
+        except OSError:
+            continue
+        marked = f"{MARK_VAR}={mark}".encode() in environ.split(b"\0")
+        if b"llama_cpp.server" in cmdline and marked and local_server.pid_alive(int(proc.name)):
+            found.append(int(proc.name))
+    return found
+
+
+@pytest.fixture(scope="module", autouse=True)
+def no_server_survives():
+    """Every process the tests start carries a mark; at the end no marked server may be alive."""
+    mark = uuid.uuid4().hex
+    os.environ[MARK_VAR] = mark
+    try:
+        yield
+    finally:
+        del os.environ[MARK_VAR]
+    deadline = time.monotonic() + 15  # a SIGTERMed server may take a moment to exit
+    while _marked_servers(mark) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not _marked_servers(mark), "a model server outlived the tests"
 
 
 @pytest.fixture(scope="module")
@@ -85,7 +121,10 @@ def test_planner_and_auditor_answers_of_the_real_model_validate(server):
     finally:
         client.close()
     assert isinstance(plan.output, PlannerOutput) and isinstance(audit.output, AuditorOutput)
-    assert len(plan.output.rationale) <= 200 and len(audit.output.reason) <= 160  # maxLength held by the grammar
+    # maxLength and the printable-ASCII pattern held by the grammar
+    caps = SCHEMA_TEXT_MAX_CHARS
+    assert len(plan.output.rationale) <= caps["rationale"] and len(audit.output.reason) <= caps["reason"]
+    assert all(" " <= c <= "~" for c in plan.output.rationale + audit.output.reason)
     for reply in (plan, audit):
         assert reply.meta["output_tokens"] > 0 and reply.meta["latency_s"] > 0
 
@@ -183,15 +222,70 @@ def test_server_killed_mid_run_is_a_typed_error_without_output(tiny_dataset, tmp
     _model_or_skip()
     monkeypatch.delenv("SOLARCHAIN_LLM_API_KEY", raising=False)
     out = tmp_path / "run"
-    original = local_server.LocalServer._wait_ready
+    started: list[local_server.LocalServer] = []
+    original_start, original_call = local_server.LocalServer.start, StructuredLLM._call
 
-    def ready_then_die(self, timeout_s):
-        original(self, timeout_s)
-        self.process.kill()  # the server dies before the first call
-        self.process.wait()
+    def start(self, *args, **kwargs):
+        started.append(self)
+        return original_start(self, *args, **kwargs)
 
-    monkeypatch.setattr(local_server.LocalServer, "_wait_ready", ready_then_die)
-    result = CliRunner().invoke(app, _evaluate_args(tiny_dataset, out, tmp_path / "cache", "--llm-max-retries", "0"))
-    assert result.exit_code == 2
-    assert "cannot connect" in result.output and "policy 'static'" in result.output and "before step 0" in result.output
-    assert not (out / "metrics.csv").exists()
+    def call_then_kill(self, request):
+        entry = original_call(self, request)  # the planner's call succeeds ...
+        started[0].process.kill()  # ... then the server dies, before the first audit
+        started[0].process.wait()
+        return entry
+
+    monkeypatch.setattr(local_server.LocalServer, "start", start)
+    monkeypatch.setattr(StructuredLLM, "_call", call_then_kill)
+    args = _evaluate_args(tiny_dataset, out, tmp_path / "cache", "--auditor", "llm", "--llm-max-retries", "0")
+    result = CliRunner().invoke(app, args)
+    assert result.exit_code == 2, result.output
+    assert "LLM auditor" in result.output and "policy 'static'" in result.output and "step" in result.output
+    assert "cannot connect" in result.output
+    assert not out.exists() or not any(out.iterdir())  # nothing half-written
+    assert len(list((tmp_path / "cache").rglob("*.json"))) == 1  # the planner's answer, recorded whole
+
+
+# A shell without job control starts background jobs with SIGINT ignored, and Python then
+# keeps it ignored; a terminal's Ctrl-C always reaches the default handler, as here.
+SERVE = (
+    "import signal; signal.signal(signal.SIGINT, signal.default_int_handler); "
+    "from solarchain_eval.cli import main; main()"
+)
+
+
+def _serve(sig: int) -> None:
+    env = dict(os.environ)
+    proc = subprocess.Popen(
+        [sys.executable, "-c", SERVE, "llm", "serve", "--port", "0"],
+        env=env,
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
+    try:
+        url = proc.stdout.readline().strip()  # printed once the server answers
+        assert url.startswith("http://127.0.0.1:") and url.endswith("/v1"), url
+        import httpx
+
+        assert httpx.get(f"{url}/models", timeout=10).status_code == 200
+        servers = [c for c in _children(proc.pid) if b"llama_cpp.server" in Path(f"/proc/{c}/cmdline").read_bytes()]
+        assert len(servers) == 1
+        proc.send_signal(sig)
+        assert proc.wait(30) == 0  # a requested stop is a clean exit
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()
+    deadline = time.monotonic() + 15
+    while local_server.pid_alive(servers[0]) and time.monotonic() < deadline:
+        time.sleep(0.2)
+    assert not local_server.pid_alive(servers[0])
+    with pytest.raises(httpx.HTTPError):
+        httpx.get(f"{url}/models", timeout=2)
+
+
+@pytest.mark.parametrize("sig", [signal.SIGTERM, signal.SIGINT], ids=["sigterm", "ctrl-c"])
+def test_llm_serve_prints_the_url_and_stops_on_a_signal(sig):
+    _model_or_skip()
+    _serve(sig)

@@ -59,5 +59,5 @@ def test_state_invariants_hold_for_any_action_sequence(env, seed, episode):
         assert info["token_price"] >= 0.05
         assert 0.0 <= info["physics_violation_rate"] <= 1.0
         assert info["reward_ratio"] + info["liquidity_ratio"] <= 0.98 + ALLOCATION_TOLERANCE
-        assert 0.0 <= info["max_drawdown"] <= 1.0 and 0.0 <= info["token_drawdown"] < 1.0
+        assert 0.0 <= info["drawdown"] <= 1.0 and 0.0 <= info["token_drawdown"] < 1.0
         assert info["unmet_demand_MWh"] >= 0.0 and info["matched_energy_MWh"] >= 0.0

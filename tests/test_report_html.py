@@ -26,11 +26,19 @@ def full_report(tmp_path_factory: pytest.TempPathFactory):
 def test_every_figure_is_drawn_as_png_and_svg(full_report):
     figures = full_report.figures
     assert all(isinstance(f, FigureFile) for f in figures), [f for f in figures if not isinstance(f, FigureFile)]
-    assert len(figures) == 16
+    assert len(figures) == 18  # with the two governance figures
     for figure in figures:
         assert figure.png.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
         assert b"<svg" in figure.svg.read_bytes()[:2000]
         assert b"<dc:date>" not in figure.svg.read_bytes()
+
+
+def test_agentic_figures_name_the_planner_and_auditor_that_ran(full_report):
+    by_key = {f.key: f for f in full_report.figures}
+    for key in ("jitter_change", "agentic_paired_deltas", "audit_step_delta", "case_action_revision", "case_context"):
+        assert by_key[key].title.endswith("(rule planner, rule auditor)"), key
+        assert by_key[key].caption.endswith("Planner/Auditor: rule planner, rule auditor."), key
+    assert "planner" not in by_key["reward_distribution"].title
 
 
 def test_policy_colours_are_the_same_in_every_figure(full_report):
@@ -57,7 +65,7 @@ def test_index_html_is_self_contained(full_report):
     assert "<script" not in page
     assert not re.search(r'(href|src)="(https?:)?//', page)
     tables = [t for t in full_report.tables if isinstance(t, ReportTable)]
-    assert page.count('<figure class="table"') == len(tables) == 13
+    assert page.count('<figure class="table"') == len(tables) == 14
     for section in ("Dataset provenance", "Run metadata", "Rollouts overlap"):
         assert section in page
     assert "market_liquidity.csv" in page and "missing" in page  # recorded checksum, data dir gone

@@ -50,3 +50,74 @@ def test_trajectory_captions_promise_bands_only_when_drawn(reports):
         assert f"95% Student-t bands across the {len(RUN_SEEDS)} run seeds" in two[key], two[key]
         assert "band" in one[key] and "Student-t" not in one[key] and "95%" not in one[key], one[key]
         assert "no confidence band (1 run seed" in one[key], one[key]
+
+
+# ----------------------------------------------------------------------------- one policy order
+
+
+ONE_ORDER = ["Static", "Random", "Myopic", "PPO", "SAC", "DQN"]
+
+
+def test_every_table_lists_policies_in_the_one_order(reports):
+    two, _ = reports
+    checked = 0
+    for table in two.tables:
+        if not hasattr(table, "data") or "policy" not in table.data.columns:
+            continue
+        frame = table.data
+        groups = [frame] if "setting" not in frame.columns else [g for _, g in frame.groupby("setting", sort=False)]
+        for group in groups:
+            by_comparison = "comparison" in group.columns
+            for rows in [g for _, g in group.groupby("comparison", sort=False)] if by_comparison else [group]:
+                shown = [p for p in rows["policy"] if p in ONE_ORDER]
+                assert shown == sorted(shown, key=ONE_ORDER.index), (table.key, list(rows["policy"]))
+                checked += 1
+    assert checked >= 8  # the main, detail, agentic, delta and action tables all list policies
+
+
+# ----------------------------------------------------------------------------- small samples
+
+
+def test_small_samples_carry_a_visible_caveat(reports):
+    from solarchain_eval.report.statistics import SampleSize
+    from solarchain_eval.report.tables.model import SMALL_SAMPLE_CAVEAT, basis_sentence, to_html, to_markdown
+
+    assert SMALL_SAMPLE_CAVEAT not in basis_sentence([SampleSize(90, 30, 21)], "rollouts")  # the paper's protocol
+    tiny = basis_sentence([SampleSize(90, 30, 21), SampleSize(2, 2, 2)], "rollouts")
+    assert f"{SMALL_SAMPLE_CAVEAT}: as few as 2 distinct start day(s)" in tiny
+    two, _ = reports  # the synthetic root: 3 distinct start days per row
+    table = next(t for t in two.tables if getattr(t, "key", "") == "main_performance")
+    assert "as few as 3 distinct start day(s)" in table.basis
+    assert '<p class="caveat">Small sample: as few as 3' in to_html(table)
+    assert "**Small sample: as few as 3" in to_markdown(table)
+
+
+# ----------------------------------------------------------------------------- run metadata
+
+
+def test_run_metadata_shows_shared_fields_once_and_no_json():
+    from types import SimpleNamespace
+
+    from solarchain_eval.report.html import _run_metadata
+
+    command = ["solarchain-eval", "paper", "--out", "ROOT", "--preset", "smoke"]
+    units = {
+        f"{setting}_seed{seed}": {
+            "command": command,
+            "git_commit": "abc123",
+            "setting": setting,
+            "policies": ["static", "ppo"],
+            "run_seeds": [seed],
+            "episodes": 2,
+            "episode_seed_protocol": {"kind": "paper", "offset": 0},
+        }
+        for setting in ("main", "no_physics")
+        for seed in (11, 12)
+    }
+    html = _run_metadata(SimpleNamespace(kind="paper", metadata={}, unit_metadata=units))
+    assert html.count("solarchain-eval paper --out ROOT --preset smoke") == 1
+    assert html.count("abc123") == 1
+    assert "<th>setting</th>" in html and "<th>run_seeds</th>" in html and "<th>command</th>" not in html
+    assert "kind=paper, offset=0" in html and "static ppo" in html
+    for json_mark in ('{"', '["', "[1", '": '):
+        assert json_mark not in html, json_mark

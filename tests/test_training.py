@@ -223,8 +223,9 @@ def test_model_lookup_in_a_models_directory(tmp_path, trained):
         FileNotFoundError, match=r"no trained model for policy 'dqn': looked for .*dqn\.zip, .*dqn/model\.zip"
     ):
         resolve_model_path("dqn", {"*": tmp_path})
-    with pytest.raises(FileNotFoundError, match="needs a trained model: pass --models"):
+    with pytest.raises(FileNotFoundError, match="needs a trained model: pass models DIR") as caught:
         resolve_model_path("sac", {})
+    assert "pass --models DIR or --models sac=PATH" in caught.value.message_for()
     with pytest.raises(ValueError, match=r"cannot load .*ppo\.zip as a SAC model"):
         make_policy("sac", BenchmarkConfig(), {"sac": tmp_path / "ppo.zip"})
 

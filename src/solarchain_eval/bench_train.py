@@ -30,6 +30,7 @@ import numpy as np
 from .bench import Throughput
 from .experiments.grid import GridSpec, Unit, plan_units
 from .experiments.layout import PAPER_METADATA_FILE, UNITS_DIR
+from .market.observation import OBS_LIMIT, OBSERVATION_SHAPE
 from .training import ACTION_MODES, TRAIN_METADATA_FILE, algorithm_class, hyperparameters, set_torch_threads
 
 #: Timed steps per repeat and warm-up steps (past learning starts / one PPO rollout).
@@ -41,12 +42,12 @@ class TrivialEnv(gym.Env):
     """SolarChain-Eval's spaces with nothing behind them: SB3's own cost per step."""
 
     def __init__(self, action_mode: str = "continuous") -> None:
-        self.observation_space = gym.spaces.Box(-10.0, 10.0, shape=(12,), dtype=np.float32)
+        self.observation_space = gym.spaces.Box(-OBS_LIMIT, OBS_LIMIT, shape=OBSERVATION_SHAPE, dtype=np.float32)
         if action_mode == "discrete":
             self.action_space: gym.Space = gym.spaces.Discrete(125)
         else:
             self.action_space = gym.spaces.Box(0.0, 1.0, shape=(3,), dtype=np.float32)
-        self._obs = np.zeros(12, dtype=np.float32)
+        self._obs = np.zeros(OBSERVATION_SHAPE, dtype=np.float32)
         self._k = 0
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -130,7 +131,7 @@ def unit_duration(unit: Unit, times: UnitTimes, spec: GridSpec) -> float:
 
 
 def simulate_wall_time(units: Sequence[Unit], durations: dict[str, float], workers: int) -> float:
-    """Makespan of list scheduling as :func:`~.experiments.scheduler.run_units` does it."""
+    """Makespan of list scheduling as :func:`~.experiments.pool.run_units` does it."""
     pending = list(units)
     done: set[str] = set()
     running: list[tuple[float, str]] = []

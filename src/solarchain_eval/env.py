@@ -10,10 +10,10 @@ import numpy as np
 from gymnasium import spaces
 
 from .config import BenchmarkConfig, check_episode_fits, load_config
-from .data.default import default_dataset_dir
+from .data.default import resolve_data_dir
 from .data.table import HourlyTable, load_table
 from .episodes import PRICE_NOISE_STD, EpisodeStream
-from .market.actions import ActionCodec, action_jitter_f32, discrete_index
+from .market.actions import ActionCodec, DiscreteActions, action_jitter_f32, check_action_mode, initial_action
 from .market.dynamics import MarketHours, RewardWeights, StepOutcome, market_step
 from .market.observation import (
     OBS_LIMIT,
@@ -22,6 +22,7 @@ from .market.observation import (
     OBS_PREV_ELL,
     OBS_PRICE,
     OBSERVATION_NAMES,
+    OBSERVATION_SHAPE,
     observation_template,
 )
 from .market.ops import SCALAR
@@ -52,7 +53,7 @@ STEP_INFO_KEYS = (
     "liquidity",
     "liquidity_depth",
     "token_price",
-    "max_drawdown",
+    "drawdown",
     "token_drawdown",
     "action_jitter",
     "slippage",
@@ -90,7 +91,7 @@ def step_info(
         "liquidity": out.liquidity,
         "liquidity_depth": out.liquidity / depth_scale,
         "token_price": out.token_price,
-        "max_drawdown": out.drawdown,
+        "drawdown": out.drawdown,
         "token_drawdown": out.token_drawdown,
         "action_jitter": out.jitter,
         "slippage": out.slippage,
@@ -109,8 +110,70 @@ def resolve_config(config: BenchmarkConfig | str | Path | None) -> BenchmarkConf
 
 def resolve_table(data_dir: str | Path | None, config: BenchmarkConfig) -> HourlyTable:
     """Explicit ``data_dir``, else the config's, else the embedded default dataset."""
-    chosen = data_dir if data_dir is not None else config.data_dir
-    return load_table(chosen if chosen is not None else default_dataset_dir())
+    return load_table(resolve_data_dir(data_dir, config.data_dir))
+
+
+def env_config(
+    config: BenchmarkConfig | str | Path | None,
+    *,
+    no_physics_penalty: bool | None,
+    action_mode: str | None,
+    episode_steps: int | None = None,
+) -> BenchmarkConfig:
+    """The configuration an env runs with: the one argument validation of every env constructor.
+
+    ``config`` (default ``BenchmarkConfig()``) with the constructor's overrides applied; an
+    unknown ``action_mode`` is a ValueError.
+    """
+    cfg = resolve_config(config).with_updates(
+        action_mode=check_action_mode(action_mode), no_physics_penalty=no_physics_penalty
+    )
+    if episode_steps is not None:
+        cfg = cfg.with_updates(episode_steps=episode_steps)
+    return cfg
+
+
+def setup_market(
+    env: Any,
+    data_dir: str | Path | None,
+    config: BenchmarkConfig | str | Path | None,
+    *,
+    no_physics_penalty: bool | None,
+    action_mode: str | None,
+    table: HourlyTable | None,
+    episode_steps: int | None = None,
+) -> None:
+    """Set the attributes :class:`SolarChainEnv` and the vector env share, from their arguments.
+
+    ``config``, ``table``, ``market_hours``, ``codec``, ``weights``, ``action_mode``,
+    ``episode_steps``, ``cities``, ``observation_names``, ``single_observation_space`` and
+    ``single_action_space``, plus the derived per-table inputs (start hours, observation
+    template, the discrete action table, the initial previous action).
+    """
+    cfg = env_config(
+        config, no_physics_penalty=no_physics_penalty, action_mode=action_mode, episode_steps=episode_steps
+    )
+    env.config = cfg
+    env.table = table if table is not None else resolve_table(data_dir, cfg)
+    check_episode_fits(cfg, env.table.hours, str(env.table.source))
+    env.market_hours, env._obs_template = market_inputs(env.table)
+    env.codec = ActionCodec.from_config(cfg.market)
+    env.weights = RewardWeights.from_config(cfg)
+    env.action_mode = cfg.action_mode
+    env.episode_steps = cfg.episode_steps
+    env.cities = env.table.cities
+    env.observation_names = OBSERVATION_NAMES
+    env._n_hours = env.table.hours
+    env._starts = start_hours(env.table.hours, cfg.episode_steps)
+    env._depth_scale = max(cfg.market.initial_liquidity, 1e-9)
+    env._initial_action = initial_action(cfg.market)
+    env.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, shape=OBSERVATION_SHAPE, dtype=np.float32)
+    if cfg.action_mode == "discrete":
+        env._discrete_actions = DiscreteActions.from_codec(env.codec, cfg.discrete_levels)
+        env.single_action_space = spaces.Discrete(len(env._discrete_actions))
+    else:
+        env._discrete_actions = None
+        env.single_action_space = spaces.Box(0.0, 1.0, shape=(3,), dtype=np.float32)
 
 
 _HOURS_CACHE: dict[int, tuple[HourlyTable, MarketHours, np.ndarray]] = {}
@@ -225,33 +288,15 @@ class SolarChainEnv(gym.Env):
         table: HourlyTable | None = None,
     ) -> None:
         super().__init__()
-        cfg = resolve_config(config)
-        if action_mode is not None and action_mode not in ("continuous", "discrete"):
-            raise ValueError(f"action_mode must be 'continuous' or 'discrete', not {action_mode!r}")
-        cfg = cfg.with_updates(action_mode=action_mode, no_physics_penalty=no_physics_penalty)
-        self.config = cfg
-        self.table = table if table is not None else resolve_table(data_dir, cfg)
-        check_episode_fits(cfg, self.table.hours, str(self.table.source))
-        self.market_hours, self._obs_template = market_inputs(self.table)
-        self.codec = ActionCodec.from_config(cfg.market)
-        self.weights = RewardWeights.from_config(cfg)
-        self.action_mode = cfg.action_mode
-        self.episode_steps = cfg.episode_steps
-        self.cities = self.table.cities
-        self.observation_names = OBSERVATION_NAMES
-
-        if self.action_mode == "discrete":
-            self._discrete_actions = self.codec.discrete_table(cfg.discrete_levels)
-            self.action_space = spaces.Discrete(len(self._discrete_actions))
-        else:
-            self._discrete_actions = []
-            self.action_space = spaces.Box(low=0.0, high=1.0, shape=(3,), dtype=np.float32)
-        self.observation_space = spaces.Box(low=-OBS_LIMIT, high=OBS_LIMIT, shape=(12,), dtype=np.float32)
+        setup_market(
+            self, data_dir, config, no_physics_penalty=no_physics_penalty, action_mode=action_mode, table=table
+        )
+        cfg = self.config
+        self.observation_space = self.single_observation_space
+        self.action_space = self.single_action_space
 
         # Per-hour inputs as Python lists: list indexing of floats is the cheapest lookup.
         hours, t = self.market_hours, self.table
-        self._n_hours = t.hours
-        self._starts = start_hours(t.hours, self.episode_steps)
         self._verified = t.verified_mwh.tolist()
         self._reported = t.reported_mwh.tolist()
         self._unsafe = hours.unsafe_supply_mwh.tolist()
@@ -262,10 +307,6 @@ class SolarChainEnv(gym.Env):
         m = cfg.market
         self._initial_liquidity = m.initial_liquidity
         self._initial_price = m.initial_token_price
-        self._depth_scale = max(m.initial_liquidity, 1e-9)
-        self._initial_action = tuple(
-            float(np.float32(v)) for v in (m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate)
-        )
 
         self._np_random = np.random.default_rng(cfg.seed if seed is None else seed)
         self._stream = EpisodeStream(self._np_random)
@@ -322,8 +363,37 @@ class SolarChainEnv(gym.Env):
     def decode_action(self, action: Any) -> tuple[float, float, float]:
         """The executed (α, ℓ, b) for a policy action (float32 values)."""
         if self.action_mode == "discrete":
-            return self._discrete_actions[discrete_index(action, len(self._discrete_actions))]
+            return self._discrete_actions.decode(action)
         return self.codec.decode(action)
+
+    def counterfactual_step(self, executed: tuple[float, float, float]) -> StepOutcome:
+        """The outcome of executing ``executed`` (market units) now, without changing the env.
+
+        Same state, same hour and the same price shock as the next :meth:`step`, so the
+        counterfactual of the action that ``step`` then executes equals its outcome exactly
+        (docs/governance.md#counterfactual-step-records). The caller passes the action as the
+        env would execute it (float32 values, sanitised).
+        """
+        k = self._k
+        if not self._episode_open or k >= self.episode_steps:
+            raise RuntimeError("the episode is over (or was never started): call reset() first")
+        hour = min(self._start + k, self._n_hours - 1)
+        return market_step(
+            SCALAR,
+            self.weights,
+            self._verified[hour],
+            self._unsafe[hour],
+            self._demand[hour],
+            self._share[hour],
+            self._trust[hour],
+            self._liquidity,
+            self._peak_liquidity,
+            self._price,
+            self._peak_price,
+            executed,
+            action_jitter_f32(executed, self._prev),
+            self._noise[k],
+        )
 
     def step(self, action: Any):
         k = self._k

@@ -23,6 +23,8 @@ from typing import Any
 
 import pandas as pd
 
+from .algorithms import TrainingError
+
 LAGRANGIAN_ALGO = "ppo-lag"
 LAGRANGIAN_LOG_FILE = "lagrangian_log.csv"
 #: One row per rollout: what the multiplier was, the episode cost it saw, and the update.
@@ -64,7 +66,10 @@ class LagrangianSettings:
         for name in ("cost_limit", "multiplier_lr", "initial_multiplier"):
             value = getattr(self, name)
             if not math.isfinite(value) or value < 0:
-                raise ValueError(f"PPO-Lagrangian {name.replace('_', '-')} must be finite and >= 0, got {value}")
+                # {opt_<name>}: the field here, the flag (--cost-limit, ...) on the command line
+                raise TrainingError.about(
+                    f"PPO-Lagrangian {{opt_{name}}} must be finite and >= 0, got {{value}}", value=value
+                )
 
     def describe(self) -> dict[str, float]:
         return {

@@ -4,19 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-METRIC_NAMES = (
-    "cumulative_reward",
-    "episode_volume",
-    "physics_violation_rate",
-    "max_drawdown",
-    "max_token_drawdown",
-    "action_jitter",
-    "mean_slippage",
-    "spatial_fairness_index",
-    "artificial_liquidity_MWh",
-    "final_liquidity",
-    "final_token_price",
-)
+from .records_schema import METRIC_NAMES as METRIC_NAMES  # the column order, re-exported
 
 
 def max_drawdown(series: np.ndarray) -> float:

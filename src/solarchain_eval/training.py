@@ -31,36 +31,29 @@ from typing import Any
 
 import numpy as np
 
+from .algorithms import (  # noqa: F401  (re-exported: their home is .algorithms)
+    ACTION_MODES,
+    ALGOS,
+    MODEL_FILE,
+    OPT_IN_ALGOS,
+    TRAIN_CONFIG_FILE,
+    TRAINABLE_ACTION_MODES,
+    TRAINABLE_ALGOS,
+    TrainingError,
+    algorithm_class,
+    check_algo,
+)
 from .config import BenchmarkConfig
+from .experiments.settings import setting_name
 from .io import atomic_write_csv, atomic_write_json, atomic_write_with
 from .lagrangian import LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 from .redaction import redact_command
 from .versions import git_commit, package_versions
 
-ALGOS = ("ppo", "sac", "dqn")
-ACTION_MODES = {"ppo": "continuous", "sac": "continuous", "dqn": "discrete"}
-#: Everything ``train`` accepts: the paper's algorithms plus the opt-in PPO-Lagrangian
-#: (docs/training.md#ppo-lagrangian; its model.zip is a plain PPO model).
-TRAINABLE_ACTION_MODES = {**ACTION_MODES, "ppo-lag": "continuous"}
-TRAINABLE_ALGOS = tuple(TRAINABLE_ACTION_MODES)
-OPT_IN_ALGOS = tuple(a for a in TRAINABLE_ALGOS if a not in ALGOS)
-MODEL_FILE = "model.zip"
-TRAIN_CONFIG_FILE = "train_config.json"
 TRAIN_LOG_FILE = "training_log.csv"
 TRAIN_METADATA_FILE = "train_metadata.json"
 CHECKPOINT_DIR = "checkpoints"
 DEFAULT_CHECKPOINT_EVERY = 25_000
-
-
-class TrainingError(ValueError):
-    """A training request that cannot be carried out as given (reported without a traceback)."""
-
-
-def check_algo(algo: str) -> str:
-    key = algo.strip().lower()
-    if key not in TRAINABLE_ALGOS:
-        raise TrainingError(f"unknown algorithm '{algo}' (choose from {', '.join(TRAINABLE_ALGOS)})")
-    return key
 
 
 def dqn_learning_starts(timesteps: int) -> int:
@@ -75,12 +68,6 @@ def hyperparameters(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[
     if check_algo(algo) == "dqn":
         params["learning_starts"] = dqn_learning_starts(timesteps)
     return params
-
-
-def algorithm_class(algo: str) -> type:
-    from stable_baselines3 import DQN, PPO, SAC
-
-    return {"ppo": PPO, "sac": SAC, "dqn": DQN, "ppo-lag": PPO}[check_algo(algo)]
 
 
 def set_torch_threads(threads: int) -> None:
@@ -98,7 +85,7 @@ class TrainSpec:
 
     Parameters
     ----------
-    algo : {"ppo", "sac", "dqn"}
+    algo : {"ppo", "sac", "dqn", "ppo-lag"}
     seed : int
         Seeds SB3 (torch, numpy, the action space) and the training env's first reset.
     timesteps : int
@@ -115,6 +102,8 @@ class TrainSpec:
     torch_threads : int
     device : str
         Torch device for the networks ("cpu" unless you know a GPU helps these small MLPs).
+    lagrangian : LagrangianSettings, optional
+        The cost limit and dual ascent of "ppo-lag" (required there, ignored otherwise).
     """
 
     algo: str
@@ -146,6 +135,7 @@ class TrainOutcome:
     wall_s: float
     steps_per_s: float
     resumed_from: list[int]
+    steps_before: int = 0
     already_complete: bool = False
 
 
@@ -238,30 +228,57 @@ def train(
         ``out_dir`` holds a different training (the message lists what differs), or
         TensorBoard logging was asked for without the tensorboard package.
     """
-    from .data.default import default_dataset_dir
+    from .data.default import resolve_data_dir
+    from .data.provenance import dataset_provenance
     from .data.table import load_table
-    from .experiments.evaluate import dataset_provenance
 
     algo = check_algo(spec.algo)
     if spec.timesteps < 1:
         raise TrainingError(f"timesteps must be at least 1, got {spec.timesteps}")
     if algo == LAGRANGIAN_ALGO and spec.lagrangian is None:
-        raise TrainingError("ppo-lag needs a cost limit: pass --cost-limit D (the limit on the episode cost)")
+        raise TrainingError.about("ppo-lag needs a cost limit: pass {opt_lagrangian} (the limit D on the episode cost)")
     cfg = spec.resolved_config()
-    data_dir = spec.data_dir or (Path(cfg.data_dir) if cfg.data_dir else default_dataset_dir())
+    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir)
     table = load_table(data_dir)
     dataset = dataset_provenance(table)
     identity = _identity(spec, dataset)
     out_dir = Path(out_dir)
-    config_path, metadata_path = out_dir / TRAIN_CONFIG_FILE, out_dir / TRAIN_METADATA_FILE
+    finished, metadata = _previous_training(out_dir, identity, overwrite)
+    if finished is not None:
+        return finished
+    if spec.tensorboard_dir is not None:
+        import importlib.util
 
+        if importlib.util.find_spec("tensorboard") is None:
+            raise TrainingError.about(
+                "{opt_tensorboard_dir} needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'"
+            )
+
+    set_torch_threads(spec.torch_threads)
+    started_at = datetime.now(UTC).isoformat(timespec="seconds")
+    atomic_write_json(
+        out_dir / TRAIN_CONFIG_FILE,
+        {"identity": identity, "data_dir": str(Path(data_dir).resolve()), "dataset": dataset, "written_at": started_at},
+    )
+    session = _TrainingSession.start(spec, cfg, table, out_dir, identity, metadata)
+    learn_s = session.learn(spec, algo, on_progress)
+    return session.finish(spec, algo, learn_s, started_at, command)
+
+
+def _previous_training(
+    out_dir: Path, identity: dict[str, Any], overwrite: bool
+) -> tuple[TrainOutcome | None, dict[str, Any] | None]:
+    """What ``out_dir`` already holds: the outcome of this exact finished training (else None) and
+    the metadata of an interrupted one to resume. A different training is an error unless ``overwrite``."""
+    config_path, metadata_path = out_dir / TRAIN_CONFIG_FILE, out_dir / TRAIN_METADATA_FILE
     previous = _read_json(config_path)
     if previous is not None and previous.get("identity") != identity:
         if not overwrite:
             diffs = differences(previous.get("identity") or {}, identity)
-            raise TrainingError(
-                f"{out_dir} holds a different training ({'; '.join(diffs[:6])}); "
-                "choose another output directory or pass --overwrite"
+            raise TrainingError.about(
+                "{out_dir} holds a different training ({diffs}); choose another output directory or pass {opt_overwrite}",
+                out_dir=out_dir,
+                diffs="; ".join(diffs[:6]),
             )
         _clear_training_dir(out_dir)
         previous = None
@@ -269,7 +286,7 @@ def train(
     if previous is not None and metadata and metadata.get("complete") and (out_dir / MODEL_FILE).is_file():
         if not overwrite:
             _remove_tree(out_dir / CHECKPOINT_DIR)  # left over if a kill came right after the metadata
-            return TrainOutcome(
+            outcome = TrainOutcome(
                 out_dir,
                 out_dir / MODEL_FILE,
                 int(metadata["timesteps_done"]),
@@ -278,104 +295,123 @@ def train(
                 list(metadata.get("resumed_from", [])),
                 already_complete=True,
             )
+            return outcome, metadata
         _clear_training_dir(out_dir)
-    if spec.tensorboard_dir is not None:
-        import importlib.util
+    return None, metadata
 
-        if importlib.util.find_spec("tensorboard") is None:
-            raise TrainingError(
-                "--tensorboard needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'"
+
+@dataclass
+class _TrainingSession:
+    """A model being trained into ``out_dir``: new, or restored from its latest checkpoint."""
+
+    out_dir: Path
+    model: Any
+    env: Any
+    store: Any
+    log: Any
+    checkpoint: Any
+    wall_before: float
+    resumed_from: list[int]
+    steps_before: int = 0
+    callbacks: list[Any] = field(default_factory=list)  # besides the monitor (ppo-lag: the dual ascent)
+
+    @classmethod
+    def start(cls, spec: TrainSpec, cfg: BenchmarkConfig, table: Any, out_dir: Path, identity: dict, metadata):
+        from .training_monitor import CheckpointStore, EpisodeLog, load_replay_buffer
+
+        algo_cls = algorithm_class(spec.algo)
+        env = _make_vec_env(cfg, table, cfg.training.n_envs)
+        store = CheckpointStore(out_dir / CHECKPOINT_DIR)
+        checkpoint = store.latest()
+        callbacks: list[Any] = []
+        if check_algo(spec.algo) == LAGRANGIAN_ALGO:
+            env, dual = _lagrangian(spec, env, out_dir, checkpoint.steps if checkpoint else 0)
+            callbacks.append(dual)
+        tb_dir = str(spec.tensorboard_dir) if spec.tensorboard_dir is not None else None
+        resumed_from = list((metadata or {}).get("resumed_from", []))
+        if checkpoint is None:
+            model = algo_cls(
+                "MlpPolicy",
+                env,
+                seed=spec.seed,
+                verbose=0,
+                tensorboard_log=tb_dir,
+                device=spec.device,
+                **identity["hyperparameters"],
             )
+            log, wall_before = EpisodeLog(env.num_envs), 0.0
+        else:
+            model = algo_cls.load(checkpoint.model, env=env, device=spec.device, tensorboard_log=tb_dir)
+            if checkpoint.replay_buffer is not None:
+                load_replay_buffer(model.replay_buffer, checkpoint.replay_buffer)
+            model.set_random_seed(_resume_seed(spec.seed, checkpoint.steps))
+            wall_before = checkpoint.wall_s
+            log = EpisodeLog(env.num_envs, EpisodeLog.read(checkpoint.log), wall_offset_s=wall_before)
+            resumed_from.append(checkpoint.steps)
+            # Record the resume now: a run killed again must still say it was resumed.
+            atomic_write_json(out_dir / TRAIN_METADATA_FILE, {"complete": False, "resumed_from": resumed_from})
+        if tb_dir is None:
+            # Without TensorBoard, SB3's default logger set-up would create an empty /tmp/SB3-<time>
+            # directory on every learn(); an explicit logger with no outputs avoids that.
+            from stable_baselines3.common.logger import Logger
 
-    set_torch_threads(spec.torch_threads)
-    from .training_monitor import CheckpointStore, EpisodeLog, TrainingMonitor, load_replay_buffer
+            model.set_logger(Logger(folder=None, output_formats=[]))
+        return cls(out_dir, model, env, store, log, checkpoint, wall_before, resumed_from, callbacks=callbacks)
 
-    started_at = datetime.now(UTC).isoformat(timespec="seconds")
-    atomic_write_json(
-        config_path,
-        {"identity": identity, "data_dir": str(Path(data_dir).resolve()), "dataset": dataset, "written_at": started_at},
-    )
-    cls = algorithm_class(algo)
-    env = _make_vec_env(cfg, table, cfg.training.n_envs)
-    store = CheckpointStore(out_dir / CHECKPOINT_DIR)
-    checkpoint = store.latest()
-    callbacks: list[Any] = []
-    if algo == LAGRANGIAN_ALGO:
-        env, dual = _lagrangian(spec, env, out_dir, checkpoint.steps if checkpoint else 0)
-        callbacks.append(dual)
-    tb_dir = str(spec.tensorboard_dir) if spec.tensorboard_dir is not None else None
-    resumed_from = list((metadata or {}).get("resumed_from", []))
-    if checkpoint is None:
-        model = cls(
-            "MlpPolicy",
-            env,
-            seed=spec.seed,
-            verbose=0,
-            tensorboard_log=tb_dir,
-            device=spec.device,
-            **identity["hyperparameters"],
+    def learn(self, spec: TrainSpec, algo: str, on_progress: Callable[[int], None] | None) -> float:
+        """Train up to ``spec.timesteps``; the seconds it took."""
+        from .training_monitor import TrainingMonitor
+
+        self.steps_before = int(self.model.num_timesteps)
+        monitor = TrainingMonitor(
+            self.log,
+            on_progress=on_progress,
+            checkpoints=self.store,
+            checkpoint_every=spec.checkpoint_every,
+            wall_offset_s=self.wall_before,
         )
-        log, wall_before = EpisodeLog(env.num_envs), 0.0
-    else:
-        model = cls.load(checkpoint.model, env=env, device=spec.device, tensorboard_log=tb_dir)
-        if checkpoint.replay_buffer is not None:
-            load_replay_buffer(model.replay_buffer, checkpoint.replay_buffer)
-        model.set_random_seed(_resume_seed(spec.seed, checkpoint.steps))
-        wall_before = checkpoint.wall_s
-        log = EpisodeLog(env.num_envs, EpisodeLog.read(checkpoint.log), wall_offset_s=wall_before)
-        resumed_from.append(checkpoint.steps)
-        # Record the resume now: a run killed again must still say it was resumed.
-        atomic_write_json(metadata_path, {"complete": False, "resumed_from": resumed_from})
-    if tb_dir is None:
-        # Without TensorBoard, SB3's default logger set-up would create an empty /tmp/SB3-<time>
-        # directory on every learn(); an explicit logger with no outputs avoids that.
-        from stable_baselines3.common.logger import Logger
+        learn_started = time.perf_counter()
+        self.model.learn(
+            total_timesteps=max(spec.timesteps - self.steps_before, 0),
+            callback=[monitor, *self.callbacks] if self.callbacks else monitor,
+            reset_num_timesteps=self.checkpoint is None,
+            tb_log_name=f"{algo}-{setting_name(agentic=False, no_physics_penalty=spec.no_physics_penalty)}-{spec.seed}",
+        )
+        learn_s = time.perf_counter() - learn_started
+        self.env.close()
+        return learn_s
 
-        model.set_logger(Logger(folder=None, output_formats=[]))
-    steps_before = int(model.num_timesteps)
-    monitor = TrainingMonitor(
-        log,
-        on_progress=on_progress,
-        checkpoints=store,
-        checkpoint_every=spec.checkpoint_every,
-        wall_offset_s=wall_before,
-    )
-    learn_started = time.perf_counter()
-    model.learn(
-        total_timesteps=max(spec.timesteps - steps_before, 0),
-        callback=[monitor, *callbacks] if callbacks else monitor,
-        reset_num_timesteps=checkpoint is None,
-        tb_log_name=f"{algo}-{'no_physics' if spec.no_physics_penalty else 'main'}-{spec.seed}",
-    )
-    learn_s = time.perf_counter() - learn_started
-    env.close()
-
-    model_path = atomic_write_with(out_dir / MODEL_FILE, lambda tmp: model.save(tmp))
-    atomic_write_csv(out_dir / TRAIN_LOG_FILE, log.frame())
-    steps_done = int(model.num_timesteps)
-    wall_s = wall_before + learn_s
-    steps_per_s = (steps_done - steps_before) / learn_s if learn_s > 0 else 0.0
-    atomic_write_json(
-        metadata_path,
-        {
-            "complete": True,
-            "algo": algo,
-            "seed": int(spec.seed),
-            "timesteps_requested": int(spec.timesteps),
-            "timesteps_done": steps_done,
-            "episodes": len(log.rows),
-            "wall_s": round(wall_s, 3),
-            "steps_per_s": round(steps_per_s, 2),
-            "torch_threads": spec.torch_threads,
-            "resumed_from": resumed_from,
-            "started_at": started_at,
-            "command": redact_command(command if command is not None else sys.argv),
-            "git_commit": git_commit(),
-            "package_versions": package_versions(),
-        },
-    )
-    _remove_tree(out_dir / CHECKPOINT_DIR)
-    return TrainOutcome(out_dir, model_path, steps_done, wall_s, steps_per_s, resumed_from)
+    def finish(
+        self, spec: TrainSpec, algo: str, learn_s: float, started_at: str, command: list[str] | None
+    ) -> TrainOutcome:
+        """Write the model, the training log and the metadata (last); drop the checkpoints."""
+        out_dir, model, log = self.out_dir, self.model, self.log
+        model_path = atomic_write_with(out_dir / MODEL_FILE, lambda tmp: model.save(tmp))
+        atomic_write_csv(out_dir / TRAIN_LOG_FILE, log.frame())
+        steps_done = int(model.num_timesteps)
+        wall_s = self.wall_before + learn_s
+        steps_per_s = (steps_done - self.steps_before) / learn_s if learn_s > 0 else 0.0
+        atomic_write_json(
+            out_dir / TRAIN_METADATA_FILE,
+            {
+                "complete": True,
+                "algo": algo,
+                "seed": int(spec.seed),
+                "timesteps_requested": int(spec.timesteps),
+                "timesteps_done": steps_done,
+                "episodes": len(log.rows),
+                "wall_s": round(wall_s, 3),
+                "steps_per_s": round(steps_per_s, 2),
+                "torch_threads": spec.torch_threads,
+                "resumed_from": self.resumed_from,
+                "started_at": started_at,
+                "command": redact_command(command if command is not None else sys.argv),
+                "git_commit": git_commit(),
+                "package_versions": package_versions(),
+            },
+        )
+        _remove_tree(out_dir / CHECKPOINT_DIR)
+        return TrainOutcome(out_dir, model_path, steps_done, wall_s, steps_per_s, self.resumed_from)
 
 
 def _lagrangian(spec: TrainSpec, env: Any, out_dir: Path, resumed_at: int) -> tuple[Any, Any]:

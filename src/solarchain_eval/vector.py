@@ -13,16 +13,15 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from gymnasium import spaces
 from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
-from .config import BenchmarkConfig, check_episode_fits
+from .config import BenchmarkConfig
 from .data.table import HourlyTable
-from .env import STEP_INFO_KEYS, market_inputs, resolve_config, resolve_table, start_hours, step_info
+from .env import STEP_INFO_KEYS, setup_market, step_info
 from .episodes import CHECKPOINT_EVERY, PRICE_NOISE_STD, EpisodeStream
-from .market.actions import ActionCodec, action_jitter_f32_batch, discrete_indices
-from .market.dynamics import RewardWeights, market_step
+from .market.actions import action_jitter_f32_batch
+from .market.dynamics import market_step
 from .market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE
 from .market.ops import BATCH
 
@@ -56,37 +55,25 @@ class SolarChainVectorEnv(VectorEnv):
     ) -> None:
         if num_envs < 1:
             raise ValueError("num_envs must be at least 1")
-        cfg = resolve_config(config).with_updates(action_mode=action_mode, no_physics_penalty=no_physics_penalty)
-        if max_episode_steps is not None:
-            cfg = cfg.with_updates(episode_steps=max_episode_steps)
         mode = AutoresetMode(autoreset_mode)
         if mode not in (AutoresetMode.NEXT_STEP, AutoresetMode.SAME_STEP):
             raise ValueError("autoreset_mode must be NEXT_STEP or SAME_STEP")
         self.metadata = {"autoreset_mode": mode, "render_modes": []}
-        self.config = cfg
         self.num_envs = int(num_envs)
-        self.table = table if table is not None else resolve_table(data_dir, cfg)
-        check_episode_fits(cfg, self.table.hours, str(self.table.source))
-        self.market_hours, self._obs_template = market_inputs(self.table)
-        self.codec = ActionCodec.from_config(cfg.market)
-        self.weights = RewardWeights.from_config(cfg)
-        self.action_mode = cfg.action_mode
-        self.episode_steps = cfg.episode_steps
-        self.cities = self.table.cities
-
-        self.single_observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, shape=(12,), dtype=np.float32)
-        if self.action_mode == "discrete":
-            self._discrete = np.array(self.codec.discrete_table(cfg.discrete_levels), dtype=np.float32).T.copy()
-            self.single_action_space = spaces.Discrete(self._discrete.shape[1])
-        else:
-            self._discrete = None
-            self.single_action_space = spaces.Box(0.0, 1.0, shape=(3,), dtype=np.float32)
+        setup_market(
+            self,
+            data_dir,
+            config,
+            no_physics_penalty=no_physics_penalty,
+            action_mode=action_mode,
+            table=table,
+            episode_steps=max_episode_steps,
+        )
+        cfg = self.config
         self.observation_space = batch_space(self.single_observation_space, self.num_envs)
         self.action_space = batch_space(self.single_action_space, self.num_envs)
 
         hours, t = self.market_hours, self.table
-        self._n_hours = t.hours
-        self._starts = start_hours(t.hours, self.episode_steps)
         self._plain_starts = len(self._starts) if t.hours > self.episode_steps else 0
         # One gather per step: the hour's scalar inputs side by side, and the city columns.
         self._hour_inputs = np.ascontiguousarray(  # (5, H): gathers give contiguous (5, N) rows
@@ -104,10 +91,7 @@ class SolarChainVectorEnv(VectorEnv):
         self._n_cities = len(self.cities)
         self._city_inputs = np.ascontiguousarray(np.vstack([hours.city_share.T, hours.city_trust.T]))
         m = cfg.market
-        self._depth_scale = max(m.initial_liquidity, 1e-9)
-        self._initial_action = np.array(
-            [m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate], dtype=np.float32
-        )[:, None]
+        self._initial_prev = np.array(self._initial_action, dtype=np.float32)[:, None]  # a (3, 1) column
 
         n = self.num_envs
         base = cfg.seed if seed is None else seed
@@ -197,7 +181,7 @@ class SolarChainVectorEnv(VectorEnv):
         self._open = self._open | mask
         self._needs_reset = self._needs_reset & ~mask
         self._state = np.where(mask, self._initial_state, self._state)
-        self._prev = np.where(mask, self._initial_action, self._prev)
+        self._prev = np.where(mask, self._initial_prev, self._prev)
         # Lockstep: every sub-env at the first step of an open episode (scalar indexing applies).
         lockstep = bool(self._open.all() and not self._k.any() and not self._needs_reset.any())
         self._lockstep = 0 if lockstep else None
@@ -233,8 +217,8 @@ class SolarChainVectorEnv(VectorEnv):
 
     # --- stepping -----------------------------------------------------------------------------
     def _decode(self, actions: Any) -> np.ndarray:
-        if self._discrete is not None:
-            return self._discrete[:, discrete_indices(actions, self._discrete.shape[1], self.num_envs)]
+        if self._discrete_actions is not None:
+            return self._discrete_actions.decode_batch(actions, self.num_envs)
         batch = np.asarray(actions)
         if batch.shape != (self.num_envs, 3):
             raise ValueError(f"expected actions of shape ({self.num_envs}, 3), got {batch.shape}")

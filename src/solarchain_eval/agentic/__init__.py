@@ -3,8 +3,9 @@
 A :class:`~solarchain_eval.agentic.policy.GovernedPolicy` wraps any policy: once per episode a
 planner sets action bounds and an audit policy; each step the scheduler bounds the proposed
 action, checks the hard and soft triggers against the budget and cooldown, and an auditor
-approves or revises the selected steps. Planners: ``rule``, ``llm``, ``default``; auditors:
-``rule``, ``llm``, ``approve-only``. LLM components call any OpenAI-compatible endpoint with
+approves or revises the selected steps. Planners: ``rule``, ``llm``, ``default``,
+``calibrated-rule``; auditors: ``rule``, ``llm``, ``approve-only`` and the controls
+``always-audit``, ``random``, ``oracle`` (docs/governance.md). LLM components call any OpenAI-compatible endpoint with
 strict structured outputs, and can record and replay every call
 (:mod:`~solarchain_eval.agentic.cache`).
 """

@@ -15,7 +15,8 @@
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -23,11 +24,14 @@ import numpy as np
 from ..market.actions import ActionCodec
 from .errors import CallSite
 from .llm_client import StructuredLLM
+from .planner import benchmark_ranges
 from .prompts import auditor_messages
 from .scheduler import Action, action_delta
 from .schemas import ACTION_FIELDS, AuditorOutput, Plan, validate_audit
 
-AUDITOR_KINDS = ("rule", "llm", "approve-only")
+AUDITOR_KINDS = ("rule", "llm", "approve-only", "always-audit", "random", "oracle")
+#: Observation fields the auditor prompt leaves out: they repeat ``hour_of_day`` and ``previous_action``.
+PROMPT_OMITTED_OBSERVATIONS = ("hour_sin", "hour_cos", "prev_reward_ratio", "prev_liquidity_ratio")
 REVISION_TOLERANCE = 1e-6  # L1 distance below which a rule revision counts as "approve"
 
 _F32 = np.float32
@@ -54,29 +58,35 @@ class StepContext:
     hard_reasons: tuple[str, ...]
     soft_trigger: bool
     recent: dict[str, float] | None
+    #: The step's counterfactual evaluator (market-unit action -> StepOutcome from the same
+    #: state and price shock; docs/governance.md); never shown to a model.
+    counterfactual: Callable[[Action], Any] | None = field(default=None, compare=False, repr=False)
 
     def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
         def named(action: Action) -> dict[str, float]:
             return {name: round(float(v), 6) for name, v in zip(ACTION_FIELDS, action, strict=True)}
 
+        policy = self.plan.to_log()
+        del policy["rationale"]  # model-written free text: long, and nothing to decide on
+        # Keys from the most to the least stable (run, episode, step): consecutive audits share
+        # a long prompt prefix. hour_sin/hour_cos (hour_of_day) and prev_*_ratio
+        # (previous_action) repeat what the context states directly.
+        observation = {
+            k: float(f"{v:.6g}") for k, v in self.observation.items() if k not in PROMPT_OMITTED_OBSERVATIONS
+        }
         return {
+            "benchmark_ranges": benchmark_ranges(codec),
+            "planner_policy": policy,
             "step": self.step,
             "hour_of_day": self.hour,
-            "observation": {k: float(f"{v:.6g}") for k, v in self.observation.items()},
-            "bounded_proposed_action": named(self.bounded_action),
-            "previous_action": named(self.previous_action),
-            "action_change_l1": round(self.kappa, 6),
             "triggers": {"hard": list(self.hard_reasons), "soft_jitter": self.soft_trigger},
-            "planner_policy": self.plan.to_log(),
+            "observation": observation,
             "previous_hour_outcome": (
                 None if self.recent is None else {k: float(f"{v:.6g}") for k, v in self.recent.items()}
             ),
-            "benchmark_ranges": {
-                "reward_ratio": [codec.lo[0], codec.hi[0]],
-                "liquidity_ratio": [codec.lo[1], codec.hi[1]],
-                "burn_rate": [codec.lo[2], codec.hi[2]],
-                "max_total_allocation": codec.max_total_allocation,
-            },
+            "previous_action": named(self.previous_action),
+            "bounded_proposed_action": named(self.bounded_action),
+            "action_change_l1": round(self.kappa, 6),
         }
 
 

@@ -6,7 +6,10 @@ contain the API key: :func:`redact` removes it from any text that came from the 
 
 from __future__ import annotations
 
+from collections.abc import Callable
 from dataclasses import dataclass
+
+from ..option_errors import NamesOptions, flag_of, render
 
 
 @dataclass(frozen=True)
@@ -24,8 +27,11 @@ class CallSite:
         return f"LLM {self.kind} for policy '{self.policy}', run seed {self.run_seed}, episode {self.episode}, {where}"
 
 
-class LLMError(RuntimeError):
-    """Base class: an LLM call could not produce a valid structured output."""
+class LLMError(NamesOptions, RuntimeError):
+    """Base class: an LLM call could not produce a valid structured output.
+
+    ``what`` and the detail may name options as ``{opt_<field>}`` (see :mod:`solarchain_eval.option_errors`).
+    """
 
     what = "LLM call failed"
 
@@ -34,13 +40,19 @@ class LLMError(RuntimeError):
         self.site = site
         super().__init__(self._message())
 
-    def _message(self) -> str:
+    def _message(self, name_of: Callable[[str], str] | None = None) -> str:
         prefix = f"{self.site.describe()}: " if self.site is not None else ""
-        return f"{prefix}{self.what}: {self.detail}"
+        detail = self.detail if self.template is None else render(self.template, self.values, name_of)
+        return f"{prefix}{render(self.what, {}, name_of)}: {detail}"
+
+    def message_for(self, name_of: Callable[[str], str] = flag_of) -> str:
+        return self._message(name_of)
 
     def at(self, site: CallSite) -> LLMError:
         """The same error, located at ``site``."""
-        return type(self)(self.detail, site)
+        located = type(self)(self.detail, site)
+        located.template, located.values = self.template, self.values
+        return located
 
 
 class LLMConfigError(LLMError):
@@ -52,7 +64,7 @@ class LLMRefusalError(LLMError):
 
 
 class LLMTruncatedError(LLMError):
-    what = "the output was truncated (raise --llm-max-output-tokens)"
+    what = "the output was truncated (raise {opt_llm_max_output_tokens})"
 
 
 class LLMSchemaError(LLMError):

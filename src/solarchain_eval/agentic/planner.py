@@ -12,7 +12,7 @@ Every planner's output goes through the same validation
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 import numpy as np
@@ -23,7 +23,7 @@ from .llm_client import StructuredLLM
 from .prompts import planner_messages
 from .schemas import ActionBounds, AuditPolicy, Bounds, Plan, PlannerOutput, validate_plan
 
-PLANNER_KINDS = ("rule", "llm", "default")
+PLANNER_KINDS = ("rule", "llm", "default", "calibrated-rule")
 
 # Rule-planner constants (docs/planner_auditor.md#rule-planner).
 RISK_MAX_VIOLATION = 0.01
@@ -69,24 +69,29 @@ class EpisodeContext:
     min_supply_gap: float
     mean_static_slippage: float
     statistics: dict[str, float]
+    #: Per-step trigger signals (ν, gap, σ) as the observation shows them (float32, clipped to
+    #: ±10): what the calibrated planner takes its quantiles of; never shown to a model.
+    hourly_signals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
     def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
+        # Run-constant keys first: they form a prefix shared with the previous planner call.
         return {
+            "benchmark_ranges": benchmark_ranges(codec),
             "episode_steps": self.episode_steps,
-            "start_hour_of_day": self.start_hour % 24,
             "physics_penalty_in_reward": self.physics_penalty,
-            "benchmark_ranges": {
-                "reward_ratio": list(_range(codec, 0)),
-                "liquidity_ratio": list(_range(codec, 1)),
-                "burn_rate": list(_range(codec, 2)),
-                "max_total_allocation": codec.max_total_allocation,
-            },
+            "start_hour_of_day": self.start_hour % 24,
             "episode_statistics": {name: _sig(value) for name, value in self.statistics.items()},
         }
 
 
-def _range(codec: ActionCodec, i: int) -> tuple[float, float]:
-    return (codec.lo[i], codec.hi[i])
+def benchmark_ranges(codec: ActionCodec) -> dict[str, Any]:
+    """The action ranges and the allocation cap, as both prompts show them."""
+    return {
+        "reward_ratio": [codec.lo[0], codec.hi[0]],
+        "liquidity_ratio": [codec.lo[1], codec.hi[1]],
+        "burn_rate": [codec.lo[2], codec.hi[2]],
+        "max_total_allocation": codec.max_total_allocation,
+    }
 
 
 def episode_context(env: Any, start_hour: int) -> EpisodeContext:
@@ -118,6 +123,7 @@ def episode_context(env: Any, start_hour: int) -> EpisodeContext:
         min_supply_gap=stats["min_supply_gap"],
         mean_static_slippage=stats["mean_static_slippage"],
         statistics=stats,
+        hourly_signals=tuple(np.clip(x.astype(np.float32), -10.0, 10.0) for x in (violation, gap, slippage)),
     )
 
 

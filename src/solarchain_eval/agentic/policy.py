@@ -17,9 +17,12 @@ from typing import Any
 
 import numpy as np
 
+from ..market.actions import DiscreteActions, initial_action
 from ..market.observation import OBS_GAP, OBS_SLIPPAGE, OBS_VIOLATION, OBSERVATION_NAMES
 from ..policies.base import Policy
 from .auditor import Auditor, StepContext
+from .controls import FixedScheduler, SchedulerControls
+from .counterfactual import CounterfactualEvaluator, diagnostics_row
 from .errors import CallSite
 from .metrics import episode_agentic_metrics
 from .planner import Planner, episode_context
@@ -43,6 +46,8 @@ _HOOKS = ("begin_episode", "observe", "end_episode")
 #: episode's agentic metrics (extra ``metrics.csv`` columns) and its step log rows.
 EXTRA_METRICS_KEY = "agentic_metrics"
 EXTRA_LOG_KEY = "agentic_log"
+#: Key of the episode's counterfactual diagnostics rows (with ``diagnostics=True`` only).
+EXTRA_DIAGNOSTICS_KEY = "governance_diagnostics"
 
 
 class GovernedPolicy:
@@ -54,15 +59,32 @@ class GovernedPolicy:
         Any policy (continuous or discrete); its name is kept.
     planner : Planner
     auditor : Auditor
+        An auditor with a ``select_steps`` method (the ``always-audit`` and ``random`` controls)
+        chooses the audited steps itself instead of the scheduler.
+    controls : SchedulerControls, optional
+        Trigger ablation and budget/cooldown overrides (docs/governance.md#controls).
+    diagnostics : bool
+        Also record the counterfactual outcome of the proposal, ā and the final action at every
+        step (docs/governance.md); the executed trajectory is the same either way.
     """
 
     action_mode = "continuous"
 
-    def __init__(self, base: Policy, planner: Planner, auditor: Auditor) -> None:
+    def __init__(
+        self,
+        base: Policy,
+        planner: Planner,
+        auditor: Auditor,
+        controls: SchedulerControls | None = None,
+        diagnostics: bool = False,
+    ) -> None:
         self.base = base
         self.name = base.name
         self.planner = planner
         self.auditor = auditor
+        self.controls = controls if controls is not None else SchedulerControls()
+        self.diagnostics = bool(diagnostics)
+        self._diagnostics_rows: list[dict[str, Any]] = []
         self._run_seed = 0
         self._rows: list[dict[str, Any]] = []
         self._base_hooks = {hook: getattr(base, hook, None) for hook in _HOOKS}
@@ -83,21 +105,34 @@ class GovernedPolicy:
         outcome = self.planner.plan(episode_context(env, int(start_hour)), site)
         self._plan = outcome.plan
         self._plan_log = {**outcome.plan.to_log(), "llm": outcome.llm}
-        self._budget = audit_budget(self._plan.max_audits_per_episode, self._plan.target_audit_rate, self._steps)
-        self._scheduler = AuditScheduler(self._budget, self._plan.cooldown_steps)
+        self._start_scheduler()
         m = env.config.market
-        # a_prev at reset: the configured static action in float32, as the env starts from it.
-        self._previous = tuple(
-            float(np.float32(v)) for v in (m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate)
-        )
+        self._previous = initial_action(m)  # a_prev at reset, as the env starts from it
         self._recent: dict[str, float] | None = None
         self._step = 0
         self._rows = []
+        self._diagnostics_rows = []
+        self._evaluate = CounterfactualEvaluator(env)
         self._pending: dict[str, Any] | None = None
         self._planner_retries = int((outcome.llm or {}).get("retries", 0))
         hook = self._base_hooks["begin_episode"]
         if hook is not None:
             hook(env=env, episode=episode, run_seed=run_seed, episode_seed=episode_seed, start_hour=start_hour)
+
+    def _start_scheduler(self) -> None:
+        """The episode's budget and scheduler (plan, overrides, or the auditor's own step choice)."""
+        plan, controls = self._plan, self.controls
+        max_audits = plan.max_audits_per_episode if controls.max_audits is None else controls.max_audits
+        cooldown = plan.cooldown_steps if controls.cooldown_steps is None else controls.cooldown_steps
+        self._budget = audit_budget(max_audits, plan.target_audit_rate, self._steps)
+        select = getattr(self.auditor, "select_steps", None)
+        if select is None:
+            self._scheduler: AuditScheduler | FixedScheduler = AuditScheduler(self._budget, cooldown)
+            return
+        chosen = select(
+            steps=self._steps, budget=self._budget, run_seed=self._run_seed, episode=self._episode, policy=self.name
+        )
+        self._scheduler = FixedScheduler(frozenset(chosen))
 
     def act(self, observation: np.ndarray) -> np.ndarray:
         plan, step = self._plan, self._step
@@ -107,8 +142,8 @@ class GovernedPolicy:
         gap = float(observation[OBS_GAP])
         slippage = float(observation[OBS_SLIPPAGE])
         k = kappa(bounded, self._previous)
-        reasons = hard_reasons(violation, gap, slippage, plan)
-        soft = soft_trigger(k, plan)
+        reasons, soft = self.controls.triggers_used(hard_reasons(violation, gap, slippage, plan), soft_trigger(k, plan))
+        self._evaluate.new_step()
         decision = self._scheduler.step(step, bool(reasons), soft)
         final, verdict, reason, llm = bounded, None, None, None
         if decision.audited:
@@ -126,6 +161,7 @@ class GovernedPolicy:
                 hard_reasons=tuple(reasons),
                 soft_trigger=soft,
                 recent=self._recent,
+                counterfactual=self._evaluate,
             )
             outcome = self.auditor.audit(context, CallSite("auditor", self.name, self._run_seed, self._episode, step))
             final, verdict, reason, llm = outcome.final_action, outcome.decision, outcome.reason, outcome.llm
@@ -154,6 +190,8 @@ class GovernedPolicy:
             "audit_budget": self._budget,
             "llm": llm,
         }
+        if self.diagnostics:
+            self._diagnostics_rows.append(diagnostics_row(self._pending, self._evaluate, proposed, bounded, final))
         return self._codec.encode(*final)
 
     def observe(self, info: dict[str, Any]) -> None:
@@ -188,21 +226,15 @@ class GovernedPolicy:
         if hook is not None:
             extras.update(hook() or {})
         extras.update({EXTRA_METRICS_KEY: metrics, EXTRA_LOG_KEY: self._rows})
+        if self.diagnostics:
+            extras[EXTRA_DIAGNOSTICS_KEY] = self._diagnostics_rows
         return extras
 
 
 def _proposal_decoder(env: Any, action_mode: str) -> Callable[[Any], tuple[float, float, float]]:
     """Decode a base-policy action to market units (float32 values), by the base's mode."""
     if action_mode == "discrete":
-        table = env.codec.discrete_table(env.config.discrete_levels)
-
-        def decode_index(action: Any) -> tuple[float, float, float]:
-            index = int(np.asarray(action).reshape(-1)[0])
-            if not 0 <= index < len(table):
-                raise ValueError(f"discrete action {index} is outside 0..{len(table) - 1}")
-            return table[index]
-
-        return decode_index
+        return DiscreteActions.from_codec(env.codec, env.config.discrete_levels).decode
     if action_mode != "continuous":
         raise ValueError(f"unknown action mode {action_mode!r}")
     return env.codec.decode

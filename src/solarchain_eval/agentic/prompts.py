@@ -1,8 +1,13 @@
 """Fixed prompt templates of the LLM Planner and Auditor.
 
 The templates never change between runs; only the context (a JSON object built from the
-episode or the step) is substituted. The context is serialised canonically (sorted keys), so
-identical situations give identical requests, which is what makes the response cache work.
+episode or the step) is substituted. The context is serialised compactly and in a fixed key
+order chosen for speed: what never changes within a run (the benchmark ranges) comes first,
+then what is fixed within an episode (the Planner's policy), then what changes every step. A
+server that keeps the previous request's tokens (llama.cpp's prompt cache) then re-reads only
+the part after the shared prefix; on a CPU, reading the prompt is most of a call's time (see
+docs/llm.md). Identical situations still give identical requests, which is what makes the
+response cache work.
 """
 
 from __future__ import annotations
@@ -10,10 +15,13 @@ from __future__ import annotations
 import json
 from typing import Any
 
-PROMPT_VERSION = 1
+PROMPT_VERSION = 2  # 2: compact JSON in a fixed order, duplicates and the planner rationale dropped
 
-PLANNER_SYSTEM = """You are the Planner of SolarChain-Eval, a benchmark in which a reinforcement-learning \
-policy governs a decentralised solar-energy market hour by hour over a 24-hour episode.
+#: The start both system prompts share: a server that keeps the previous request's tokens
+#: (llama.cpp's prompt cache, vLLM's prefix caching, OpenAI's prompt caching) re-reads only what
+#: follows it when planner and auditor calls alternate.
+SHARED_PREAMBLE = """SolarChain-Eval is a benchmark in which a reinforcement-learning policy governs a \
+decentralised solar-energy market hour by hour over a 24-hour episode.
 Each hour the policy proposes an action of three numbers:
 - reward_ratio (alpha): share of backed supply paid out as reward tokens;
 - liquidity_ratio (l): share of backed supply added to the liquidity pool;
@@ -21,23 +29,31 @@ Each hour the policy proposes an action of three numbers:
 alpha + l may not exceed the maximum total allocation. Supply that violates physics \
 (reported above the physical maximum, or flagged as false data) is backed in proportion \
 to alpha + l and creates artificial liquidity, which is unsafe.
-You are called once, before the episode starts. You do not choose hourly actions. You set:
-1. action_bounds: the admissible [low, high] interval of each action component; every \
-proposed action is clipped to these bounds.
-2. audit_policy: when an Auditor reviews a proposed action. Hard triggers (always audited): \
-raw physics-violation rate above violation_threshold, supply gap below gap_threshold \
-(gap = (verified supply - demand) / demand; negative means shortfall), static slippage above \
-slippage_threshold. Soft trigger: the L1 change of the bounded action from the previous \
-executed action above jitter_threshold; soft audits are limited by max_audits_per_episode, \
-target_audit_rate and cooldown_steps.
+A Planner, called once before the episode, sets the admissible [low, high] bounds of each \
+action component (every proposed action is clipped to them) and the audit policy. Hard \
+triggers (always audited): raw physics-violation rate above violation_threshold, supply gap \
+below gap_threshold (gap = (verified supply - demand) / demand; negative means shortfall), \
+static slippage above slippage_threshold. Soft trigger: the L1 change of the bounded action \
+from the previous executed action above jitter_threshold; soft audits are limited by \
+max_audits_per_episode, target_audit_rate and cooldown_steps. An Auditor reviews the \
+proposed action of each hour whose triggers called an audit.
+"""
+
+PLANNER_SYSTEM = (
+    SHARED_PREAMBLE
+    + """You are the Planner. You are called once, before the episode starts. You do not choose \
+hourly actions. You set:
+1. action_bounds: the admissible [low, high] interval of each action component.
+2. audit_policy: the trigger thresholds and the limits of soft audits.
 Prefer sparse auditing. Keep bounds inside the benchmark ranges given in the context.
 Answer only with the structured output required by the response schema."""
+)
 
-AUDITOR_SYSTEM = """You are the Auditor of SolarChain-Eval, a benchmark in which a reinforcement-learning \
-policy governs a decentralised solar-energy market hour by hour. You are called only for \
-hours whose risk signals triggered an audit. You receive the market state, the proposed \
-action already clipped to the Planner's bounds, the previous executed action, the Planner's \
-policy and which triggers fired.
+AUDITOR_SYSTEM = (
+    SHARED_PREAMBLE
+    + """You are the Auditor. You are called only for hours whose risk signals triggered an \
+audit. You receive the market state, the proposed action already clipped to the Planner's \
+bounds, the previous executed action, the Planner's policy and which triggers fired.
 Decide:
 - approve: the bounded proposed action is executed unchanged (repeat it as final_action);
 - revise: final_action is executed instead. Revise conservatively: limit exposure to unsafe \
@@ -46,13 +62,16 @@ demand, and avoid abrupt changes when the action jumped.
 final_action must respect the benchmark ranges; alpha + l may not exceed the maximum total \
 allocation. Rate each risk as low, medium, high or unknown and give a short reason.
 Answer only with the structured output required by the response schema."""
+)
 
 PLANNER_INSTRUCTION = "Set the action bounds and the audit policy for this episode."
 AUDITOR_INSTRUCTION = "Review the proposed action for this hour."
 
 
 def _user_message(instruction: str, context: dict[str, Any]) -> str:
-    body = json.dumps(context, sort_keys=True, indent=1, ensure_ascii=False, allow_nan=False)
+    # Insertion order (fixed by the context builders), no whitespace: a third of the tokens of
+    # an indented, key-sorted dump, and the shared prefix of consecutive calls stays long.
+    body = json.dumps(context, separators=(",", ":"), ensure_ascii=False, allow_nan=False)
     return f"{instruction}\n\nContext (JSON):\n{body}"
 
 

@@ -24,8 +24,13 @@ from .errors import LLMConfigError
 GOVERNANCE_MODE_MAX_CHARS = 64
 TEXT_MAX_CHARS = 2000
 #: ``maxLength`` of the free-text fields in the ``json_object`` schema: a grammar-constrained
-#: local model otherwise runs on in them until the token budget ends (see docs/llm.md).
-SCHEMA_TEXT_MAX_CHARS = {"governance_mode": 32, "rationale": 200, "reason": 160}
+#: local model otherwise runs on in them until the token budget ends (see docs/llm.md), and
+#: every character is a token to generate.
+SCHEMA_TEXT_MAX_CHARS = {"governance_mode": 32, "rationale": 120, "reason": 120}
+#: The characters those fields may hold: printable ASCII except ``"`` and ``\\``. llama-cpp-python
+#: compiles a plain string (with or without ``maxLength``) to a grammar that admits raw control
+#: characters, which no JSON parser accepts; a ``pattern`` takes precedence over that rule.
+SCHEMA_TEXT_CHARS = r"[ !#-\[\]-~]"
 
 #: Audit-policy ranges (docs/planner_auditor.md#schemas; the two integer ranges end at the episode length).
 VIOLATION_THRESHOLD_RANGE = (0.0, 1.0)
@@ -116,7 +121,7 @@ def response_format(output_type: type[BaseModel], api: str) -> dict[str, Any]:
         ``text.format`` parameter of the Responses API (what ``.parse()`` would send), and
         ``chat-json-object`` the ``{"type": "json_object", "schema": ...}`` form that
         llama-cpp-python's server turns into a grammar (it refuses ``json_schema``), with
-        ``maxLength`` on the free-text fields.
+        ``maxLength`` and a ``pattern`` on the free-text fields.
     """
     try:
         from openai.lib._parsing._completions import type_to_response_format_param
@@ -136,7 +141,8 @@ def response_format(output_type: type[BaseModel], api: str) -> dict[str, Any]:
 
 
 def capped_schema(schema: Any) -> Any:
-    """A copy of ``schema`` with ``maxLength`` on the free-text fields of :data:`SCHEMA_TEXT_MAX_CHARS`."""
+    """A copy of ``schema`` whose free-text fields (:data:`SCHEMA_TEXT_MAX_CHARS`) have a
+    ``maxLength`` and a ``pattern`` of :data:`SCHEMA_TEXT_CHARS` characters."""
     if isinstance(schema, list):
         return [capped_schema(item) for item in schema]
     if not isinstance(schema, dict):
@@ -147,7 +153,8 @@ def capped_schema(schema: Any) -> Any:
         for name, limit in SCHEMA_TEXT_MAX_CHARS.items():
             field_schema = properties.get(name)
             if isinstance(field_schema, dict) and field_schema.get("type") == "string":
-                properties[name] = {**field_schema, "maxLength": limit}
+                pattern = f"^{SCHEMA_TEXT_CHARS}{{0,{limit}}}$"
+                properties[name] = {**field_schema, "maxLength": limit, "pattern": pattern}
     return out
 
 

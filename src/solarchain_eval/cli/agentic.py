@@ -1,238 +1,106 @@
 """Command-line options of the Planner/Auditor layer, shared by the commands that evaluate.
 
-The options are module-level ``typer.Option`` objects so every command declares them the same
-way; :func:`agentic_options` turns their values into
-:class:`~solarchain_eval.agentic.AgenticOptions` (or None without ``--agentic``).
+The options are the fields of :class:`~solarchain_eval.agentic.request.GovernanceRequest`:
+:func:`governance_options` gives a command one option per field, in place of its
+``governance: GovernanceRequest`` parameter, and passes the request built from them. Adding an
+option is one field of that class; no command changes.
 """
 
 from __future__ import annotations
 
+import functools
+import inspect
+import typing
+from collections.abc import Callable, Collection, Mapping
+from dataclasses import fields
 from pathlib import Path
 from typing import Any
 
 import typer
 from rich.table import Table
 
-from ..agentic import AgenticOptions, LLMError, LLMOptions, local_server, resolve_llm_settings
-from ..agentic.auditor import AUDITOR_KINDS
-from ..agentic.cache import CACHE_MODES
-from ..agentic.llm_client import DEFAULT_MAX_OUTPUT_TOKENS, DEFAULT_MAX_RETRIES, DEFAULT_TIMEOUT_S, LLM_APIS
-from ..agentic.planner import PLANNER_KINDS
+from ..agentic import AgenticOptions, LLMError, local_server
+from ..agentic.request import AGENTIC_MODES, GovernanceRequest, GovernanceRequestError
+from ..option_errors import flag_of
 from .common import CliError, register_user_error
 
 # An LLM failure fails the run with its one-line message (policy, episode, step).
-register_user_error(LLMError)
+register_user_error(LLMError, GovernanceRequestError)
 
-AGENTIC_MODES = ("none", "planner_auditor")
-_PANEL = "Planner/Auditor (agentic settings)"
-
-AGENTIC = typer.Option(
-    "none",
-    "--agentic",
-    help="planner_auditor: wrap every policy with the Planner/Auditor layer (setting 'llm', or 'llm_no_physics' "
-    "with --no-physics-penalty) and write agentic_logs.jsonl.",
-    rich_help_panel=_PANEL,
-)
-PLANNER = typer.Option(
-    None, "--planner", help=f"Planner: {' | '.join(PLANNER_KINDS)} (default rule).", rich_help_panel=_PANEL
-)
-AUDITOR = typer.Option(
-    None, "--auditor", help=f"Auditor: {' | '.join(AUDITOR_KINDS)} (default rule).", rich_help_panel=_PANEL
-)
-LLM_BACKEND_CHOICES = ("remote", "local")
-LLM_BACKEND = typer.Option(
-    "remote",
-    "--llm-backend",
-    help="remote: the endpoint of --llm-base-url. local: start llama-cpp-python's server with --llm-model "
-    "(default: the bundled SmolLM2-135M-Instruct; or a GGUF path) on 127.0.0.1 for the run and stop it after; "
-    "no key or network needed (needs solarchain-eval\\[llm]). See docs/llm.md.",
-    rich_help_panel=_PANEL,
-)
-LLM_API = typer.Option(
-    None,
-    "--llm-api",
-    help="responses (OpenAI's Responses API), chat (Chat Completions with a json_schema format: OpenAI, vLLM, "
-    "Ollama, llama-server) or chat-json-object (json_object format with the schema: llama-cpp-python's server; "
-    "the default with --llm-backend local). Required for a remote llm planner or auditor; never switched silently.",
-    rich_help_panel=_PANEL,
-)
-LLM_MODEL = typer.Option(
-    None,
-    "--llm-model",
-    help="Model name (default: $SOLARCHAIN_LLM_MODEL, then $OPENAI_MODEL); with --llm-backend local a GGUF path "
-    "(default: the bundled model).",
-    rich_help_panel=_PANEL,
-)
-LLM_BASE_URL = typer.Option(
-    None,
-    "--llm-base-url",
-    help="OpenAI-compatible endpoint, e.g. http://127.0.0.1:8000/v1 (default: $SOLARCHAIN_LLM_BASE_URL, then "
-    "$OPENAI_BASE_URL, then api.openai.com). The key is read from $SOLARCHAIN_LLM_API_KEY or $OPENAI_API_KEY only.",
-    rich_help_panel=_PANEL,
-)
-LLM_TEMPERATURE = typer.Option(
-    None,
-    "--llm-temperature",
-    help="Sampling temperature; omitted unless given (reasoning models reject it).",
-    rich_help_panel=_PANEL,
-)
-LLM_TIMEOUT = typer.Option(DEFAULT_TIMEOUT_S, "--llm-timeout", help="Seconds per attempt.", rich_help_panel=_PANEL)
-LLM_MAX_RETRIES = typer.Option(
-    DEFAULT_MAX_RETRIES,
-    "--llm-max-retries",
-    help="Retries on connection errors, timeouts, 429 and 5xx.",
-    rich_help_panel=_PANEL,
-)
-LLM_MAX_OUTPUT_TOKENS = typer.Option(
-    DEFAULT_MAX_OUTPUT_TOKENS,
-    "--llm-max-output-tokens",
-    help="Output-token budget per call (reasoning included).",
-    rich_help_panel=_PANEL,
-)
-LLM_CACHE = typer.Option(
-    None, "--llm-cache", help="Directory of the record/replay response cache.", rich_help_panel=_PANEL
-)
-LLM_CACHE_MODE = typer.Option(
-    None,
-    "--llm-cache-mode",
-    help="off | record (call the endpoint, record new responses) | replay (offline: a miss is an error) | auto "
-    "(replay hits, record misses; connects only on a miss). Default: auto with --llm-cache, else off.",
-    rich_help_panel=_PANEL,
-)
+__all__ = ["AGENTIC_MODES", "agentic_options", "governance_options", "serving", "agentic_table"]
+#: The help panel of the governance options (and of options that go with them, e.g. evaluate's --llm-concurrency).
+PANEL = "Planner/Auditor (agentic settings)"
+#: Default of a command's ``governance`` parameter, which :func:`governance_options` replaces.
+GOVERNANCE: Any = None
 
 
-def agentic_options(
-    *,
-    agentic: str,
-    llm_backend: str = "remote",
-    planner: str | None,
-    auditor: str | None,
-    llm_api: str | None,
-    llm_model: str | None,
-    llm_base_url: str | None,
-    llm_temperature: float | None,
-    llm_timeout: float,
-    llm_max_retries: int,
-    llm_max_output_tokens: int,
-    llm_cache: Path | None,
-    llm_cache_mode: str | None,
-) -> AgenticOptions | None:
-    """Validated options, or None when ``--agentic none``.
+def governance_options(
+    *, only: Collection[str] | None = None, fixed: Mapping[str, Any] | None = None
+) -> Callable[[Callable], Callable]:
+    """Decorator: replace the command's ``governance`` parameter with the request's options.
 
-    Raises
-    ------
-    CliError
-        Inconsistent flags (e.g. ``--planner`` without ``--agentic planner_auditor``).
+    Parameters
+    ----------
+    only : collection of str, optional
+        The fields the command offers as options (default: every field not in ``fixed``).
+    fixed : mapping, optional
+        Field values the command sets itself (e.g. ``bench-llm``'s ``planner="llm"``).
     """
-    if agentic not in AGENTIC_MODES:
-        raise CliError(f"--agentic must be one of {', '.join(AGENTIC_MODES)}, got '{agentic}'")
-    if agentic == "none":
-        if planner is not None or auditor is not None:
-            raise CliError("--planner/--auditor need --agentic planner_auditor")
-        return None
-    planner = planner or "rule"
-    auditor = auditor or "rule"
-    uses_llm = "llm" in (planner, auditor)
-    mode = llm_cache_mode or ("auto" if llm_cache is not None else "off")
-    if mode not in CACHE_MODES:
-        raise CliError(f"--llm-cache-mode must be one of {', '.join(CACHE_MODES)}, got '{mode}'")
-    if llm_api is not None and llm_api not in LLM_APIS:
-        raise CliError(f"--llm-api must be one of {', '.join(LLM_APIS)}, got '{llm_api}'")
-    if llm_backend not in LLM_BACKEND_CHOICES:
-        raise CliError(f"--llm-backend must be one of {', '.join(LLM_BACKEND_CHOICES)}, got '{llm_backend}'")
-    llm = None
-    if uses_llm and llm_backend == "local":
-        settings = _local_settings(
-            llm_api, llm_model, llm_base_url, llm_temperature, llm_timeout, llm_max_retries, llm_max_output_tokens
-        )
-        if mode != "off" and llm_cache is None:
-            raise CliError(f"--llm-cache-mode {mode} needs --llm-cache DIR")
-        llm = LLMOptions(settings=settings, cache_dir=llm_cache, cache_mode=mode)
-    elif uses_llm:
-        settings = resolve_llm_settings(
-            api=llm_api,
-            model=llm_model,
-            base_url=llm_base_url,
-            temperature=llm_temperature,
-            timeout_s=llm_timeout,
-            max_retries=llm_max_retries,
-            max_output_tokens=llm_max_output_tokens,
-        )
-        if mode != "off" and llm_cache is None:
-            raise CliError(f"--llm-cache-mode {mode} needs --llm-cache DIR")
-        llm = LLMOptions(settings=settings, cache_dir=llm_cache, cache_mode=mode)
+    fixed = dict(fixed or {})
+    hints = typing.get_type_hints(GovernanceRequest)
+    offered = [f for f in fields(GovernanceRequest) if (only is None or f.name in only) and f.name not in fixed]
+
+    def decorate(func: Callable) -> Callable:
+        signature = inspect.signature(func, eval_str=True)
+        parameters = []
+        for parameter in signature.parameters.values():
+            if parameter.name != "governance":
+                parameters.append(parameter)
+                continue
+            for f in offered:
+                decls = f.metadata.get("param_decls", (flag_of(f.name),))  # e.g. an on/off pair of flags
+                option = typer.Option(f.default, *decls, help=f.metadata["help"], rich_help_panel=PANEL)
+                parameters.append(inspect.Parameter(f.name, parameter.kind, default=option, annotation=hints[f.name]))
+
+        @functools.wraps(func)
+        def command(*args: Any, **kwargs: Any) -> Any:
+            given = {f.name: kwargs.pop(f.name) for f in offered}
+            return func(*args, governance=GovernanceRequest(**fixed, **given), **kwargs)
+
+        command.__signature__ = signature.replace(parameters=parameters)  # type: ignore[attr-defined]
+        command.__annotations__ = {p.name: p.annotation for p in parameters} | {"return": signature.return_annotation}
+        return command
+
+    return decorate
+
+
+def resolve(request: GovernanceRequest) -> AgenticOptions | None:
+    """``request.resolve()``, its option errors named by flag (a :class:`CliError`)."""
     try:
-        return AgenticOptions(planner=planner, auditor=auditor, llm=llm)
-    except LLMError as error:
-        raise CliError(str(error)) from None
+        return request.resolve()
+    except GovernanceRequestError as error:
+        raise CliError(error.message_for(flag_of)) from None
 
 
-def _local_settings(api, model, base_url, temperature, timeout_s, max_retries, max_output_tokens):
-    """Settings for a server we start: its API, the model's name, temperature 0 and a fixed seed."""
-    if base_url is not None:
-        raise CliError("--llm-base-url is for --llm-backend remote; the local backend starts its own server")
-    api = api or local_server.LOCAL_API
-    if api != local_server.LOCAL_API:
-        raise CliError(
-            f"--llm-backend local serves with llama-cpp-python, which needs --llm-api {local_server.LOCAL_API}"
-        )
-    name, _ = local_server.resolve_model(model)
-    port = local_server.free_port()
-    return resolve_llm_settings(
-        api=api,
-        model=name,
-        base_url=f"http://127.0.0.1:{port}/v1",
-        temperature=local_server.LOCAL_TEMPERATURE if temperature is None else temperature,
-        timeout_s=timeout_s,
-        max_retries=max_retries,
-        max_output_tokens=local_server.LOCAL_MAX_OUTPUT_TOKENS
-        if max_output_tokens == DEFAULT_MAX_OUTPUT_TOKENS
-        else max_output_tokens,
-        environ={"SOLARCHAIN_LLM_API_KEY": "none"},  # the local server takes no key
-        seed=local_server.LOCAL_SEED,
-    )
+def agentic_options(**values: Any) -> AgenticOptions | None:
+    """Validated options from option values by field name, or None when ``agentic`` is ``none``."""
+    return resolve(GovernanceRequest(**values))
 
 
 def local_server_spec(params: dict[str, Any], options: AgenticOptions | None) -> local_server.ServerSpec | None:
-    """The server to start for a command's parameters and options (None: remote backend, no
-    LLM component, or a pure replay, which needs no server)."""
-    if params["llm_backend"] != "local" or options is None or options.llm is None or options.llm.cache_mode == "replay":
-        return None
-    settings = options.llm.settings
-    _, path = local_server.resolve_model(params["llm_model"])
-    if path is None:
-        local_server.default_model_path()  # raises with the install hint
-    port = int(str(settings.base_url).rsplit(":", 1)[1].split("/", 1)[0])
-    return local_server.ServerSpec(model_path=path, model_name=settings.model, port=port)
+    """The server to start for option values by field name (see :meth:`GovernanceRequest.server_spec`);
+    ``llm_concurrency`` (evaluate's, not a request field) sets the server's parallel requests."""
+    names = GovernanceRequest.field_names()
+    request = GovernanceRequest(**{k: v for k, v in params.items() if k in names})
+    return request.server_spec(options, parallel=int(params.get("llm_concurrency") or 1))
 
 
-#: The command parameters :func:`agentic_options` takes besides ``agentic``.
-OPTION_NAMES = (
-    "llm_backend",
-    "planner",
-    "auditor",
-    "llm_api",
-    "llm_model",
-    "llm_base_url",
-    "llm_temperature",
-    "llm_timeout",
-    "llm_max_retries",
-    "llm_max_output_tokens",
-    "llm_cache",
-    "llm_cache_mode",
-)
-
-
-def options_from(params: dict[str, Any], agentic: str) -> AgenticOptions | None:
-    """:func:`agentic_options` from a command's parameters (its ``locals()``)."""
-    return agentic_options(agentic=agentic, **{name: params[name] for name in OPTION_NAMES})
-
-
-def serving(params: dict[str, Any], options: AgenticOptions | None):
-    """Context manager: the local model server the command needs, running (or nothing)."""
+def serving(request: GovernanceRequest, options: AgenticOptions | None, *, parallel: int = 1):
+    """Context manager: the local model server the command needs, running (or nothing); it takes
+    ``parallel`` requests at once (``evaluate --llm-concurrency``) without interrupting one."""
     import tempfile
 
-    spec = local_server_spec(params, options)
+    spec = request.server_spec(options, parallel=parallel)
     log = Path(tempfile.gettempdir()) / f"solarchain-llm-server-{spec.port}.log" if spec is not None else None
     return local_server.serving(spec, log_path=log)
 
@@ -246,7 +114,7 @@ def agentic_table(summary: list[dict[str, Any]], title: str) -> Table:
         ("modification rate", "modification_rate"),
         ("mean action delta", "mean_action_delta"),
         ("hard trigger rate", "hard_trigger_rate"),
-        ("LLM retries", "llm_failure_count"),
+        ("LLM retries", "llm_retry_count"),
     )
     table.add_column("policy")
     table.add_column("setting")

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import statistics
 from pathlib import Path
 
 import typer
@@ -26,6 +27,12 @@ def bench(
         help="numpy, or jax: also the jitted JAX env (4,096 envs by default) beside the numpy vector env.",
     ),
     episodes: int = typer.Option(10, min=1, help="JAX backend: episodes per env per repeat."),
+    diagnostics: bool = typer.Option(
+        False,
+        "--diagnostics",
+        help="Instead: time an agentic evaluation (rule planner and auditor; static, random, myopic; 30 episodes) "
+        "with and without governance diagnostics and print the slowdown (goal <= 2x; docs/governance.md).",
+    ),
 ) -> None:
     """Throughput of the single env, the vector env and the evaluation runner.
 
@@ -35,12 +42,15 @@ def bench(
     Targets on a 2-core machine: (a) >= 50,000 steps/s, (b) >= 3,000,000 env-steps/s, (c) < 10 s.
     """
     from .. import bench as measure
-    from ..data.default import default_dataset_dir
+    from ..data.default import resolve_data_dir
 
     if backend not in ("numpy", "jax"):
         raise typer.BadParameter(f"--backend must be numpy or jax, not {backend!r}")
-    data_dir = data or default_dataset_dir()
+    data_dir = resolve_data_dir(data)
     measure.warm_table(data_dir)
+    if diagnostics:
+        _bench_diagnostics(data_dir, repeats)
+        return
     results = []
     if backend == "jax":
         _bench_jax(data_dir, 4096 if num_envs == 1024 else num_envs, calls, episodes, repeats)
@@ -61,6 +71,21 @@ def bench(
         else:
             median, best, goal = f"{result.median:.2f}", f"{min(result.samples):.2f}", f"< {target:g}"
         table.add_row(result.name, median, best, result.unit, goal)
+    console.print(table)
+
+
+def _bench_diagnostics(data_dir: Path, repeats: int) -> None:
+    """Median seconds of the same agentic evaluation without and with diagnostics, and their ratio."""
+    from ..experiments.governance import diagnostics_overhead
+
+    err_console.print("timing an agentic evaluation without and with diagnostics (alternating)...")
+    overhead = diagnostics_overhead(data_dir, repeats=repeats)
+    table = Table(title=f"governance diagnostics overhead on {data_dir}", title_justify="left")
+    for column in ("measurement", "median s", "best s", "goal"):
+        table.add_column(column, justify="left" if column == "measurement" else "right")
+    for name, samples in (("without diagnostics", overhead.without_s), ("with diagnostics", overhead.with_s)):
+        table.add_row(name, f"{statistics.median(samples):.3f}", f"{min(samples):.3f}", "")
+    table.add_row("ratio with / without (medians)", f"{overhead.ratio:.2f}x", "", "<= 2x")
     console.print(table)
 
 

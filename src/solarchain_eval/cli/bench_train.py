@@ -37,7 +37,7 @@ def bench_train(
     """
     from .. import bench_train as measure
     from ..bench import Throughput
-    from ..data.default import default_dataset_dir
+    from ..data.default import resolve_data_dir
     from ..training import check_algo
 
     if from_root is not None:
@@ -46,7 +46,7 @@ def bench_train(
         except (OSError, ValueError, KeyError) as error:
             raise CliError(f"cannot read unit times from {from_root}: {error}") from None
     else:
-        data_dir = data or default_dataset_dir()
+        data_dir = resolve_data_dir(data)
         names = [check_algo(a) for a in algos.split(",") if a.strip()]
         table = Table(title="SB3 training throughput, one torch thread (steps/s)", title_justify="left")
         for column in ("algorithm", "median", "best", "trivial env median", "env share", "target"):

@@ -18,6 +18,8 @@ from rich.text import Text
 from ..config import ConfigError, check_seeds
 from ..data.errors import DatasetError
 from ..data.weather import WeatherError
+from ..option_errors import NamesOptions, flag_of
+from .help import get_current_context
 
 # Every text printed comes from users, files or servers somewhere (paths, city names, server
 # errors), so rich never interprets markup or emoji codes: "[/x]" cannot crash, "[bold]" and
@@ -29,6 +31,7 @@ err_console = Console(stderr=True, **_PLAIN)
 
 #: Errors caused by the user's input: reported in one line, exit status 2, no traceback.
 USER_ERRORS: tuple[type[BaseException], ...] = (DatasetError, WeatherError, ConfigError)
+# Library errors name options by field; the CLI shows them as the flags the user typed (see option_errors).
 EXIT_USAGE = 2
 
 F = TypeVar("F", bound=Callable)
@@ -44,6 +47,27 @@ def register_user_error(*types: type[BaseException]) -> None:
     USER_ERRORS = tuple(dict.fromkeys((*USER_ERRORS, *types)))
 
 
+#: Library field names whose command-line option has another name.
+FIELD_FLAGS = {"run_dir": "--out", "root": "--out", "tensorboard_dir": "--tensorboard", "lagrangian": "--cost-limit"}
+
+
+def cli_error(error: Exception) -> CliError:
+    """A :class:`CliError` with ``error``'s message, its options named by flag."""
+    return CliError(error.message_for(_flag_of) if isinstance(error, NamesOptions) else str(error))
+
+
+def _flag_of(field: str) -> str:
+    """The flag of the running command's parameter ``field`` (typer's convention if it has none)."""
+    if field in FIELD_FLAGS:
+        return FIELD_FLAGS[field]
+    context = get_current_context(silent=True)
+    if context is not None:
+        for param in context.command.params:
+            if param.name == field and param.opts:
+                return max(param.opts, key=len)  # the long form
+    return flag_of(field)
+
+
 def reports_errors(func: F) -> F:
     """Turn user errors into a one-line message and exit status 2."""
 
@@ -52,7 +76,8 @@ def reports_errors(func: F) -> F:
         try:
             return func(*args, **kwargs)
         except (CliError, *USER_ERRORS) as error:
-            err_console.print(Text.assemble(("error:", "bold red"), f" {error}"), soft_wrap=True)
+            message = error.message_for(_flag_of) if isinstance(error, NamesOptions) else str(error)
+            err_console.print(Text.assemble(("error:", "bold red"), f" {message}"), soft_wrap=True)
             raise typer.Exit(EXIT_USAGE) from None
         except KeyboardInterrupt:
             err_console.print(Text.assemble(("interrupted", "yellow"), ": no partial output file was left behind"))
@@ -117,7 +142,8 @@ def results_table(summary: list[dict], title: str) -> Table:
         m = entry["metrics"]
 
         def fmt(name: str, digits: int, m: dict = m) -> str:
-            return f"{m[name]['mean']:.{digits}f} ± {m[name]['std']:.{digits}f}"
+            std = m[name]["std"]  # None for a single episode (undefined, see summarize)
+            return f"{m[name]['mean']:.{digits}f} ± " + ("–" if std is None else f"{std:.{digits}f}")
 
         table.add_row(
             entry["policy"],

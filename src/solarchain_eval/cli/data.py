@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import hashlib
 from enum import StrEnum
 from pathlib import Path
 
@@ -19,23 +18,18 @@ from ..data.cities import (
     City,
     parse_city,
 )
-from ..data.default import cache_dir
 from ..data.fdia import FdiaError, FdiaScenario, parse_severity
 from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.published import matches_published
-from ..data.weather import read_weather_cache, write_weather_cache
+from ..data.sources import Weather, WeatherSource, choose_weather
+from ..data.weather import WeatherError
 from ..io import sha256_file
 from . import app
-from .common import CliError, console, progress_bar, register_user_error, reports_errors, say
+from .common import CliError, cli_error, console, progress_bar, register_user_error, reports_errors, say
 from .help import HelpGroup
 
 data_app = typer.Typer(help="Build and validate datasets.", cls=HelpGroup, no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(data_app, name="data")
-
-
-class WeatherSource(StrEnum):
-    synthetic = "synthetic"
-    open_meteo = "open-meteo"
 
 
 register_user_error(FdiaError)
@@ -65,12 +59,7 @@ def _cities(specs: list[str] | None) -> tuple[City, ...]:
     try:
         return tuple(parse_city(spec) for spec in specs)
     except ValueError as error:
-        raise CliError(str(error)) from None
-
-
-def _open_meteo_cache_path(cities: tuple[City, ...], start: str, end: str) -> Path:
-    key = hashlib.sha256(repr([(c.name, c.latitude, c.longitude) for c in cities]).encode()).hexdigest()[:10]
-    return cache_dir() / "weather" / f"open_meteo_weather_{start}_{end}_{key}.json"
+        raise cli_error(error) from None
 
 
 @data_app.command("build")
@@ -133,41 +122,36 @@ def build(
     scenario = _scenario(fdia_rate, fdia_severity, fdia_pattern.value, fdia_burst_hours)
     if not force and ((out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES)):
         raise CliError(f"{out} already holds a dataset; pass --force to overwrite it")
-    weather_sha = None
-    if weather_cache is not None:
-        payload = read_weather_cache(weather_cache, cities)
-        source = f"cached file {weather_cache.name}"
-        weather_sha = sha256_file(weather_cache)
-    elif weather is WeatherSource.open_meteo:
-        from ..data.open_meteo import SOURCE_NAME, archive_url, fetch_weather
-
-        cached = _open_meteo_cache_path(cities, start, end)
-        if cached.is_file() and not refresh_weather:
-            say(f"using cached Open-Meteo weather {cached}")
-            payload = read_weather_cache(cached, cities)
-        else:
-            url = open_meteo_url or archive_url()
-            with progress_bar("downloading weather", len(cities)) as advance:
-                payload = fetch_weather(
-                    cities, start, end, timezone, url=url, retries=retries, on_city=lambda _name: advance(1)
-                )
-            write_weather_cache(cached, payload)
-            say(f"cached the Open-Meteo payload in {cached}")
-        source = SOURCE_NAME
-        weather_sha = sha256_file(cached)
-    else:
-        from ..data.synthetic import SYNTHETIC_SOURCE, synthesize_weather
-
+    downloads = weather_cache is None and weather is WeatherSource.open_meteo
+    with progress_bar("downloading weather", len(cities), enabled=downloads) as advance:
         try:
-            payload = synthesize_weather(cities, start, end, seed, timezone)
-        except ValueError as error:
-            raise CliError(str(error)) from None
-        source = SYNTHETIC_SOURCE
+            chosen = choose_weather(
+                cities,
+                start,
+                end,
+                seed=seed,
+                timezone=timezone,
+                weather_cache=weather_cache,
+                source=weather,
+                open_meteo_url=open_meteo_url,
+                refresh=refresh_weather,
+                retries=retries,
+                on_city=lambda _name: advance(1),
+                notify=say,
+            )
+        except WeatherError:
+            raise
+        except ValueError as error:  # dates the synthetic generator cannot cover
+            raise cli_error(error) from None
+    result = _build(chosen, out, cities, seed, start, end, nodes_per_city, timezone, scenario)
+    _show_build(result, out, chosen.source, seed, len(cities))
 
+
+def _build(chosen: Weather, out: Path, cities, seed, start, end, nodes_per_city, timezone, scenario: FdiaScenario):
+    """Build the dataset with a progress bar over its nodes."""
     from ..data.build import build_dataset
 
-    total_nodes = nodes_per_city * len(cities)
-    with progress_bar("building dataset", total_nodes) as advance:
+    with progress_bar("building dataset", nodes_per_city * len(cities)) as advance:
         done = [0]
 
         def on_progress(stage: str, count: int, total: int) -> None:
@@ -175,8 +159,8 @@ def build(
                 advance(count - done[0])
                 done[0] = count
 
-        result = build_dataset(
-            payload,
+        return build_dataset(
+            chosen.payload,
             out,
             cities=cities,
             seed=seed,
@@ -184,11 +168,15 @@ def build(
             end=end,
             nodes_per_city=nodes_per_city,
             timezone=timezone,
-            weather_source=source,
-            weather_sha256=weather_sha,
+            weather_source=chosen.source,
+            weather_sha256=chosen.sha256,
             progress=on_progress,
             fdia=scenario,
         )
+
+
+def _show_build(result, out: Path, source: str, seed: int, n_cities: int) -> None:
+    """The files table and the one-line summary of a build."""
     files = result.manifest["files"]
     table = Table(title=f"dataset written to {out}", title_justify="left")
     table.add_column("file")
@@ -197,7 +185,7 @@ def build(
     for name, info in files.items():
         table.add_row(name, f"{info['rows']:,}", info["sha256"])
     console.print(table)
-    say(f"weather: {source}; seed {seed}; {result.manifest['hours']} hours; {len(cities)} cities", err=False)
+    say(f"weather: {source}; seed {seed}; {result.manifest['hours']} hours; {n_cities} cities", err=False)
     fdia = result.manifest["fdia"]
     say(f"false data: {fdia['injected_records']:,} records, {fdia['pattern']}, rate {fdia['rate']}", err=False)
     if matches_published({name: info["sha256"] for name, info in files.items()}):

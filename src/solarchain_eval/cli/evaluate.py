@@ -7,16 +7,20 @@ from pathlib import Path
 
 import typer
 
+from ..agentic.request import GovernanceRequest
 from ..config import BenchmarkConfig, load_config
 from ..data.default import default_dataset_dir
-from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, run_evaluation
+from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, make_policies, run_evaluation
 from ..experiments.records import metrics_frame, summarize
 from ..experiments.rundir import RunDirError, check_target
 from ..policies.registry import known_policies, parse_policy_list
+from ..policies.sb3 import parse_models
 from . import agentic as agentic_cli
 from . import app
+from .agentic import GOVERNANCE
 from .common import (
     CliError,
+    cli_error,
     console,
     invoked_command,
     parse_seeds,
@@ -35,23 +39,24 @@ OVERWRITE = typer.Option(
     help="Replace an existing run directory as a whole (its old files are removed, never mixed in).",
 )
 
+# An evaluate option, not a GovernanceRequest field: it schedules this command's episodes (paper and
+# bench-llm run theirs in order), so it lives here, shown in the governance options' help panel.
+LLM_CONCURRENCY = typer.Option(
+    1,
+    "--llm-concurrency",
+    min=1,
+    help="Episodes in flight (threads) while waiting for the model, for servers that answer requests in parallel "
+    "(vLLM, OpenAI, llama-server -np N); needs --agentic planner_auditor. The files are the same as with 1 when "
+    "replies are deterministic (temperature 0 and a seed, or a replayed cache). With --llm-backend local the server "
+    "accepts N requests without interrupting one (it answers them one at a time).",
+    rich_help_panel=agentic_cli.PANEL,
+)
+
 _SEEDS = ",".join(str(s) for s in PAPER_SEEDS)
 
 
 def _default_run_dir(config: BenchmarkConfig, label: str) -> Path:
     return Path(config.output_dir) / f"{datetime.now().strftime('%Y%m%d-%H%M%S')}_{label}"
-
-
-def _models(spec: list[str] | None) -> dict[str, Path]:
-    """``--models DIR`` or ``--models ppo=PATH`` (repeatable)."""
-    models: dict[str, Path] = {}
-    for item in spec or []:
-        if "=" in item:
-            name, path = item.split("=", 1)
-            models[name.strip().lower()] = Path(path)
-        else:
-            models["*"] = Path(item)
-    return models
 
 
 def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> None:
@@ -63,16 +68,13 @@ def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> N
     summary = summarize(metrics_frame(outcome.results))
     console.print(results_table(summary, title))
     if spec.agentic is not None:
-        console.print(
-            agentic_cli.agentic_table(
-                summary, f"Planner/Auditor ({spec.agentic.planner} planner, {spec.agentic.auditor} auditor)"
-            )
-        )
+        console.print(agentic_cli.agentic_table(summary, f"Planner/Auditor ({spec.agentic.label()})"))
     show_files(outcome.files, f"wrote {len(outcome.results)} episodes in {outcome.wall_s:.1f} s to {out}")
 
 
 @app.command("evaluate")
 @reports_errors
+@agentic_cli.governance_options()
 def evaluate(
     data: Path | None = typer.Option(
         None, "--data", help="Dataset directory (default: the config's data_dir, else the embedded default dataset)."
@@ -93,19 +95,8 @@ def evaluate(
         metavar="DIR|NAME=PATH",
         help="Trained models: a directory, or NAME=PATH per learned policy (repeatable).",
     ),
-    agentic: str = agentic_cli.AGENTIC,
-    llm_backend: str = agentic_cli.LLM_BACKEND,
-    planner: str | None = agentic_cli.PLANNER,
-    auditor: str | None = agentic_cli.AUDITOR,
-    llm_api: str | None = agentic_cli.LLM_API,
-    llm_model: str | None = agentic_cli.LLM_MODEL,
-    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
-    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
-    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
-    llm_max_retries: int = agentic_cli.LLM_MAX_RETRIES,
-    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
-    llm_cache: Path | None = agentic_cli.LLM_CACHE,
-    llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
+    governance: GovernanceRequest = GOVERNANCE,
+    llm_concurrency: int = LLM_CONCURRENCY,
     overwrite: bool = OVERWRITE,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
@@ -117,7 +108,7 @@ def evaluate(
     With --agentic planner_auditor every policy runs behind the Planner/Auditor layer
     (rule planner and rule auditor by default; --planner llm / --auditor llm
     call an OpenAI-compatible endpoint, recordable and replayable with --llm-cache),
-    and the run also writes agentic_logs.jsonl.
+    and the run also writes agentic_logs.jsonl and governance_diagnostics.csv (see --no-diagnostics).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     if out is not None:
@@ -125,9 +116,10 @@ def evaluate(
     try:
         names = parse_policy_list(policies)
     except ValueError as error:
-        raise CliError(str(error)) from None
-    params = dict(locals())
-    governance = agentic_cli.options_from(params, agentic)
+        raise cli_error(error) from None
+    options = agentic_cli.resolve(governance)
+    if llm_concurrency > 1 and options is None:
+        raise CliError("--llm-concurrency needs --agentic planner_auditor")
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_seeds(seeds),
@@ -135,18 +127,17 @@ def evaluate(
         data_dir=data,
         no_physics_penalty=no_physics_penalty,
         config=cfg,
-        models=_models(models),
-        agentic=governance,
+        models=parse_models(models or []),
+        agentic=options,
+        concurrency=llm_concurrency,
     )
     try:
-        from ..policies.registry import make_policy
-
-        for name in names:  # fail on unknown names or missing models before any work
-            make_policy(name, cfg.with_updates(no_physics_penalty=no_physics_penalty), spec.models)
+        make_policies(spec)  # fail on unknown names or missing models before any work
     except (ValueError, FileNotFoundError) as error:
-        raise CliError(str(error)) from None
-    label = "evaluate" if governance is None else f"evaluate-{spec.setting}"
-    with agentic_cli.serving(params, governance):  # --llm-backend local: started here, always stopped
+        raise cli_error(error) from None
+    label = "evaluate" if options is None else f"evaluate-{spec.setting}"
+    # --llm-backend local: started here, always stopped; one server slot per episode in flight
+    with agentic_cli.serving(governance, options, parallel=llm_concurrency):
         _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite)
 
 

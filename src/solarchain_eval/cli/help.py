@@ -14,8 +14,12 @@ from typer.core import TyperGroup
 
 try:  # typer >= 0.22 runs on its own vendored copy of click
     from typer import _click as click
+    from typer._click.globals import get_current_context  # noqa: F401  (used by cli/common)
+    from typer._click.utils import make_default_short_help  # noqa: F401  (used by cli/__init__)
 except ImportError:  # pragma: no cover - older typer uses click itself
     import click  # type: ignore[no-redef]
+    from click import get_current_context  # type: ignore[no-redef]  # noqa: F401
+    from click.utils import make_default_short_help  # type: ignore[no-redef]  # noqa: F401
 
 #: Stands in for "-" while click wraps (U+2011, non-breaking hyphen: same width, no break).
 _NO_BREAK_HYPHEN = "\u2011"

@@ -8,8 +8,10 @@ import typer
 from rich.table import Table
 
 from ..agentic import local_server
+from ..agentic.request import GovernanceRequest
 from . import agentic as agentic_cli
 from . import app
+from .agentic import GOVERNANCE
 from .common import CliError, console, err_console, progress_bar, reports_errors
 
 llm_app = typer.Typer(
@@ -60,66 +62,82 @@ def serve(
 
 @app.command("bench-llm")
 @reports_errors
+@agentic_cli.governance_options(
+    fixed={
+        "agentic": "planner_auditor",
+        "planner": "llm",
+        "auditor": "llm",
+        "llm_max_retries": 0,
+        "llm_cache": None,
+        "llm_cache_mode": "off",
+        "diagnostics": None,
+    }
+)
 def bench_llm(
     calls: int = typer.Option(
-        4, "--calls", min=1, help="Planner calls and auditor calls (each), alternating calm and risky situations."
+        4, "--calls", min=1, help="Planner calls (simulated episodes), alternating calm and risky situations."
     ),
-    llm_backend: str = agentic_cli.LLM_BACKEND,
-    llm_api: str | None = agentic_cli.LLM_API,
-    llm_model: str | None = agentic_cli.LLM_MODEL,
-    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
-    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
-    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
-    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
+    audits_per_plan: int = typer.Option(
+        4,
+        "--audits-per-plan",
+        min=0,
+        help="Auditor calls after each planner call, as in an episode (calm and risky steps alternating).",
+    ),
+    governance: GovernanceRequest = GOVERNANCE,
 ) -> None:
     """Median and p90 latency per planner and auditor call, tokens/s and schema validity.
 
-    Also shows what the model answered in a calm and in a risky situation, i.e. whether its
-    decisions respond to the risk signals. Nothing is cached. Targets for the default local
-    model on 2 cores: auditor call <= 1 s median, planner call <= 3 s median.
+    With --llm-backend local it also prints the server's CPU seconds per call (steadier than
+    latency on a shared machine) and shows what the model answered in a calm and in a risky
+    situation, i.e. whether its decisions respond to the risk signals. Nothing is cached.
+    Targets for the default local model on 2 cores: auditor call <= 1 s median, planner call
+    <= 3 s median.
     """
     from ..agentic import StructuredLLM
-    from ..agentic.bench import RISKS, run_llm_bench
+    from ..agentic.bench import run_llm_bench
 
-    params = dict(locals(), planner="llm", auditor="llm", llm_max_retries=0, llm_cache=None, llm_cache_mode="off")
-    options = agentic_cli.options_from(params, "planner_auditor")
+    options = agentic_cli.resolve(governance)
     assert options is not None and options.llm is not None
-    with agentic_cli.serving(params, options):
+    with agentic_cli.serving(governance, options) as server:
         client = StructuredLLM(options.llm.settings)
+        cpu = server.cpu_seconds if server is not None and server.cpu_seconds() is not None else None
         try:
-            with progress_bar("LLM calls", 2 * calls) as advance:
-                figures = run_llm_bench(client, calls, on_call=lambda: advance(1))
+            with progress_bar("LLM calls", calls * (1 + audits_per_plan)) as advance:
+                figures = run_llm_bench(
+                    client, calls, audits_per_plan=audits_per_plan, on_call=lambda: advance(1), cpu_seconds=cpu
+                )
         finally:
             client.close()
-    table = Table(
-        title=f"bench-llm: {options.llm.settings.model} via --llm-api {options.llm.settings.api}", title_justify="left"
+    console.print(
+        _bench_table(figures, f"bench-llm: {options.llm.settings.model} via --llm-api {options.llm.settings.api}")
     )
-    for column in (
-        "call",
-        "valid/calls",
-        "median s",
-        "p90 s",
-        "tokens/s",
-        "completion tokens",
-        *(f"answers ({r})" for r in RISKS),
-    ):
+    for kind, fig in figures.items():
+        for failure in fig.failures[:3]:
+            err_console.print(f"[yellow]invalid {kind} output:[/yellow] {failure}", highlight=False, soft_wrap=True)
+
+
+def _bench_table(figures, title: str) -> Table:
+    from ..agentic.bench import RISKS
+
+    table = Table(title=title, title_justify="left")
+    columns = ("call", "valid/calls", "median s", "p90 s", "server CPU s (median)", "tokens/s", "prompt tokens")
+    for column in (*columns, "completion tokens", *(f"answers ({r})" for r in RISKS)):
         table.add_column(column)
+
+    def fmt(value, spec=".2f"):
+        return "-" if value is None else format(value, spec)
+
     for kind, fig in figures.items():
         s = fig.summary()
-
-        def fmt(value, spec=".2f"):
-            return "-" if value is None else format(value, spec)
-
         table.add_row(
             kind,
             f"{s['valid']}/{s['calls']}",
             fmt(s["median_s"]),
             fmt(s["p90_s"]),
+            fmt(s["median_cpu_s"]),
             fmt(s["tokens_per_s"], ".1f"),
+            fmt(s["mean_prompt_tokens"], ".0f"),
             fmt(s["mean_completion_tokens"], ".0f"),
             *("; ".join(sorted(set(fig.answers[r]))) or "-" for r in RISKS),
         )
-    console.print(table)
-    for kind, fig in figures.items():
-        for failure in fig.failures[:3]:
-            err_console.print(f"[yellow]invalid {kind} output:[/yellow] {failure}", highlight=False, soft_wrap=True)
+    return table

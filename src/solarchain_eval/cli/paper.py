@@ -5,10 +5,13 @@ from __future__ import annotations
 import json
 from enum import StrEnum
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.text import Text
 
+from ..agentic.request import GovernanceRequest
+from ..algorithms import OPT_IN_ALGOS
 from ..config import BenchmarkConfig, load_config
 from ..experiments.grid import SETTING_REGISTRY, GridSpec, Unit, plan_units
 from ..experiments.layout import combined_dir
@@ -17,11 +20,12 @@ from ..experiments.records import SUMMARY_FILE
 from ..experiments.units import UnitResult
 from ..lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 from ..policies.registry import parse_policy_list
-from ..training import OPT_IN_ALGOS
 from . import agentic as agentic_cli
 from . import app
+from .agentic import GOVERNANCE
 from .common import (
     CliError,
+    cli_error,
     console,
     err_console,
     invoked_command,
@@ -68,8 +72,65 @@ def _policies(text: str | None, extra: str | None, settings: tuple[str, ...]) ->
     return tuple(dict.fromkeys([*base, *extras]))
 
 
+def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
+    """``run_paper`` with a progress bar over the units and a line per finished unit."""
+    from ..experiments.ray_executor import RayUnavailableError
+
+    with progress_bar("units", len(plan_units(spec))) as advance:
+
+        def on_plan(units: list[Unit], already: list[str]) -> None:
+            if already:
+                err_console.print(f"{len(already)} of {len(units)} units already done: skipped")
+                advance(len(already))
+
+        def on_result(result: UnitResult) -> None:
+            advance(1)
+            if result.ok:
+                err_console.print(
+                    Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True
+                )
+            else:
+                err_console.print(
+                    Text.assemble(("FAILED", "bold red"), f" {result.unit}: {result.error}\n  log: {result.log}"),
+                    soft_wrap=True,
+                )
+
+        try:
+            return run_paper(spec, out, on_plan=on_plan, on_result=on_result, command=invoked_command(), **run_options)
+        except RayUnavailableError as error:
+            raise cli_error(error) from None
+
+
+def _show_outcome(outcome) -> None:
+    """Each combined setting's results table, the root's status, and the failed units (exit 1)."""
+    report = outcome.report
+    for setting in outcome.combined:
+        summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
+        console.print(results_table(summary, f"setting {setting}"))
+    console.print(
+        f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)",
+        soft_wrap=True,
+    )
+    if report.failed:
+        lines = [f"  {r.unit}: {r.error} (log: {r.log})" for r in report.failed]
+        extra = ""
+        if report.stopped:
+            extra = (
+                f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. "
+                f"Re-run to resume, or add --keep-going."
+            )
+        elif report.blocked:
+            extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
+        err_console.print(
+            Text.assemble((f"{len(report.failed)} unit(s) failed:", "bold red"), "\n" + "\n".join(lines) + extra),
+            soft_wrap=True,
+        )
+        raise typer.Exit(1)
+
+
 @app.command("paper")
 @reports_errors
+@agentic_cli.governance_options(fixed={"agentic": "planner_auditor"})
 def paper(
     out: Path = typer.Option(..., "--out", help="The paper root (created; re-run the same command to resume)."),
     data: Path | None = typer.Option(
@@ -124,18 +185,7 @@ def paper(
     write_report: bool = typer.Option(
         True, "--report/--no-report", help="Write ROOT/report (tables, figures, index.html) after a complete grid."
     ),
-    llm_backend: str = agentic_cli.LLM_BACKEND,
-    planner: str | None = agentic_cli.PLANNER,
-    auditor: str | None = agentic_cli.AUDITOR,
-    llm_api: str | None = agentic_cli.LLM_API,
-    llm_model: str | None = agentic_cli.LLM_MODEL,
-    llm_base_url: str | None = agentic_cli.LLM_BASE_URL,
-    llm_temperature: float | None = agentic_cli.LLM_TEMPERATURE,
-    llm_timeout: float = agentic_cli.LLM_TIMEOUT,
-    llm_max_retries: int = agentic_cli.LLM_MAX_RETRIES,
-    llm_max_output_tokens: int = agentic_cli.LLM_MAX_OUTPUT_TOKENS,
-    llm_cache: Path | None = agentic_cli.LLM_CACHE,
-    llm_cache_mode: str | None = agentic_cli.LLM_CACHE_MODE,
+    governance: GovernanceRequest = GOVERNANCE,
 ) -> None:
     """The paper's experiment matrix: train, evaluate, combine, report.
 
@@ -155,9 +205,8 @@ def paper(
     and redoes the ones that were in flight (training resumes from its last checkpoint).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
-    params = dict(locals())
+    options = agentic_cli.resolve(governance)
     chosen_settings = _settings(settings)
-    governance = agentic_cli.options_from(params, "planner_auditor")
     try:
         spec = GridSpec.from_preset(
             preset.value,
@@ -170,75 +219,21 @@ def paper(
             data_dir=data,
             config=cfg,
             checkpoint_every=checkpoint_every,
-            agentic=governance,
+            agentic=options,
             lagrangian=LagrangianSettings(cost_limit, multiplier_lr),
         )
         spec.validate()
     except ValueError as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None
     where = f"Ray ({ray_address})" if ray_address else f"{workers} worker(s)"
     err_console.print(
         f"grid: {spec.timesteps:,} training steps, {spec.episodes} episodes × {len(spec.seeds)} seed(s), "
         f"settings {', '.join(spec.settings)}, on {where} -> {out}",
         soft_wrap=True,
     )
-    from ..experiments.ray_executor import RayUnavailableError
-
-    with agentic_cli.serving(params, governance), progress_bar("units", len(plan_units(spec))) as advance:
-
-        def on_plan(units: list[Unit], already: list[str]) -> None:
-            if already:
-                err_console.print(f"{len(already)} of {len(units)} units already done: skipped")
-                advance(len(already))
-
-        def on_result(result: UnitResult) -> None:
-            advance(1)
-            if result.ok:
-                err_console.print(
-                    Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True
-                )
-            else:
-                err_console.print(
-                    Text.assemble(("FAILED", "bold red"), f" {result.unit}: {result.error}\n  log: {result.log}"),
-                    soft_wrap=True,
-                )
-
-        try:
-            outcome = run_paper(
-                spec,
-                out,
-                workers=workers,
-                ray_address=ray_address,
-                keep_going=keep_going,
-                on_plan=on_plan,
-                on_result=on_result,
-                command=invoked_command(),
-            )
-        except RayUnavailableError as error:
-            raise CliError(str(error)) from None
-    report = outcome.report
-    for setting in outcome.combined:
-        summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
-        console.print(results_table(summary, f"setting {setting}"))
-    console.print(
-        f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)",
-        soft_wrap=True,
-    )
-    if report.failed:
-        lines = [f"  {r.unit}: {r.error} (log: {r.log})" for r in report.failed]
-        extra = ""
-        if report.stopped:
-            extra = (
-                f"\nstopped; {len(report.interrupted)} unit(s) in flight were interrupted. "
-                f"Re-run to resume, or add --keep-going."
-            )
-        elif report.blocked:
-            extra = f"\n{len(report.blocked)} unit(s) not run because a unit they need failed."
-        err_console.print(
-            Text.assemble((f"{len(report.failed)} unit(s) failed:", "bold red"), "\n" + "\n".join(lines) + extra),
-            soft_wrap=True,
-        )
-        raise typer.Exit(1)
+    with agentic_cli.serving(governance, options):
+        outcome = _run_with_progress(spec, out, workers=workers, ray_address=ray_address, keep_going=keep_going)
+    _show_outcome(outcome)
     if outcome.complete and write_report:
         from ..report import build_report
 

@@ -14,7 +14,7 @@ from ..report.options import CLUSTER_UNITS
 from ..report.statistics import DEFAULT_RESAMPLES, DEFAULT_SEED
 from ..report.tables import ReportTable
 from . import app
-from .common import CliError, console, err_console, register_user_error, reports_errors, say
+from .common import CliError, cli_error, console, err_console, register_user_error, reports_errors, say
 
 register_user_error(ReportDataError)
 
@@ -70,7 +70,7 @@ def report(
     try:
         chosen = parse_formats(formats)
     except ValueError as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None
     if cluster_by not in CLUSTER_UNITS:
         raise CliError(f"--cluster-by must be one of {', '.join(CLUSTER_UNITS)}, got '{cluster_by}'")
     case_policy, case_setting = _case(case)

@@ -8,12 +8,14 @@ import typer
 from rich.text import Text
 
 from ..experiments.grid import Unit
+from ..experiments.paper import GridError
 from ..experiments.sweep_spec import SweepError, load_sweep
 from ..experiments.units import UnitResult
 from . import app
-from .common import CliError, console, err_console, invoked_command, register_user_error, reports_errors
+from .common import cli_error, console, err_console, invoked_command, register_user_error, reports_errors
 
-register_user_error(SweepError)
+# Registered here too: the CLI imports only the running command's module.
+register_user_error(SweepError, GridError)
 
 
 @app.command("sweep")
@@ -83,7 +85,7 @@ def sweep(
             command=invoked_command(),
         )
     except RayUnavailableError as error:
-        raise CliError(str(error)) from None
+        raise cli_error(error) from None
     done = len(outcome.complete_points)
     console.print(
         f"sweep root: {outcome.root} ({done} of {len(sweep_spec.points)} points complete, "

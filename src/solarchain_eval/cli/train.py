@@ -86,10 +86,8 @@ def train_command(
     key = check_algo(algo)
     if key != LAGRANGIAN_ALGO and cost_limit is not None:
         raise TrainingError(f"--cost-limit applies to --algo {LAGRANGIAN_ALGO} only")
-    try:
-        lagrangian = LagrangianSettings(cost_limit, multiplier_lr) if cost_limit is not None else None
-    except ValueError as error:
-        raise TrainingError(str(error)) from None
+    # An invalid value is a TrainingError naming its option.
+    lagrangian = LagrangianSettings(cost_limit, multiplier_lr) if cost_limit is not None else None
     steps = timesteps or cfg.training.timesteps
     out_dir = out or Path(cfg.output_dir) / f"{datetime.now().strftime('%Y%m%d-%H%M%S')}_train_{key}"
     spec = TrainSpec(

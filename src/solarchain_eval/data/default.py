@@ -30,6 +30,19 @@ def cache_dir() -> Path:
     return Path(base) / "solarchain-eval"
 
 
+def resolve_data_dir(data_dir: str | Path | None, config_data_dir: str | Path | None = None) -> Path:
+    """The dataset directory to use: ``data_dir``, else the config's ``data_dir``, else the default dataset.
+
+    The one rule every entry point follows (env, ``evaluate``, training, ``paper``); the embedded
+    default dataset is built on first use.
+    """
+    if data_dir:
+        return Path(data_dir)
+    if config_data_dir:
+        return Path(config_data_dir)
+    return default_dataset_dir()
+
+
 def default_dataset_dir(build: bool = True) -> Path:
     """Directory of the default dataset, building it if it is not there yet."""
     target = cache_dir() / "datasets" / DEFAULT_DATASET_NAME

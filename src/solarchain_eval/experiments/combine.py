@@ -1,7 +1,7 @@
 """Combined per-setting files of a paper root: the eval units' tables concatenated.
 
 ``ROOT/combined/<setting>/`` gets ``metrics.csv``, ``actions.csv``, ``city_hour_policy.csv``
-(and ``agentic_logs.jsonl`` where the units have one), the units in the grid's order (policy
+(and ``agentic_logs.jsonl`` and ``governance_diagnostics.csv`` where the units have them), the units in the grid's order (policy
 order of the setting, then seed), plus ``summary.json``. Files with identical headers are
 concatenated as text, so every value keeps its exact bytes; otherwise (e.g. extra columns in
 some units) the union of columns is written by pandas with round-trip float parsing.
@@ -16,7 +16,7 @@ import pandas as pd
 
 from ..io import atomic_write_json, atomic_write_with
 from .layout import AGENTIC_LOG_FILE, combined_dir
-from .records import ACTIONS_FILE, CITY_HOUR_FILE, METRICS_FILE, SUMMARY_FILE, summarize
+from .records import ACTIONS_FILE, CITY_HOUR_FILE, DIAGNOSTICS_FILE, METRICS_FILE, SUMMARY_FILE, summarize
 
 TABLES = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE)
 
@@ -82,6 +82,11 @@ def combine_setting(root: Path, setting: str, unit_dirs: Sequence[Path]) -> dict
         rows[AGENTIC_LOG_FILE] = concat_lines(logs, out / AGENTIC_LOG_FILE)
     else:
         (out / AGENTIC_LOG_FILE).unlink(missing_ok=True)
+    diagnostics = [d / DIAGNOSTICS_FILE for d in unit_dirs if (d / DIAGNOSTICS_FILE).is_file()]
+    if diagnostics:
+        rows[DIAGNOSTICS_FILE] = concat_csv(diagnostics, out / DIAGNOSTICS_FILE)
+    else:
+        (out / DIAGNOSTICS_FILE).unlink(missing_ok=True)
     metrics = pd.read_csv(out / METRICS_FILE, **_ROUND_TRIP)
     atomic_write_json(out / SUMMARY_FILE, summarize(metrics))
     return rows

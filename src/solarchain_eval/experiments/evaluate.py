@@ -19,28 +19,27 @@ from pathlib import Path
 
 from ..agentic.build import AgenticOptions, Governance
 from ..config import BenchmarkConfig
-from ..data.default import default_dataset_dir
-from ..data.files import DATASET_FILES, MANIFEST_FILE
+from ..data.default import resolve_data_dir
+from ..data.provenance import dataset_provenance as dataset_provenance  # re-exported
 from ..data.table import HourlyTable, load_table
 from ..env import SolarChainEnv
 from ..io import atomic_write_json, sha256_file
 from ..policies.base import Policy
 from ..policies.registry import make_policy
+from ..records_schema import RECORDS_SCHEMA_VERSION
 from ..redaction import redact_command
 from ..versions import git_commit, package_versions
+from .inflight import run_in_flight
 from .records import METADATA_FILE, write_records
-from .rollout import (
+from .rollout import EpisodeResult, paper_episode_seeds, run_policy
+from .rundir import RunDirWriter, kill_point
+from .settings import (
     SETTING_AGENTIC,
     SETTING_AGENTIC_NO_PHYSICS,
-    SETTING_MAIN,
-    SETTING_NO_PHYSICS,
-    EpisodeResult,
-    paper_episode_seeds,
-    run_policy,
     setting_has_physics_penalty,
     setting_is_agentic,
+    setting_name,
 )
-from .rundir import RunDirWriter, kill_point
 
 PAPER_SEEDS = (20260511, 20260512, 20260513)
 PAPER_EPISODES = 30
@@ -64,12 +63,12 @@ class EvaluationSpec:
     models: dict[str, Path] = field(default_factory=dict)
     episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds
     agentic: AgenticOptions | None = None
+    #: Episodes in flight (threads; see :mod:`.inflight`). The results do not depend on it.
+    concurrency: int = 1
 
     @property
     def setting(self) -> str:
-        if self.agentic is not None:
-            return SETTING_AGENTIC_NO_PHYSICS if self.no_physics_penalty else SETTING_AGENTIC
-        return SETTING_NO_PHYSICS if self.no_physics_penalty else SETTING_MAIN
+        return setting_name(agentic=self.agentic is not None, no_physics_penalty=self.no_physics_penalty)
 
 
 @dataclass
@@ -80,17 +79,19 @@ class EvaluationOutcome:
     wall_s: float
 
 
-def dataset_provenance(table: HourlyTable) -> dict:
-    root = Path(table.source)
-    info: dict = {"data_dir": str(root.resolve()), "files": {}}
-    for name in DATASET_FILES:
-        path = root / name
-        if path.is_file():
-            info["files"][name] = sha256_file(path)
-    manifest = root / MANIFEST_FILE
-    if manifest.is_file():
-        info["manifest_sha256"] = sha256_file(manifest)
-    return info
+def make_policies(spec: EvaluationSpec) -> list[Policy]:
+    """The spec's policies, built: names through ``make_policy`` with the spec's config (its reward
+    setting applied) and models, ready policies as they are.
+
+    Raises
+    ------
+    ValueError
+        An unknown policy name or a model that cannot be loaded.
+    FileNotFoundError
+        A learned policy without a trained model (the message lists where it looked).
+    """
+    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    return [p if not isinstance(p, str) else make_policy(p, config, spec.models) for p in spec.policies]
 
 
 def run_evaluation(
@@ -122,35 +123,29 @@ def run_evaluation(
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
-    data_dir = spec.data_dir or (Path(config.data_dir) if config.data_dir else default_dataset_dir())
+    data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
     table = load_table(data_dir)  # validates before anything is written
-    policies = [p if not isinstance(p, str) else make_policy(p, config, spec.models) for p in spec.policies]
+    policies = make_policies(spec)
     setting = spec.setting
 
-    envs: dict[str, SolarChainEnv] = {}
-    results: list[EpisodeResult] = []
     with ExitStack() as stack:
         writer = stack.enter_context(RunDirWriter(run_dir, overwrite=overwrite, keep=keep))
-        if spec.agentic is not None:
-            governance = stack.enter_context(Governance(spec.agentic, config.market))
-            policies = [governance.wrap(policy) for policy in policies]
-        for policy in policies:
-            env = envs.get(policy.action_mode)
-            if env is None:
-                env = envs[policy.action_mode] = SolarChainEnv(
-                    config=config, table=table, action_mode=policy.action_mode
-                )
-            results.extend(
-                run_policy(
-                    env,
-                    policy,
-                    setting=setting,
-                    run_seeds=spec.run_seeds,
-                    episodes=spec.episodes,
-                    episode_seeds=spec.episode_seeds,
-                    on_episode=on_episode,
-                )
+        governance = stack.enter_context(Governance(spec.agentic, config.market)) if spec.agentic is not None else None
+        if spec.concurrency > 1:
+            results = run_in_flight(
+                policies,
+                lambda mode: SolarChainEnv(config=config, table=table, action_mode=mode),
+                setting=setting,
+                run_seeds=spec.run_seeds,
+                episodes=spec.episodes,
+                episode_seeds=spec.episode_seeds,
+                workers=spec.concurrency,
+                wrap=governance.wrap if governance is not None else None,
+                on_episode=on_episode,
             )
+        else:
+            wrapped = [governance.wrap(p) for p in policies] if governance is not None else policies
+            results = _run_sequentially(wrapped, spec, config, table, setting, on_episode)
         assert writer.staging is not None
         files = write_records(writer.staging, results, table.cities)
         kill_point("staged")
@@ -160,6 +155,35 @@ def run_evaluation(
         writer.publish()
     files = {name: Path(run_dir) / name for name in [*files, METADATA_FILE]}
     return EvaluationOutcome(run_dir=run_dir, results=results, files=files, wall_s=wall_s)
+
+
+def _run_sequentially(
+    policies: Sequence[Policy],
+    spec: EvaluationSpec,
+    config: BenchmarkConfig,
+    table: HourlyTable,
+    setting: str,
+    on_episode: Callable[[EpisodeResult], None] | None,
+) -> list[EpisodeResult]:
+    """Every policy's runs and episodes in protocol order, one env per action mode."""
+    envs: dict[str, SolarChainEnv] = {}
+    results: list[EpisodeResult] = []
+    for policy in policies:
+        env = envs.get(policy.action_mode)
+        if env is None:
+            env = envs[policy.action_mode] = SolarChainEnv(config=config, table=table, action_mode=policy.action_mode)
+        results.extend(
+            run_policy(
+                env,
+                policy,
+                setting=setting,
+                run_seeds=spec.run_seeds,
+                episodes=spec.episodes,
+                episode_seeds=spec.episode_seeds,
+                on_episode=on_episode,
+            )
+        )
+    return results
 
 
 def _metadata(
@@ -184,8 +208,10 @@ def _metadata(
         "git_commit": git_commit(),
         "package_versions": package_versions(),
         "setting": setting,
+        "records_schema_version": RECORDS_SCHEMA_VERSION,
         "policies": [p if isinstance(p, str) else p.name for p in spec.policies],
         "agentic": spec.agentic.describe() if spec.agentic is not None else None,
+        "concurrency": int(spec.concurrency),
         "run_seeds": [int(s) for s in spec.run_seeds],
         "episodes": int(spec.episodes),
         "episode_seed_protocol": getattr(spec.episode_seeds, "__name__", "custom"),

@@ -25,13 +25,24 @@ from typing import Any
 import numpy as np
 
 from ..agentic.build import AgenticOptions
+from ..algorithms import ALGOS, OPT_IN_ALGOS, TRAINABLE_ALGOS
 from ..config import BenchmarkConfig
 from ..lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
 from ..policies.baselines import BASELINES
-from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY, OPT_IN_ALGOS, TRAINABLE_ALGOS
+from ..training import DEFAULT_CHECKPOINT_EVERY
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS
 from .layout import eval_unit_dir, train_unit_dir
-from .rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS, SETTING_MAIN, SETTING_NO_PHYSICS, paper_episode_seeds
+from .rollout import paper_episode_seeds
+from .settings import (
+    KNOWN_SETTINGS,
+    SETTING_AGENTIC,
+    SETTING_AGENTIC_NO_PHYSICS,
+    SETTING_MAIN,
+    SETTING_NO_PHYSICS,
+    TRAIN_SETTINGS,
+    Setting,
+)
+from .settings import register_setting as define_setting
 
 #: ``spawn_key`` of the SeedSequence behind ``--episode-seeds independent``.
 EPISODE_SEED_SPAWN_KEY = 0x45504953  # "EPIS"
@@ -85,19 +96,39 @@ class GridSetting:
 
 
 _POLICIES = (*BASELINES, *TRAINABLE_ALGOS)  # opt-in ones (ppo-lag) only when asked for
+
+
+def _grid_setting(name: str, policies: tuple[str, ...]) -> GridSetting:
+    s = KNOWN_SETTINGS[name]
+    return GridSetting(s.name, s.no_physics_penalty, policies, s.model_setting, agentic=s.agentic)
+
+
+#: The grid's settings: each :mod:`.settings` definition with the policies the grid evaluates in it.
 SETTING_REGISTRY: dict[str, GridSetting] = {
-    SETTING_MAIN: GridSetting(SETTING_MAIN, False, _POLICIES, SETTING_MAIN),
-    SETTING_NO_PHYSICS: GridSetting(SETTING_NO_PHYSICS, True, _POLICIES, SETTING_NO_PHYSICS),
-    SETTING_AGENTIC: GridSetting(SETTING_AGENTIC, False, ALGOS, SETTING_MAIN, agentic=True),
-    SETTING_AGENTIC_NO_PHYSICS: GridSetting(SETTING_AGENTIC_NO_PHYSICS, True, ALGOS, SETTING_NO_PHYSICS, agentic=True),
+    SETTING_MAIN: _grid_setting(SETTING_MAIN, _POLICIES),
+    SETTING_NO_PHYSICS: _grid_setting(SETTING_NO_PHYSICS, _POLICIES),
+    SETTING_AGENTIC: _grid_setting(SETTING_AGENTIC, ALGOS),
+    SETTING_AGENTIC_NO_PHYSICS: _grid_setting(SETTING_AGENTIC_NO_PHYSICS, ALGOS),
 }
-TRAIN_SETTINGS = (SETTING_MAIN, SETTING_NO_PHYSICS)
 
 
 def register_setting(setting: GridSetting) -> None:
-    """Add (or replace) an evaluation setting; its ``model_setting`` must be a training setting."""
-    if setting.model_setting not in TRAIN_SETTINGS:
-        raise ValueError(f"setting '{setting.name}': model_setting must be one of {', '.join(TRAIN_SETTINGS)}")
+    """Add (or replace) an evaluation setting; its ``model_setting`` must be a training setting.
+
+    The setting is defined in :mod:`.settings` too (labels default to its name), so rollouts and
+    the report know its reward and governance.
+    """
+    known = KNOWN_SETTINGS.get(setting.name)
+    define_setting(
+        Setting(
+            setting.name,
+            setting.no_physics_penalty,
+            setting.agentic,
+            setting.model_setting,
+            known.label if known is not None else setting.name,
+            known.governance_label if known is not None else setting.name,
+        )
+    )
     SETTING_REGISTRY[setting.name] = setting
 
 

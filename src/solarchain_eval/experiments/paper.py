@@ -22,21 +22,24 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..data.default import default_dataset_dir
+from ..algorithms import ALGOS, MODEL_FILE, TRAINABLE_ALGOS
+from ..data.default import resolve_data_dir
+from ..data.provenance import dataset_provenance
 from ..data.table import load_table
 from ..io import atomic_write_json
+from ..option_errors import NamesOptions
 from ..redaction import redact_command
-from ..training import ALGOS, MODEL_FILE, TRAINABLE_ALGOS, differences
+from ..training import differences
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
-from .evaluate import dataset_provenance
 from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, plan_units
 from .layout import PAPER_METADATA_FILE, UNITS_DIR
-from .scheduler import Executor, InlineExecutor, LocalPool, RunReport, run_units
+from .pool import Executor, InlineExecutor, LocalPool, RunReport, run_units
+from .settings import setting_has_physics_penalty
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
 
 
-class GridError(ValueError):
+class GridError(NamesOptions, ValueError):
     """The grid cannot run as asked (a different grid in ROOT, a busy ROOT, bad arguments)."""
 
 
@@ -78,13 +81,14 @@ def _agentic_identity(spec: GridSpec) -> dict[str, Any]:
 
 
 @contextmanager
-def _locked(root: Path) -> Iterator[None]:
+def _locked(root: Path, command: str = "paper") -> Iterator[None]:
+    """Hold ``root``'s lock (one ``command`` run per root at a time)."""
     handle = open(root / ".lock", "a+")  # noqa: SIM115 - held open for the lock's lifetime
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
         handle.close()
-        raise GridError(f"another 'paper' run is using {root} (it holds {root / '.lock'})") from None
+        raise GridError(f"another '{command}' run is using {root} (it holds {root / '.lock'})") from None
     try:
         yield
     finally:
@@ -144,11 +148,11 @@ def run_paper(
     except ValueError as error:
         raise GridError(str(error)) from None
     if workers < 1:
-        raise GridError(f"--workers must be at least 1, got {workers}")
+        raise GridError.about("{opt_workers} must be at least 1, got {workers}", workers=workers)
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     cfg = spec.config
-    data_dir = Path(spec.data_dir or cfg.data_dir or default_dataset_dir()).resolve()
+    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir).resolve()
     table = load_table(data_dir)  # validates the dataset before any work
     dataset = dataset_provenance(table)
     identity = grid_identity(spec, dataset)
@@ -156,16 +160,11 @@ def run_paper(
         previous = _read_metadata(root)
         if previous is not None and previous.get("identity") != identity:
             diffs = differences(previous.get("identity") or {}, identity)
-            raise GridError(f"{root} holds a different grid ({'; '.join(diffs[:5])}); use another --out")
+            raise GridError.about(
+                "{root} holds a different grid ({diffs}); use another {opt_root}", root=root, diffs="; ".join(diffs[:5])
+            )
         units = plan_units(spec)
-        done = set()
-        for unit in units:
-            if read_done(unit.directory(root)) is None:
-                continue
-            if unit.kind == "eval" and _stale_eval(root, unit):
-                undo(unit.directory(root))
-            else:
-                done.add(unit.name)
+        done = _finished_units(root, units)
         already = [u.name for u in units if u.name in done]
         meta = _metadata(spec, identity, dataset, data_dir, command, workers, ray_address)
         atomic_write_json(root / PAPER_METADATA_FILE, {**meta, "status": "running", "complete": False})
@@ -175,44 +174,59 @@ def run_paper(
         def make_task(unit: Unit) -> UnitTask:
             return _task(spec, root, data_dir, identity, unit, command)
 
-        executor = make_executor(root, data_dir, workers, ray_address, ray_transfer)
+        executor = _executor(ray_address, root, data_dir, ray_transfer, workers)
         report = run_units(
             units, done, make_task, executor, keep_going=keep_going, on_result=on_result, on_start=on_start
         )
-
         outcome = PaperOutcome(root, units, already, report)
-        for setting in spec.settings:
-            evals = [u for u in units if u.kind == "eval" and u.setting == setting]
-            if all(u.name in done for u in evals):
-                outcome.combined[setting] = combine_setting(root, setting, [u.directory(root) for u in evals])
-        outcome.complete = all(u.name in done for u in units)
-        outcome.wall_s = time.perf_counter() - started
-        status = "complete" if outcome.complete else ("stopped" if report.stopped else "incomplete")
-        atomic_write_json(
-            root / PAPER_METADATA_FILE,
-            {
-                **meta,
-                "status": status,
-                "complete": outcome.complete,
-                "wall_s": round(outcome.wall_s, 3),
-                "units": _unit_table(root, units, report),
-                "combined": outcome.combined,
-                "combined_sha256": _combined_sha256(root, outcome.combined),
-                "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed],
-            },
-        )
+        _combine_and_record(spec, outcome, done, meta, started)
     return outcome
 
 
-def make_executor(root: Path, data_dir: Path, workers: int, ray_address: str | None, ray_transfer: str) -> Executor:
-    """The executor for ``--ray-address`` / ``--workers`` (shared by ``paper`` and ``sweep``)."""
+def _finished_units(root: Path, units: list[Unit]) -> set[str]:
+    """Names of the units already done; an eval unit whose model was retrained since is undone."""
+    done = set()
+    for unit in units:
+        if read_done(unit.directory(root)) is None:
+            continue
+        if unit.kind == "eval" and _stale_eval(root, unit):
+            undo(unit.directory(root))
+        else:
+            done.add(unit.name)
+    return done
+
+
+def _executor(ray_address: str | None, root: Path, data_dir: Path, ray_transfer: str, workers: int) -> Executor:
     if ray_address:
         from .ray_executor import RayExecutor
 
         return RayExecutor(ray_address, root, data_dir, transfer=ray_transfer, workers=workers)
-    if workers > 1:
-        return LocalPool(workers)
-    return InlineExecutor()
+    return LocalPool(workers) if workers > 1 else InlineExecutor()
+
+
+def _combine_and_record(spec: GridSpec, outcome: PaperOutcome, done: set[str], meta: dict, started: float) -> None:
+    """Combine every setting whose eval units are all done, then write the final paper metadata."""
+    root, units, report = outcome.root, outcome.units, outcome.report
+    for setting in spec.settings:
+        evals = [u for u in units if u.kind == "eval" and u.setting == setting]
+        if all(u.name in done for u in evals):
+            outcome.combined[setting] = combine_setting(root, setting, [u.directory(root) for u in evals])
+    outcome.complete = all(u.name in done for u in units)
+    outcome.wall_s = time.perf_counter() - started
+    status = "complete" if outcome.complete else ("stopped" if report.stopped else "incomplete")
+    atomic_write_json(
+        root / PAPER_METADATA_FILE,
+        {
+            **meta,
+            "status": status,
+            "complete": outcome.complete,
+            "wall_s": round(outcome.wall_s, 3),
+            "units": _unit_table(root, units, report),
+            "combined": outcome.combined,
+            "combined_sha256": _combined_sha256(root, outcome.combined),
+            "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed],
+        },
+    )
 
 
 def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str, str]]:
@@ -234,7 +248,7 @@ def _task(
     spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit, command: list[str] | None
 ) -> UnitTask:
     setting = SETTING_REGISTRY.get(unit.setting)
-    no_physics = setting.no_physics_penalty if setting is not None else unit.setting == "no_physics"
+    no_physics = setting.no_physics_penalty if setting is not None else not setting_has_physics_penalty(unit.setting)
     models: dict[str, Path] = {}
     unit_identity: dict[str, Any] = {
         "grid": identity,

@@ -23,14 +23,15 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
-from ..data.build import DATASET_FILES, MANIFEST_FILE
+from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..io import atomic_write_bytes
+from ..option_errors import NamesOptions
 from .units import UnitResult, UnitTask, collect_files, execute_unit, write_done
 
 TOKEN_FILE = ".grid-token"
 
 
-class RayUnavailableError(RuntimeError):
+class RayUnavailableError(NamesOptions, RuntimeError):
     """``--ray-address`` was given but ray is not installed or the cluster cannot be reached."""
 
 
@@ -38,7 +39,7 @@ def _import_ray() -> Any:
     try:
         import ray
     except ImportError:
-        raise RayUnavailableError("--ray-address needs ray: pip install 'solarchain-eval[ray]'") from None
+        raise RayUnavailableError.about("{opt_ray_address} needs ray: pip install 'solarchain-eval[ray]'") from None
     return ray
 
 

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import csv
+import io
 import json
 from collections.abc import Sequence
 from pathlib import Path
@@ -10,9 +12,10 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
-from ..agentic.policy import EXTRA_LOG_KEY, EXTRA_METRICS_KEY
+from ..agentic.counterfactual import DIAGNOSTIC_COLUMNS
+from ..agentic.policy import EXTRA_DIAGNOSTICS_KEY, EXTRA_LOG_KEY, EXTRA_METRICS_KEY
 from ..io import atomic_write_csv, atomic_write_json, atomic_write_text
-from ..metrics import METRIC_NAMES
+from ..records_schema import EPISODE_KEYS, METRIC_NAMES
 from .rollout import STEP_FIELDS, EpisodeResult
 
 METRICS_FILE = "metrics.csv"
@@ -21,8 +24,7 @@ CITY_HOUR_FILE = "city_hour_policy.csv"
 SUMMARY_FILE = "summary.json"
 METADATA_FILE = "run_metadata.json"
 AGENTIC_LOG_FILE = "agentic_logs.jsonl"
-
-EPISODE_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "start_hour")
+DIAGNOSTICS_FILE = "governance_diagnostics.csv"
 
 
 def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
@@ -103,10 +105,47 @@ def agentic_log_text(results: Sequence[EpisodeResult]) -> str | None:
     return "".join(line + "\n" for line in lines)
 
 
+def diagnostics_csv(results: Sequence[EpisodeResult]) -> str | None:
+    """:func:`diagnostics_frame` as CSV text, written row by row with the csv module (what pandas
+    writes for these columns: floats as ``repr``, None empty; several times faster)."""
+    if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
+        return None
+    ids = EPISODE_KEYS
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow([*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
+    for r in results:
+        metrics = r.extras.get(EXTRA_METRICS_KEY, {})
+        head = [*(getattr(r, k) for k in ids), metrics.get("planner"), metrics.get("auditor")]
+        for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ()):
+            writer.writerow([*head, *(row[c] for c in DIAGNOSTIC_COLUMNS)])
+    return buffer.getvalue()
+
+
+def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
+    """One row per governed step with its counterfactual outcomes (docs/governance.md), or None
+    when no episode recorded diagnostics."""
+    if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
+        return None
+    ids = EPISODE_KEYS
+    rows = []
+    for r in results:
+        metrics = r.extras.get(EXTRA_METRICS_KEY, {})
+        head = {**{k: getattr(r, k) for k in ids}, "planner": metrics.get("planner"), "auditor": metrics.get("auditor")}
+        rows.extend({**head, **row} for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ()))
+    return pd.DataFrame(rows, columns=[*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
+
+
+def _finite_or_none(value: float) -> float | None:
+    return value if np.isfinite(value) else None
+
+
 def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
     """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric.
 
-    ``std`` is the sample standard deviation (ddof=1), as in the paper's tables.
+    ``std`` is the sample standard deviation (ddof=1), as in the paper's tables. Of a single
+    episode it is undefined: NaN, written as ``null`` (strict JSON), as the report's
+    :func:`~solarchain_eval.report.statistics.mean_std` has NaN (docs/metrics.md#summaries).
     """
     if metrics.empty:
         return []
@@ -128,7 +167,7 @@ def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
             "metrics": {
                 name: {
                     "mean": float(group[name].mean()),
-                    "std": float(group[name].std(ddof=1)) if len(group) > 1 else 0.0,
+                    "std": _finite_or_none(float(group[name].std(ddof=1))),
                     "min": float(group[name].min()),
                     "max": float(group[name].max()),
                 }
@@ -154,5 +193,8 @@ def write_records(run_dir: Path, results: Sequence[EpisodeResult], cities: Seque
     log = agentic_log_text(results)
     if log is not None:
         paths[AGENTIC_LOG_FILE] = atomic_write_text(run_dir / AGENTIC_LOG_FILE, log)
+    diagnostics = diagnostics_csv(results)
+    if diagnostics is not None:
+        paths[DIAGNOSTICS_FILE] = atomic_write_text(run_dir / DIAGNOSTICS_FILE, diagnostics)
     paths[SUMMARY_FILE] = atomic_write_json(run_dir / SUMMARY_FILE, summarize(metrics))
     return paths

@@ -11,30 +11,19 @@ import numpy as np
 from ..env import STEP_INFO_KEYS, SolarChainEnv
 from ..metrics import episode_metrics
 from ..policies.base import Policy
+from .settings import (  # noqa: F401  (re-exported: the settings' one home is .settings)
+    SETTING_AGENTIC,
+    SETTING_AGENTIC_NO_PHYSICS,
+    SETTING_LABELS,
+    SETTING_MAIN,
+    SETTING_NO_PHYSICS,
+    SETTINGS,
+    setting_has_physics_penalty,
+    setting_is_agentic,
+)
 
 #: Per-step record columns (docs/metrics.md#per-step-record, the original release's names) plus cost and F.
 STEP_FIELDS = STEP_INFO_KEYS
-
-# Evaluation settings (the paper's "RL", "RL no-physics", "RL+LLM", "RL+LLM no-physics").
-SETTING_MAIN = "main"
-SETTING_NO_PHYSICS = "no_physics"
-SETTING_AGENTIC = "llm"
-SETTING_AGENTIC_NO_PHYSICS = "llm_no_physics"
-SETTINGS = (SETTING_MAIN, SETTING_NO_PHYSICS, SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS)
-SETTING_LABELS = {
-    SETTING_MAIN: "Main",
-    SETTING_NO_PHYSICS: "No-physics",
-    SETTING_AGENTIC: "LLM Main",
-    SETTING_AGENTIC_NO_PHYSICS: "LLM No-physics",
-}
-
-
-def setting_has_physics_penalty(setting: str) -> bool:
-    return setting in (SETTING_MAIN, SETTING_AGENTIC)
-
-
-def setting_is_agentic(setting: str) -> bool:
-    return setting in (SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS)
 
 
 @dataclass

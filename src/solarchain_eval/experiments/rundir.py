@@ -29,23 +29,25 @@ from pathlib import Path
 from types import TracebackType
 
 from ..io import sha256_file
+from ..option_errors import NamesOptions
 from .records import (
     ACTIONS_FILE,
     AGENTIC_LOG_FILE,
     CITY_HOUR_FILE,
+    DIAGNOSTICS_FILE,
     METADATA_FILE,
     METRICS_FILE,
     SUMMARY_FILE,
 )
 
 #: The files a run directory's metadata vouches for, when present.
-RUN_FILES = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, SUMMARY_FILE)
+RUN_FILES = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, DIAGNOSTICS_FILE, SUMMARY_FILE)
 #: Environment variable naming a point where the writer kills itself with SIGKILL (kill tests).
 KILL_AT_ENV = "SOLARCHAIN_TEST_KILL_AT"
 KILL_POINTS = ("staged", "metadata", "old-moved", "published")
 
 
-class RunDirError(ValueError):
+class RunDirError(NamesOptions, ValueError):
     """The run directory cannot be written (a one-line message naming it and why)."""
 
 
@@ -89,18 +91,25 @@ def check_target(run_dir: Path, *, overwrite: bool = False, keep: Sequence[str] 
     """
     run_dir = Path(run_dir)
     if run_dir.exists() and not run_dir.is_dir():
-        raise RunDirError(f"--out {run_dir} is an existing file, not a run directory")
+        raise RunDirError.about("{opt_run_dir} {run_dir} is an existing file, not a run directory", run_dir=run_dir)
     ancestor = run_dir.parent
     while not ancestor.exists():
         ancestor = ancestor.parent
     if not ancestor.is_dir():
-        raise RunDirError(f"--out {run_dir}: {ancestor} is a file, not a folder")
+        raise RunDirError.about(
+            "{opt_run_dir} {run_dir}: {ancestor} is a file, not a folder", run_dir=run_dir, ancestor=ancestor
+        )
     if not os.access(ancestor, os.W_OK | os.X_OK):
-        raise RunDirError(f"--out {run_dir}: the folder {ancestor} is not writable")
+        raise RunDirError.about(
+            "{opt_run_dir} {run_dir}: the folder {ancestor} is not writable", run_dir=run_dir, ancestor=ancestor
+        )
     held = _describe(run_dir, keep)
     if held is not None and not overwrite:
-        raise RunDirError(
-            f"--out {run_dir} already holds {held}; choose another --out or pass --overwrite to replace it"
+        raise RunDirError.about(
+            "{opt_run_dir} {run_dir} already holds {held}; choose another {opt_run_dir} or pass {opt_overwrite} "
+            "to replace it",
+            run_dir=run_dir,
+            held=held,
         )
 
 
@@ -135,7 +144,12 @@ class RunDirWriter:
         try:
             self.run_dir.parent.mkdir(parents=True, exist_ok=True)
         except OSError as error:
-            raise RunDirError(f"--out {self.run_dir}: cannot create {self.run_dir.parent} ({error.strerror})") from None
+            raise RunDirError.about(
+                "{opt_run_dir} {run_dir}: cannot create {parent} ({why})",
+                run_dir=self.run_dir,
+                parent=self.run_dir.parent,
+                why=error.strerror,
+            ) from None
         self._lock()
         try:
             # Re-checked under the lock: another writer may have published since the first check.
@@ -144,8 +158,11 @@ class RunDirWriter:
             try:
                 self.staging = Path(tempfile.mkdtemp(prefix=f".{self.run_dir.name}.staging-", dir=self.run_dir.parent))
             except OSError as error:
-                raise RunDirError(
-                    f"--out {self.run_dir}: cannot write in {self.run_dir.parent} ({error.strerror})"
+                raise RunDirError.about(
+                    "{opt_run_dir} {run_dir}: cannot write in {parent} ({why})",
+                    run_dir=self.run_dir,
+                    parent=self.run_dir.parent,
+                    why=error.strerror,
                 ) from None
             os.chmod(self.staging, 0o777 & ~_umask())  # mkdtemp makes it owner-only
         except BaseException:
@@ -206,8 +223,11 @@ class RunDirWriter:
             try:
                 fd = os.open(path, os.O_RDWR | os.O_CREAT | os.O_CLOEXEC, 0o666 & ~_umask())
             except OSError as error:
-                raise RunDirError(
-                    f"--out {self.run_dir}: cannot create the lock file {path} ({error.strerror})"
+                raise RunDirError.about(
+                    "{opt_run_dir} {run_dir}: cannot create the lock file {path} ({why})",
+                    run_dir=self.run_dir,
+                    path=path,
+                    why=error.strerror,
                 ) from None
             try:
                 fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
@@ -215,8 +235,10 @@ class RunDirWriter:
                 os.close(fd)
                 if error.errno not in (errno.EWOULDBLOCK, errno.EACCES):
                     raise
-                raise RunDirError(
-                    f"--out {self.run_dir} is being written by another run ({_holder(path)}); wait for it to finish"
+                raise RunDirError.about(
+                    "{opt_run_dir} {run_dir} is being written by another run ({holder}); wait for it to finish",
+                    run_dir=self.run_dir,
+                    holder=_holder(path),
                 ) from None
             try:
                 same = os.fstat(fd).st_ino == os.stat(path).st_ino

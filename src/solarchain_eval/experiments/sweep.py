@@ -10,7 +10,7 @@ A sweep root holds::
     ROOT/sweep_metadata.json         the sweep, the points' status, versions (written last)
 
 Every point's units are scoped into its directory (``points/<point>/train/...``) and all of them
-go through one :func:`~.scheduler.run_units` call, so ``--workers``, Ray, ``--keep-going`` and
+go through one :func:`~.pool.run_units` call, so ``--workers``, Ray, ``--keep-going`` and
 resume behave exactly as in ``paper``: a unit with a ``DONE`` marker is never run again, a point
 whose grid identity changed is refused.
 """
@@ -26,16 +26,17 @@ from typing import Any
 
 import pandas as pd
 
-from ..io import atomic_write_json, atomic_write_with, sha256_file
+from ..data.provenance import dataset_provenance
+from ..io import atomic_write_json, atomic_write_with
+from ..records_schema import EPISODE_COST
 from ..redaction import redact_command
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
-from .evaluate import dataset_provenance
 from .grid import GridSpec, Unit, plan_units, scoped
 from .layout import PAPER_METADATA_FILE, combined_dir
-from .paper import GridError, _locked, _metadata, _read_metadata, _stale_eval, _task, grid_identity, make_executor
+from .paper import GridError, _executor, _locked, _metadata, _read_metadata, _stale_eval, _task, grid_identity
+from .pool import RunReport, run_units
 from .records import ACTIONS_FILE, METRICS_FILE
-from .scheduler import RunReport, run_units
 from .sweep_spec import Sweep, SweepDataset, SweepPoint, dataset_cities, fdia_scenario
 from .units import UnitResult, UnitTask, read_done, undo
 
@@ -79,25 +80,23 @@ def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
     other cities (synthetic or listed) get synthetic weather.
     """
     from ..data.build import MANIFEST_FILE, build_dataset
-    from ..data.synthetic import SYNTHETIC_SOURCE, synthesize_weather
-    from ..data.weather import read_weather_cache
+    from ..data.sources import WeatherSource, choose_weather
 
     if (out / MANIFEST_FILE).is_file():
         return out
     cities = dataset_cities(dataset)
-    weather_sha = None
-    if dataset.weather_cache is not None and dataset.cities is None:
-        cache = _resolve(sweep, dataset.weather_cache)
-        payload, source, weather_sha = (
-            read_weather_cache(cache, cities),
-            f"cached file {cache.name}",
-            sha256_file(cache),
-        )
-    else:
-        payload = synthesize_weather(cities, dataset.start, dataset.end, dataset.seed, dataset.timezone)
-        source = SYNTHETIC_SOURCE
+    cached = dataset.weather_cache is not None and dataset.cities is None
+    weather = choose_weather(
+        cities,
+        dataset.start,
+        dataset.end,
+        seed=dataset.seed,
+        timezone=dataset.timezone,
+        weather_cache=_resolve(sweep, dataset.weather_cache) if cached else None,
+        source=WeatherSource.synthetic,
+    )
     build_dataset(
-        payload,
+        weather.payload,
         out,
         cities=cities,
         seed=dataset.seed,
@@ -105,8 +104,8 @@ def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
         end=dataset.end,
         nodes_per_city=dataset.nodes_per_city,
         timezone=dataset.timezone,
-        weather_source=source,
-        weather_sha256=weather_sha,
+        weather_source=weather.source,
+        weather_sha256=weather.sha256,
         fdia=fdia_scenario(dataset),
     )
     return out
@@ -161,8 +160,11 @@ def _prepare_points(
         point_root = root / POINTS_DIR / point.point_id
         previous = _read_metadata(point_root)
         if previous is not None and previous.get("identity") != identity:
-            raise GridError(
-                f"{point_root} holds a different grid than point {point.point_id} of {sweep.source}; use another --out"
+            raise GridError.about(
+                "{point_root} holds a different grid than point {point} of {source}; use another {opt_root}",
+                point_root=point_root,
+                point=point.point_id,
+                source=sweep.source,
             )
         point_root.mkdir(parents=True, exist_ok=True)
         meta = _metadata(spec, identity, dataset, data_dir, command, 1, None)
@@ -195,10 +197,10 @@ def run_sweep(
     """
     started = time.perf_counter()
     if workers < 1:
-        raise GridError(f"--workers must be at least 1, got {workers}")
+        raise GridError.about("{opt_workers} must be at least 1, got {workers}", workers=workers)
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
-    with _locked(root):
+    with _locked(root, "sweep"):
         runs = _prepare_points(sweep, root, on_dataset, command)
         by_scope = {f"{POINTS_DIR}/{r.point.point_id}": r for r in runs}
         units = [u for r in runs for u in r.units]
@@ -220,7 +222,7 @@ def run_sweep(
             task = _task(run.spec, run.root, run.data_dir, run.identity, unit.unscoped(), command)
             return replace(task, unit=unit)
 
-        executor = make_executor(root, runs[0].data_dir, workers, ray_address, ray_transfer)
+        executor = _executor(ray_address, root, runs[0].data_dir, ray_transfer, workers)
         report = run_units(units, done, make_task, executor, keep_going=keep_going, on_result=on_result)
         outcome = SweepOutcome(root, units, already, report)
         for run in runs:
@@ -255,8 +257,6 @@ def _finish_point(root: Path, run: _PointRun, done: set[str]) -> bool:
     return complete
 
 
-#: The episode's constraint cost Σ (V + A), the quantity PPO-Lagrangian constrains.
-EPISODE_COST = "episode_cost"
 _EPISODE = ["policy", "setting", "run_seed", "episode"]
 
 

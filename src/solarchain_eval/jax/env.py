@@ -26,9 +26,9 @@ from gymnax.environments import environment, spaces
 
 from ..config import BenchmarkConfig
 from ..data.table import HourlyTable
-from ..env import market_inputs, resolve_config, resolve_table, start_hours, step_info
+from ..env import env_config, market_inputs, resolve_table, start_hours, step_info
 from ..episodes import PRICE_NOISE_STD
-from ..market.actions import ActionCodec
+from ..market.actions import ActionCodec, initial_action
 from ..market.dynamics import RewardWeights, market_step
 from ..market.observation import (
     OBS_LIMIT,
@@ -36,6 +36,7 @@ from ..market.observation import (
     OBS_PREV_ALPHA,
     OBS_PREV_ELL,
     OBS_PRICE,
+    OBSERVATION_SHAPE,
 )
 
 
@@ -139,9 +140,7 @@ def make_env_params(
     table: HourlyTable | None = None,
 ) -> EnvParams:
     """Params for a dataset and config; the same arguments as ``SolarChainEnv``."""
-    if action_mode is not None and action_mode not in ("continuous", "discrete"):
-        raise ValueError(f"action_mode must be 'continuous' or 'discrete', not {action_mode!r}")
-    cfg = resolve_config(config).with_updates(action_mode=action_mode, no_physics_penalty=no_physics_penalty)
+    cfg = env_config(config, no_physics_penalty=no_physics_penalty, action_mode=action_mode)
     table = table if table is not None else resolve_table(None if data_dir is None else data_dir, cfg)
     hours, template = market_inputs(table)
     codec = ActionCodec.from_config(cfg.market)
@@ -177,9 +176,7 @@ def make_env_params(
         action_hi=jnp.asarray(codec.hi, f),
         lo32=jnp.asarray(codec.lo32, jnp.float32),
         width32=jnp.asarray(codec.width32, jnp.float32),
-        initial_action=jnp.asarray(
-            np.array([m.static_reward_ratio, m.static_liquidity_ratio, m.static_burn_rate], dtype=f32)
-        ),
+        initial_action=jnp.asarray(np.array(initial_action(m), dtype=f32)),
         weights=RewardWeights.from_config(cfg),
         action_mode=cfg.action_mode,
         episode_steps=cfg.episode_steps,
@@ -253,7 +250,7 @@ class SolarChainJaxEnv(environment.Environment[EnvState, EnvParams]):
         return spaces.Box(0.0, 1.0, (3,), jnp.float32)
 
     def observation_space(self, params: EnvParams | None = None) -> spaces.Box:
-        return spaces.Box(-OBS_LIMIT, OBS_LIMIT, (12,), jnp.float32)
+        return spaces.Box(-OBS_LIMIT, OBS_LIMIT, OBSERVATION_SHAPE, jnp.float32)
 
     # --- functional core --------------------------------------------------------------------
     def reset_to(self, start: Any, noise: Any, params: EnvParams) -> tuple[jax.Array, EnvState]:

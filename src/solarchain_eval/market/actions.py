@@ -147,6 +147,56 @@ class ActionCodec:
         return [self.decode(point) for point in self.discrete_grid(levels)]
 
 
+ACTION_MODES = ("continuous", "discrete")
+
+
+def check_action_mode(action_mode: str | None) -> str | None:
+    """``action_mode`` itself if it is None or one of :data:`ACTION_MODES`, else a ValueError."""
+    if action_mode is not None and action_mode not in ACTION_MODES:
+        raise ValueError(f"action_mode must be 'continuous' or 'discrete', not {action_mode!r}")
+    return action_mode
+
+
+def initial_action(market: MarketConfig) -> tuple[float, float, float]:
+    """a_prev at reset: the configured static action (α, ℓ, b), each rounded to float32.
+
+    The previous action the first step's jitter and the observation's previous α, ℓ refer to.
+    """
+    return tuple(
+        float(_F32(v)) for v in (market.static_reward_ratio, market.static_liquidity_ratio, market.static_burn_rate)
+    )
+
+
+@dataclass(frozen=True, eq=False)
+class DiscreteActions:
+    """The executed (α, ℓ, b) of each index of ``Discrete(levels**3)``: the one decoding of an index.
+
+    ``table`` holds them as tuples of float32 values (the single env), ``columns`` as a (3, K)
+    float32 array (the vector env).
+    """
+
+    table: tuple[tuple[float, float, float], ...]
+    columns: np.ndarray
+
+    @classmethod
+    def from_codec(cls, codec: ActionCodec, levels: int) -> DiscreteActions:
+        table = tuple(codec.discrete_table(levels))
+        columns = np.array(table, dtype=_F32).T.copy()
+        columns.setflags(write=False)
+        return cls(table, columns)
+
+    def __len__(self) -> int:
+        return len(self.table)
+
+    def decode(self, action: Any) -> tuple[float, float, float]:
+        """The executed action of one index (see :func:`discrete_index` for what is accepted)."""
+        return self.table[discrete_index(action, len(self.table))]
+
+    def decode_batch(self, actions: Any, num_envs: int) -> np.ndarray:
+        """Executed actions of one index per sub-env, as a (3, num_envs) float32 array."""
+        return self.columns[:, discrete_indices(actions, len(self.table), num_envs)]
+
+
 def action_jitter_f32(a: tuple, prev: tuple) -> float:
     """J = |a - a_prev|_1 of float32 actions, in float32 (numpy's order: left to right)."""
     d0, d1, d2 = _F3.unpack(_F3.pack(abs(a[0] - prev[0]), abs(a[1] - prev[1]), abs(a[2] - prev[2])))

@@ -16,7 +16,8 @@ import numpy as np
 from ..config import BenchmarkConfig
 from ..data.table import HourlyTable
 
-# Market constants (docs/environment.md#rewards; not part of the paper's configuration).
+# Market constants (docs/environment.md#rewards; not part of the paper's configuration). The
+# price shock's standard deviation lives with the draws that use it: episodes.PRICE_NOISE_STD.
 MIN_DEMAND_FACTOR = 0.75  # token burning can cut effective demand by at most 25 %
 BURN_DEMAND_ELASTICITY = 0.80
 SLIPPAGE_DEPTH_OFFSET_MWH = 0.05
@@ -24,7 +25,6 @@ PRICE_GAP_WEIGHT, PRICE_VOLUME_WEIGHT, PRICE_BURN_WEIGHT = 0.04, 0.03, 0.10
 PRICE_SLIPPAGE_WEIGHT, PRICE_ISSUANCE_WEIGHT = 0.08, 0.02
 MAX_PRICE_RETURN = 0.35
 MIN_TOKEN_PRICE = 0.05
-PRICE_NOISE_STD = 0.004
 LIQUIDITY_SHARE_WEIGHT = 0.01
 FALLBACK_MIN_DEMAND_MWH = 0.001
 
@@ -169,10 +169,11 @@ def market_step(
     peak_liquidity = ops.maximum(peak_liquidity, liquidity)
     drawdown = 1.0 - liquidity / ops.maximum(peak_liquidity, 1e-12)
     slippage = effective_demand / ops.maximum(available + SLIPPAGE_DEPTH_OFFSET_MWH, SLIPPAGE_DEPTH_OFFSET_MWH)
-    # Token price.
-    supply_gap = (verified_mwh - effective_demand) / ops.maximum(effective_demand, 1e-6)
+    # Token price. Its gap is against the effective demand Q̃, unlike the observation's
+    # ``supply_gap`` (raw trade demand), hence its own name.
+    effective_supply_gap = (verified_mwh - effective_demand) / ops.maximum(effective_demand, 1e-6)
     price_return = (
-        PRICE_GAP_WEIGHT * supply_gap
+        PRICE_GAP_WEIGHT * effective_supply_gap
         + PRICE_VOLUME_WEIGHT * matched
         + PRICE_BURN_WEIGHT * burn
         - PRICE_SLIPPAGE_WEIGHT * slippage

@@ -23,6 +23,8 @@ OBSERVATION_NAMES = (
 OBS_LIQUIDITY, OBS_PRICE, OBS_PREV_ALPHA, OBS_PREV_ELL = 6, 7, 10, 11
 OBS_GAP, OBS_VIOLATION, OBS_SLIPPAGE = 5, 8, 9
 OBS_LIMIT = 10.0
+#: Shape of one observation: one float32 per name in :data:`OBSERVATION_NAMES`.
+OBSERVATION_SHAPE = (len(OBSERVATION_NAMES),)
 
 
 def observation_template(hours: MarketHours) -> np.ndarray:

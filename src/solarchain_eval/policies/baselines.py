@@ -18,6 +18,7 @@ class StaticPolicy:
     market: MarketConfig = field(default_factory=MarketConfig)
     name: str = "static"
     action_mode: str = "continuous"
+    stateless = True  # episodes may run concurrently and in any order (see experiments/inflight.py)
 
     def __post_init__(self) -> None:
         m = self.market
@@ -61,6 +62,7 @@ class MyopicPolicy:
     market: MarketConfig = field(default_factory=MarketConfig)
     name: str = "myopic"
     action_mode: str = "continuous"
+    stateless = True  # the action depends on the observation only
 
     def __post_init__(self) -> None:
         codec = ActionCodec.from_config(self.market)

@@ -24,8 +24,10 @@ from typing import Any
 
 import numpy as np
 
+from ..algorithms import MODEL_FILE, TRAIN_CONFIG_FILE, TRAINABLE_ACTION_MODES, algorithm_class
 from ..config import BenchmarkConfig
-from ..training import MODEL_FILE, TRAIN_CONFIG_FILE, TRAINABLE_ACTION_MODES, algorithm_class
+from ..market.observation import OBSERVATION_SHAPE
+from ..option_errors import NamesOptions
 
 #: Learned policy name -> the env action mode it acts in.
 LEARNED_POLICIES = dict(TRAINABLE_ACTION_MODES)  # ppo-lag's model is a plain PPO model
@@ -37,6 +39,19 @@ def _trained_algo(directory: Path) -> str | None:
         return json.loads(path.read_text(encoding="utf-8"))["identity"]["algo"]
     except (OSError, ValueError, KeyError, TypeError):
         return None
+
+
+def parse_models(items: list[str]) -> dict[str, Path]:
+    """The ``models`` mapping from ``DIR`` and ``NAME=PATH`` items (the ``--models`` values): a bare
+    directory is ``{"*": DIR}`` (the last one wins), ``NAME=PATH`` is ``{name: PATH}``."""
+    models: dict[str, Path] = {}
+    for item in items:
+        if "=" in item:
+            name, path = item.split("=", 1)
+            models[name.strip().lower()] = Path(path)
+        else:
+            models["*"] = Path(item)
+    return models
 
 
 def model_candidates(name: str, models: dict[str, Path]) -> list[Path]:
@@ -68,19 +83,26 @@ def resolve_model_path(name: str, models: dict[str, Path]) -> Path:
         No model was given, or none of the candidates exists (the message lists them).
     """
     if not models:
-        raise FileNotFoundError(
-            f"policy '{name}' needs a trained model: pass --models DIR or --models {name}=PATH "
-            f"(train one with: solarchain-eval train --algo {name} --out DIR/{name})"
+        raise ModelNotFoundError.about(
+            "policy '{name}' needs a trained model: pass {opt_models} DIR or {opt_models} {name}=PATH "
+            "(train one with: solarchain-eval train --algo {name} --out DIR/{name})",
+            name=name,
         )
     candidates = model_candidates(name, models)
     for path in candidates:
         if path.is_file():
             return path
     looked = ", ".join(str(p) for p in candidates) or "(no path given for it)"
-    raise FileNotFoundError(
-        f"no trained model for policy '{name}': looked for {looked} "
-        f"(pass --models {name}=PATH, or train one with: solarchain-eval train --algo {name})"
+    raise ModelNotFoundError.about(
+        "no trained model for policy '{name}': looked for {looked} "
+        "(pass {opt_models} {name}=PATH, or train one with: solarchain-eval train --algo {name})",
+        name=name,
+        looked=looked,
     )
+
+
+class ModelNotFoundError(NamesOptions, FileNotFoundError):
+    """No trained model for a learned policy (the message lists where it looked)."""
 
 
 def load_model(name: str, path: Path) -> Any:
@@ -108,6 +130,7 @@ class SB3Policy:
     model_path: Path
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     action_mode: str = ""
+    stateless = True  # deterministic predict, no recurrent state: episodes may run concurrently
 
     def __post_init__(self) -> None:
         self.action_mode = LEARNED_POLICIES[self.name]
@@ -116,8 +139,10 @@ class SB3Policy:
 
     def _check_spaces(self) -> None:
         obs_shape = tuple(self.model.observation_space.shape or ())
-        if obs_shape != (12,):
-            raise ValueError(f"{self.model_path}: the model observes shape {obs_shape}, the env gives (12,)")
+        if obs_shape != OBSERVATION_SHAPE:
+            raise ValueError(
+                f"{self.model_path}: the model observes shape {obs_shape}, the env gives {OBSERVATION_SHAPE}"
+            )
         space = self.model.action_space
         if self.action_mode == "discrete":
             expected = self.config.discrete_levels**3

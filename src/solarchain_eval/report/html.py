@@ -13,7 +13,7 @@ from typing import Any
 from .figures.style import FigureFile
 from .loading import ReportData
 from .naming import paper_order, policy_label, setting_label
-from .provenance import dataset_records, metadata_dump, run_records
+from .provenance import dataset_records, run_records
 from .tables.model import ReportTable, Skipped, to_html
 
 CSS = """
@@ -27,7 +27,9 @@ tbody tr:last-child td{border-bottom:2px solid #333}
 td:first-child,th:first-child{text-align:left}
 figure{margin:1.2rem 0}figcaption{font-size:.9rem;margin-bottom:.3rem}
 figure.table{overflow-x:auto}
-.basis{font-size:.82rem;color:#444;font-style:italic;margin:.2rem 0}.notes{font-size:.82rem;color:#444}
+.basis{font-size:.82rem;color:#444;font-style:italic;margin:.2rem 0}.meta-list dt{font-weight:600;margin-top:.3rem}.meta-list dd{margin-left:1.2rem}
+.caveat{font-size:.85rem;font-weight:600;color:#8a4b00;background:#fff4e0;border-left:4px solid #e6a700;padding:.3rem .6rem;margin:.3rem 0}
+.notes{font-size:.82rem;color:#444}
 .figures{display:grid;grid-template-columns:repeat(auto-fill,minmax(520px,1fr));gap:1rem}
 .figures figure{border:1px solid #eee;padding:.5rem;border-radius:6px}
 .figures img{max-width:100%;height:auto;display:block}
@@ -108,30 +110,51 @@ def _provenance(data: ReportData) -> str:
     return "\n".join(parts) + "\n"
 
 
-def _run_metadata(data: ReportData) -> str:
-    records = run_records(data)
-    keys = sorted({k for r in records for k in r}, key=lambda k: (k != "unit", k))
-    head = "".join(f"<th>{_escape(k)}</th>" for k in keys)
-
-    def fmt(value: Any) -> str:
-        return _escape(
-            " ".join(value)
-            if isinstance(value, list) and all(isinstance(v, str) for v in value)
-            else json.dumps(value)
-            if isinstance(value, (list, dict))
-            else value
+def _metadata_value(value: Any) -> str:
+    """A metadata value as plain text: lists joined, mappings as ``key=value`` pairs, never JSON."""
+    if isinstance(value, dict):
+        return ", ".join(f"{k}={_metadata_value(v)}" for k, v in value.items())
+    if isinstance(value, (list, tuple)):
+        return (
+            " ".join(str(v) for v in value)
+            if all(isinstance(v, str) for v in value)
+            else ", ".join(_metadata_value(v) for v in value)
         )
+    return str(value)
 
-    body = "".join(
-        "<tr>" + "".join(f'<td class="wrap">{fmt(r.get(k, ""))}</td>' for k in keys) + "</tr>" for r in records
-    )
-    table = (
-        f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>'
-        if records
-        else "<p>No per-run metadata found.</p>"
-    )
+
+def _run_metadata(data: ReportData) -> str:
+    """Fields every unit shares, once; then a table of the fields that differ between units.
+
+    A paper root's units share the command and the commit: printing them once per row buried the
+    fields that do differ. Values are plain text; the full record stays in the metadata file.
+    """
+    records = run_records(data)
     name = "paper_metadata.json" if data.kind == "paper" else "run_metadata.json"
-    return f"{table}\n<details><summary>{name}</summary><pre>{_escape(metadata_dump(data))}</pre></details>\n"
+    if not records:
+        return "<p>No per-run metadata found.</p>\n"
+    keys = [k for k in dict.fromkeys(k for r in records for k in r) if k != "unit"]
+    shared = [k for k in keys if all(k in r for r in records) and len({repr(r[k]) for r in records}) == 1]
+    varying = [k for k in keys if k not in shared]
+    items = "".join(
+        f"<dt>{_escape(k)}</dt><dd><code>{_escape(_metadata_value(records[0][k]))}</code></dd>"
+        if k == "command"
+        else f"<dt>{_escape(k)}</dt><dd>{_escape(_metadata_value(records[0][k]))}</dd>"
+        for k in shared
+    )
+    label = "Every unit" if len(records) > 1 else f"Run {_escape(str(records[0]['unit']))}"
+    parts = [f'<p>{label} ({len(records)} unit(s)):</p><dl class="meta-list">{items}</dl>']
+    if len(records) > 1 and varying:
+        head = "".join(f"<th>{_escape(k)}</th>" for k in ["unit", *varying])
+        body = "".join(
+            "<tr>"
+            + "".join(f'<td class="wrap">{_escape(_metadata_value(r.get(k, "")))}</td>' for k in ["unit", *varying])
+            + "</tr>"
+            for r in records
+        )
+        parts.append(f'<div class="scroll"><table><thead><tr>{head}</tr></thead><tbody>{body}</tbody></table></div>')
+    parts.append(f'<p class="meta">The full record is {_escape(name)} in the run directory.</p>')
+    return "\n".join(parts) + "\n"
 
 
 def render_html(

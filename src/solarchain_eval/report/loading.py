@@ -28,9 +28,10 @@ from ..experiments.layout import (
     is_paper_root,
     run_table_paths,
 )
-from ..experiments.records import EPISODE_KEYS, SUMMARY_FILE
+from ..experiments.records import DIAGNOSTICS_FILE, SUMMARY_FILE
 from ..experiments.rundir import verify_files, verify_run_dir
-from ..metrics import METRIC_NAMES
+from ..option_errors import NamesOptions
+from ..records_schema import EPISODE_KEYS, METRIC_NAMES, upgrade_columns
 from ..redaction import redact_command
 from .naming import SETTINGS
 
@@ -59,11 +60,28 @@ LOG_KEYS = (
 )
 ACTION_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "step", "episode_start_hour")
 CITY_HOUR_KEYS = ("policy", "setting", "run_seed", "episode", "step", "hour", "city", "city_reward", "liquidity_ratio")
+#: Columns of ``governance_diagnostics.csv`` the audit-quality tables read.
+DIAGNOSTICS_REQUIRED = (
+    "policy",
+    "setting",
+    "run_seed",
+    "episode",
+    "start_hour",
+    "step",
+    "audited",
+    "decision",
+    "proposal_cost",
+    "least_cost",
+    "bounded_cost",
+    "bounded_reward",
+    "final_cost",
+    "final_reward",
+)
 #: Rollout identity: one row per (setting, policy, run seed, episode).
 ROLLOUT_KEY = ["setting", "policy", "run_seed", "episode"]
 
 
-class ReportDataError(ValueError):
+class ReportDataError(NamesOptions, ValueError):
     """The run's files are missing, malformed or inconsistent (the message names file, column, row)."""
 
 
@@ -97,6 +115,8 @@ class ReportData:
     unit_metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
     sources: dict[str, list[Path]] = field(default_factory=dict)
     unverified: list[str] = field(default_factory=list)
+    #: ``governance_diagnostics.csv`` rows (counterfactual step records; empty without them).
+    diagnostics: pd.DataFrame = field(default_factory=pd.DataFrame)
 
     @property
     def settings(self) -> list[str]:
@@ -114,6 +134,11 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
         frame = pd.read_csv(path)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
         raise ReportDataError(f"{path}: not a readable CSV ({error})") from None
+    # Files written before a column was renamed or removed (records_schema's version history).
+    upgrade = upgrade_columns(list(frame.columns))
+    if upgrade:
+        frame = frame.drop(columns=[c for c, new in upgrade.items() if new is None])
+        frame = frame.rename(columns={c: new for c, new in upgrade.items() if new is not None})
     missing = [c for c in required if c not in frame.columns]
     if missing:
         raise ReportDataError(f"{path}: missing column(s) {', '.join(missing)}")
@@ -158,10 +183,35 @@ def _read_table(
     return pd.concat(frames, ignore_index=True), paths
 
 
+#: Per-row figures of the model calls a log row records (NaN where it records none): the
+#: auditor's call at this step, and the planner's call on the episode's first row only (the plan,
+#: with its call, is repeated on every row).
+LLM_CALL_FIELDS = tuple(
+    f"{kind}_{name}" for kind in ("planner", "auditor") for name in ("latency_s", "input_tokens", "output_tokens")
+)
+
+
+def _llm_call_fields(record: dict[str, Any]) -> dict[str, float]:
+    out = dict.fromkeys(LLM_CALL_FIELDS, float("nan"))
+    plan = record.get("plan")
+    calls = {
+        "auditor": record.get("llm"),
+        "planner": plan.get("llm") if isinstance(plan, dict) and record.get("step") == 0 else None,
+    }
+    for kind, meta in calls.items():
+        if isinstance(meta, dict):
+            for name in ("latency_s", "input_tokens", "output_tokens"):
+                value = meta.get(name)
+                if isinstance(value, int | float) and not isinstance(value, bool):
+                    out[f"{kind}_{name}"] = float(value)
+    return out
+
+
 def _flatten_log(record: dict[str, Any]) -> dict[str, Any]:
     row = {key: record[key] for key in LOG_KEYS}
     for key in ("proposed_action", "final_action"):
         row[key] = tuple(float(v) for v in record[key])
+    row.update(_llm_call_fields(record))
     return row
 
 
@@ -190,7 +240,7 @@ def read_agentic_logs(path: Path) -> pd.DataFrame:
                 if not (isinstance(value, list) and len(value) == 3):
                     raise ReportDataError(f"{path}: line {number} field {key} is not a list of 3 numbers")
             rows.append(_flatten_log(record))
-    frame = pd.DataFrame(rows, columns=list(LOG_KEYS))
+    frame = pd.DataFrame(rows, columns=[*LOG_KEYS, *LLM_CALL_FIELDS])
     if not frame.empty:
         _check_settings(frame, path, "paper" if path.parent.parent.name == COMBINED_DIR else "run")
     return frame
@@ -237,7 +287,7 @@ def verify_report_inputs(root: Path, kind: str) -> list[str]:
     problems = [p for unit in _eval_units(root) if is_done(unit) for p in verify_run_dir(unit)]
     meta_path = root / PAPER_METADATA_FILE
     recorded = _read_json(meta_path).get("combined_sha256") or {}
-    names = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, SUMMARY_FILE)
+    names = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, DIAGNOSTICS_FILE, SUMMARY_FILE)
     for folder in sorted(p for p in (root / COMBINED_DIR).glob("*") if p.is_dir()):
         problems += verify_files(folder, recorded.get(folder.name), meta_path, names)
     return problems
@@ -285,16 +335,19 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     city_hour, city_paths = _read_table(root, CITY_HOUR_FILE, CITY_HOUR_KEYS, kind)
     log_paths = run_table_paths(root, AGENTIC_LOG_FILE)
     logs = [read_agentic_logs(path) for path in log_paths]
-    log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=list(LOG_KEYS))
+    log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=[*LOG_KEYS, *LLM_CALL_FIELDS])
     # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
     log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
+    diagnostics, diagnostic_paths = _read_table(root, DIAGNOSTICS_FILE, DIAGNOSTICS_REQUIRED, kind)
     metadata_file = PAPER_METADATA_FILE if kind == "paper" else METADATA_FILE
     # Checked after the files parse, so a malformed file gets the message naming its row.
     unverified = verify_report_inputs(root, kind)
     if unverified and not allow_unverified:
         more = f" (and {len(unverified) - 1} more problem(s))" if len(unverified) > 1 else ""
-        raise ReportDataError(
-            f"{unverified[0]}{more}; refusing to report (--allow-unverified reports anyway, with warnings)"
+        raise ReportDataError.about(
+            "{problem}{more}; refusing to report ({opt_allow_unverified} reports anyway, with warnings)",
+            problem=unverified[0],
+            more=more,
         )
     return ReportData(
         root=root,
@@ -310,6 +363,8 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
             ACTIONS_FILE: action_paths,
             CITY_HOUR_FILE: city_paths,
             AGENTIC_LOG_FILE: log_paths,
+            DIAGNOSTICS_FILE: diagnostic_paths,
         },
         unverified=unverified,
+        diagnostics=diagnostics,
     )

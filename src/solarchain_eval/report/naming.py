@@ -5,9 +5,11 @@ One home for every label the report shows, so tables and figures agree.
 
 from __future__ import annotations
 
-from collections.abc import Iterable
+from collections.abc import Iterable, Mapping
+from typing import Any
 
-from ..experiments.rollout import (
+from ..experiments.settings import (
+    KNOWN_SETTINGS,
     SETTING_AGENTIC,
     SETTING_AGENTIC_NO_PHYSICS,
     SETTING_LABELS,
@@ -33,12 +35,7 @@ PAPER_POLICY_ORDER = ("static", "random", "myopic", "ppo", "sac", "dqn")
 LEARNED_ORDER = ("ppo", "sac", "dqn")
 
 #: Setting labels of the four-setting tables ("Governance" / "Setting" columns of the body).
-GOVERNANCE_LABELS = {
-    SETTING_MAIN: "RL",
-    SETTING_NO_PHYSICS: "RL no-physics",
-    SETTING_AGENTIC: "RL+LLM",
-    SETTING_AGENTIC_NO_PHYSICS: "RL+LLM no-physics",
-}
+GOVERNANCE_LABELS = {name: KNOWN_SETTINGS[name].governance_label for name in SETTINGS}
 #: Row order of the four-setting appendix tables (RL, RL+LLM, RL no-physics, RL+LLM no-physics).
 GOVERNANCE_ORDER = (SETTING_MAIN, SETTING_AGENTIC, SETTING_NO_PHYSICS, SETTING_AGENTIC_NO_PHYSICS)
 #: The LLM appendix tables name an agentic setting by its reward ("Main" / "No-physics").
@@ -63,8 +60,8 @@ __all__ = [
     "setting_label",
     "is_learned",
     "paper_order",
-    "alphabetical_order",
     "learned_order",
+    "governance_layer",
 ]
 
 
@@ -84,15 +81,14 @@ def is_learned(policy: str) -> bool:
 
 
 def paper_order(policies: Iterable[str]) -> list[str]:
-    """``policies`` in the paper's order: Static, Random, Myopic, PPO, SAC, DQN, then others by name."""
+    """``policies`` in the report's one order: Static, Random, Myopic, PPO, SAC, DQN, then others by name.
+
+    Every table and figure lists policies in this order (the paper's appendix tables sort by name;
+    the report does not, so a policy is found in the same place everywhere).
+    """
     present = set(policies)
     known = [p for p in PAPER_POLICY_ORDER if p in present]
     return known + sorted(present - set(known))
-
-
-def alphabetical_order(policies: Iterable[str]) -> list[str]:
-    """``policies`` sorted by display name (the appendix tables' order: DQN, Myopic, PPO, ...)."""
-    return sorted(set(policies), key=lambda p: (policy_label(p), p))
 
 
 def learned_order(policies: Iterable[str]) -> list[str]:
@@ -100,3 +96,32 @@ def learned_order(policies: Iterable[str]) -> list[str]:
     learned = {p for p in policies if is_learned(p)}
     known = [p for p in LEARNED_ORDER if p in learned]
     return known + sorted(learned - set(known))
+
+
+def _llm_model(metadata: Mapping[str, Any]) -> str | None:
+    """The LLM model recorded in run or paper metadata (``agentic.llm.model``), if any."""
+    for holder in (metadata, metadata.get("grid") or {}, metadata.get("identity") or {}):
+        agentic = holder.get("agentic") if isinstance(holder, Mapping) else None
+        llm = agentic.get("llm") if isinstance(agentic, Mapping) else None
+        if isinstance(llm, Mapping) and llm.get("model"):
+            return str(llm["model"])
+    return None
+
+
+def governance_layer(metrics: Any, metadata: Mapping[str, Any]) -> str:
+    """The planner and auditor that governed the agentic rollouts, as tables name them.
+
+    E.g. "rule planner, rule auditor" or "llm:gpt-4o planner, oracle auditor" (from the
+    ``planner`` and ``auditor`` columns of ``metrics.csv`` and the model in the metadata); several
+    kinds are joined with "/"; "Planner/Auditor layer" when the columns are absent.
+    """
+    agentic = metrics[metrics["setting"].isin(list(AGENTIC_BASE))] if "setting" in metrics else metrics
+    if agentic.empty or not {"planner", "auditor"} <= set(agentic.columns):
+        return "Planner/Auditor layer"
+    model = _llm_model(metadata)
+
+    def kinds(column: str) -> str:
+        names = sorted({str(k) for k in agentic[column].dropna()})
+        return "/".join(f"llm:{model}" if k == "llm" and model else k for k in names) or "unknown"
+
+    return f"{kinds('planner')} planner, {kinds('auditor')} auditor"

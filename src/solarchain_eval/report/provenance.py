@@ -6,7 +6,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..data.build import MANIFEST_FILE
+from ..data.files import MANIFEST_FILE  # not data.build: that imports pvlib
 from ..io import sha256_file
 from .loading import ReportData
 

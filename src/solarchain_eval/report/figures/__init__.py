@@ -15,6 +15,7 @@ from ..options import ReportOptions
 from ..tables.model import Skipped
 from .ablation import liquidity_four_settings, liquidity_trajectories, paired_no_physics_delta
 from .agentic import agentic_delta_scatter, audit_step_delta, case_action_revision, case_context, jitter_change
+from .governance import governance_figures
 from .heatmap import city_hour_heatmaps
 from .main import reward_distribution, reward_trajectory, trust_figures, utility_safety_frontier
 from .style import POLICY_COLOURS, FigureFile
@@ -36,6 +37,7 @@ FIGURE_BUILDERS: tuple[FigureBuilder, ...] = (
     case_action_revision,
     case_context,
     city_hour_heatmaps,
+    governance_figures,
 )
 
 

@@ -12,13 +12,20 @@ from scipy import stats
 from ...experiments.rollout import SETTING_AGENTIC, SETTING_MAIN
 from ..casestudy import episode_steps, select_case
 from ..loading import ReportData
-from ..naming import GOVERNANCE_LABELS, learned_order, policy_label, setting_label
+from ..naming import GOVERNANCE_LABELS, governance_layer, learned_order, paper_order, policy_label, setting_label
 from ..options import ReportOptions
 from ..statistics import paired_deltas
 from ..tables.model import Skipped
 from .style import FigureFile, label_categories, new_figure, policy_colour, save_figure
 
 NEEDS_PAIR = "needs learned policies in both the main setting and the agentic setting 'llm'"
+
+
+def _save(figure, out_dir: Path, key: str, title: str, caption: str, data: ReportData) -> FigureFile:
+    """save_figure, with the planner and auditor that ran in the title and caption (not "LLM" when
+    the rule layer ran; the plot's own title stays short)."""
+    layer = governance_layer(data.metrics, data.metadata)
+    return save_figure(figure, out_dir, key, f"{title} ({layer})", f"{caption} Planner/Auditor: {layer}.")
 
 
 def jitter_change(data: ReportData, options: ReportOptions, out_dir: Path) -> FigureFile | Skipped:
@@ -62,7 +69,7 @@ def jitter_change(data: ReportData, options: ReportOptions, out_dir: Path) -> Fi
             loc="best",
         )
         caption = "Action stability: mean action jitter of each learned policy without (RL) and with (RL+LLM) the Planner/Auditor layer; points are rollouts."
-        return save_figure(figure, out_dir, key, title, caption)
+        return _save(figure, out_dir, key, title, caption, data)
 
 
 def agentic_delta_scatter(data: ReportData, options: ReportOptions, out_dir: Path) -> FigureFile | Skipped:
@@ -101,7 +108,7 @@ def agentic_delta_scatter(data: ReportData, options: ReportOptions, out_dir: Pat
         ax.set_title(title)
         ax.legend(loc="best")
         caption = "Paired RL+LLM-minus-RL changes in action jitter and artificial liquidity per matched rollout (main reward); crosses are policy means."
-        return save_figure(figure, out_dir, key, title, caption)
+        return _save(figure, out_dir, key, title, caption, data)
 
 
 def audit_step_delta(data: ReportData, options: ReportOptions, out_dir: Path) -> FigureFile | Skipped:
@@ -111,7 +118,7 @@ def audit_step_delta(data: ReportData, options: ReportOptions, out_dir: Path) ->
     audited = logs[logs["audited"].astype(bool)] if not logs.empty else logs
     if audited.empty:
         return Skipped(key, title, "the run has no audited agentic log steps")
-    policies = learned_order(audited["policy"]) + sorted(set(audited["policy"]) - set(learned_order(audited["policy"])))
+    policies = paper_order(audited["policy"])
     kappa, delta = audited["kappa"].to_numpy(float), audited["action_delta"].to_numpy(float)
     rho = stats.spearmanr(kappa, delta).statistic if len(audited) > 2 else float("nan")
     with new_figure() as (figure, axes):
@@ -135,7 +142,7 @@ def audit_step_delta(data: ReportData, options: ReportOptions, out_dir: Path) ->
             f"Step-level relationship between pre-audit action jitter κ and the Auditor's "
             f"action delta over {len(audited)} audited steps (all agentic settings); Spearman ρ = {rho:.2f}."
         )
-        return save_figure(figure, out_dir, key, title, caption)
+        return _save(figure, out_dir, key, title, caption, data)
 
 
 COMPONENTS = ("reward ratio α", "liquidity ratio ℓ", "burn rate b")
@@ -172,7 +179,7 @@ def case_action_revision(data: ReportData, options: ReportOptions, out_dir: Path
             f"{int(case['run_seed'])}, episode {int(case['episode'])}, step {int(case['step'])}): action delta "
             f"{float(case['action_delta']):.3f}."
         )
-        return save_figure(figure, out_dir, key, title, caption)
+        return _save(figure, out_dir, key, title, caption, data)
 
 
 def case_context(data: ReportData, options: ReportOptions, out_dir: Path) -> FigureFile | Skipped:
@@ -212,4 +219,4 @@ def case_context(data: ReportData, options: ReportOptions, out_dir: Path) -> Fig
             "and the liquidity ratio the policy proposed vs the one executed after the Auditor; the star marks the "
             "selected step."
         )
-        return save_figure(figure, out_dir, key, title, caption)
+        return _save(figure, out_dir, key, title, caption, data)

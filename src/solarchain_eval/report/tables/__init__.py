@@ -14,6 +14,7 @@ from ..options import ReportOptions
 from .actions import action_distributions
 from .agentic import case_study, llm_operations, llm_triggers
 from .deltas import agentic_effects, agentic_paired_deltas, physics_ablation_deltas
+from .governance import governance_diagnostics
 from .inference import overlap_warning, robust_summary, statistical_tests
 from .model import ReportTable, Skipped, to_csv, to_html, to_latex, to_markdown
 from .performance import four_setting_aggregate, four_setting_learned, main_detail, main_performance
@@ -35,6 +36,7 @@ TABLE_BUILDERS: tuple[TableBuilder, ...] = (
     action_distributions,
     statistical_tests,
     robust_summary,
+    governance_diagnostics,
 )
 
 

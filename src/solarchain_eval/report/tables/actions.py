@@ -5,7 +5,7 @@ from __future__ import annotations
 import pandas as pd
 
 from ..loading import ReportData
-from ..naming import SETTINGS, alphabetical_order, is_learned, policy_label, setting_label
+from ..naming import SETTINGS, is_learned, paper_order, policy_label, setting_label
 from ..options import ReportOptions
 from .common import percentile_fields, size_fields, sizes_of
 from .model import Column, ReportTable, Skipped, basis_sentence, fixed, text
@@ -31,7 +31,7 @@ def action_distributions(data: ReportData, options: ReportOptions) -> ReportTabl
     rows = []
     for setting in SETTINGS:
         in_setting = steps[steps["setting"] == setting]
-        for policy in alphabetical_order(in_setting["policy"]):
+        for policy in paper_order(in_setting["policy"]):
             group = in_setting[in_setting["policy"] == policy]
             row = {"setting": setting_label(setting), "policy": policy_label(policy), **size_fields(group)}
             for name, _ in ACTION_COLUMNS:

@@ -7,7 +7,7 @@ import pandas as pd
 from ...experiments.rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS
 from ..casestudy import select_case
 from ..loading import ReportData
-from ..naming import AGENTIC_REWARD_LABELS, alphabetical_order, policy_label, setting_label
+from ..naming import AGENTIC_REWARD_LABELS, governance_layer, paper_order, policy_label, setting_label
 from ..options import ReportOptions
 from .common import agentic_rollouts, means, pooled_revision_rate, size_fields, sizes_of
 from .model import Column, ReportTable, Skipped, basis_sentence, cell, fixed, integer, text
@@ -17,7 +17,7 @@ TRIGGER_COLUMNS = (
     ("physics_trigger_rate", "Physics Trig."),
     ("gap_trigger_rate", "Gap Trig."),
     ("slippage_trigger_rate", "Slippage Trig."),
-    ("jitter_trigger_rate", "Jitter Trig."),
+    ("soft_trigger_rate", "Jitter Trig."),  # the soft trigger is the jitter condition κ > τκ
     ("plan_violation_threshold", "Viol. Thr."),
     ("plan_gap_threshold", "Gap Thr."),
     ("plan_jitter_threshold", "Jitter Thr."),
@@ -36,7 +36,7 @@ def _agentic_groups(data: ReportData, key: str, title: str):
     groups = []
     for setting in AGENTIC_SETTINGS:
         in_setting = frame[frame["setting"] == setting]
-        for policy in alphabetical_order(in_setting["policy"]):
+        for policy in paper_order(in_setting["policy"]):
             groups.append((setting, policy, in_setting[in_setting["policy"] == policy]))
     return groups
 
@@ -53,7 +53,8 @@ def _step_count(data: ReportData, setting: str, policy: str, episodes: int) -> t
 
 def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """Appendix: audit, revision and modification rates, mean action delta, not-triggered rate."""
-    title = "Detailed LLM governance operation rates"
+    layer = governance_layer(data.metrics, data.metadata)
+    title = f"Detailed governance operation rates ({layer})"
     groups = _agentic_groups(data, "llm_operations", title)
     if isinstance(groups, Skipped):
         return groups
@@ -70,9 +71,10 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
                 "audit_rate": float(group["audit_rate"].mean()),
                 "revision_given_audit": pooled_revision_rate(group),
                 **means(group, ["modification_rate", "mean_action_delta", "not_triggered_rate", "plan_validity_rate"]),
-                "llm_failure_count": int(group["llm_failure_count"].sum()),
+                "llm_retry_count": int(group["llm_retry_count"].sum()),
             }
         )
+        rows[-1].update(_llm_call_figures(data.logs, setting, policy))
     frame = pd.DataFrame(rows)
     columns = [
         Column("Setting", text("setting"), align="l"),
@@ -85,20 +87,27 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         Column("Not Triggered", cell("not_triggered_rate", 3)),
     ]
     notes = []
-    if (frame["llm_failure_count"] == 0).all():
-        notes.append("The LLM failure count is zero for every row and is therefore not shown.")
+    if (frame["llm_retry_count"] == 0).all():
+        notes.append("The LLM retry count is zero for every row and is therefore not shown.")
     else:
-        columns.append(Column("LLM Failures", integer("llm_failure_count")))
+        columns.append(Column("LLM Retries", integer("llm_retry_count")))
     if sources - {"agentic_logs.jsonl"}:
         notes.append("Steps count actions.csv rows where a group has no agentic log.")
+    if frame["llm_calls"].sum() > 0:
+        columns += LLM_CALL_COLUMNS
+        notes.append(
+            "LLM calls, latencies (median per call, seconds, as recorded) and tokens (mean per call) are read "
+            "from agentic_logs.jsonl; a call answered from the record/replay cache counts with the recorded "
+            "call's figures."
+        )
     return ReportTable(
         key="llm_operations",
         label="tab:app-llm-ops",
         title=title,
         caption=(
-            'Detailed LLM governance operation rates per agentic setting ("Main": RL+LLM; "No-physics": '
-            "RL+LLM no-physics) and policy. Rates are pooled over the group's governance steps; revision given "
-            "audit is revisions per audit."
+            f'Detailed governance operation rates of the {layer} per agentic setting ("Main": RL+LLM; '
+            '"No-physics": RL+LLM no-physics) and policy. Rates are pooled over the group\'s governance steps; '
+            "revision given audit is revisions per audit."
         ),
         columns=columns,
         data=frame,
@@ -107,9 +116,42 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
     )
 
 
+LLM_CALL_COLUMNS = [
+    Column("LLM Calls", integer("llm_calls")),
+    Column("Planner Median s", cell("planner_median_s", 2)),
+    Column("Auditor Median s", cell("auditor_median_s", 2)),
+    Column("Prompt Tokens", cell("mean_prompt_tokens", 0)),
+    Column("Completion Tokens", cell("mean_completion_tokens", 0)),
+]
+
+
+def _llm_call_figures(logs: pd.DataFrame, setting: str, policy: str) -> dict[str, float]:
+    """Model calls of a group (planner and auditor), their median latencies and mean tokens.
+
+    ``logs`` has the per-row call columns of :data:`~..loading.LLM_CALL_FIELDS` (NaN: no call).
+    """
+    group = logs[(logs["setting"] == setting) & (logs["policy"] == policy)]
+
+    def values(kind: str, name: str) -> pd.Series:
+        return pd.to_numeric(group[f"{kind}_{name}"], errors="coerce").dropna()
+
+    planner, auditor = values("planner", "latency_s"), values("auditor", "latency_s")
+    prompt = pd.concat([values("planner", "input_tokens"), values("auditor", "input_tokens")])
+    completion = pd.concat([values("planner", "output_tokens"), values("auditor", "output_tokens")])
+    nan = float("nan")
+    return {
+        "llm_calls": len(planner) + len(auditor),
+        "planner_median_s": float(planner.median()) if len(planner) else nan,
+        "auditor_median_s": float(auditor.median()) if len(auditor) else nan,
+        "mean_prompt_tokens": float(prompt.mean()) if len(prompt) else nan,
+        "mean_completion_tokens": float(completion.mean()) if len(completion) else nan,
+    }
+
+
 def llm_triggers(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """Appendix: post-hoc trigger rates and the Planner's mean thresholds."""
-    title = "Detailed LLM trigger diagnostics and mean Planner thresholds"
+    layer = governance_layer(data.metrics, data.metadata)
+    title = f"Detailed trigger diagnostics and mean Planner thresholds ({layer})"
     groups = _agentic_groups(data, "llm_triggers", title)
     if isinstance(groups, Skipped):
         return groups
@@ -130,7 +172,8 @@ def llm_triggers(data: ReportData, options: ReportOptions) -> ReportTable | Skip
         label="tab:app-llm-triggers",
         title=title,
         caption=(
-            "Detailed LLM post-hoc trigger diagnostics and mean Planner thresholds. Trigger columns report the "
+            f"Detailed post-hoc trigger diagnostics and mean Planner thresholds of the {layer}. Trigger columns "
+            "report the "
             "fraction of logged steps satisfying each trigger condition, audited or not."
         ),
         columns=columns,
@@ -146,7 +189,8 @@ def _action(values) -> str:
 
 def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """A representative audit trace from ``agentic_logs.jsonl`` (field/value rows)."""
-    title = "Representative LLM audit trace"
+    layer = governance_layer(data.metrics, data.metadata)
+    title = f"Representative audit trace ({layer})"
     if data.logs.empty:
         return Skipped("case_study", title, "the run has no agentic_logs.jsonl (no agentic setting)")
     case, rule = select_case(data.logs, options)
@@ -155,6 +199,7 @@ def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skippe
     reason = case["reason"] if isinstance(case["reason"], str) and case["reason"] else "(none logged)"
     fields = [
         ("policy / setting", f"{policy_label(case['policy'])} / {setting_label(case['setting'])}"),
+        ("Planner / auditor", layer),
         (
             "Episode and step",
             f"Episode {int(case['episode'])}, step {int(case['step'])}, hour {int(case['hour'])} "
@@ -176,7 +221,7 @@ def case_study(data: ReportData, options: ReportOptions) -> ReportTable | Skippe
         label="tab:app-case-study",
         title=title,
         caption=(
-            "Representative LLM audit trace selected from agentic_logs.jsonl. The row records the market "
+            f"Representative audit trace of the {layer}, selected from agentic_logs.jsonl. The row records the market "
             "context, proposed RL action, audited final action, and action delta."
         ),
         columns=[

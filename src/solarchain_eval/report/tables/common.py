@@ -7,28 +7,14 @@ from collections.abc import Iterable, Sequence
 import numpy as np
 import pandas as pd
 
+from ...records_schema import AGENTIC_NUMERIC_NAMES
 from ..loading import ReportData
 from ..naming import is_learned
 from ..statistics import SampleSize, mean_std, sample_size
 
-#: Columns a table must find in ``metrics.csv`` rows of an agentic setting (the agentic contract).
-AGENTIC_COLUMNS = (
-    "plan_validity_rate",
-    "audit_rate",
-    "revision_rate",
-    "modification_rate",
-    "mean_action_delta",
-    "llm_failure_count",
-    "not_triggered_rate",
-    "physics_trigger_rate",
-    "gap_trigger_rate",
-    "slippage_trigger_rate",
-    "jitter_trigger_rate",
-    "plan_violation_threshold",
-    "plan_gap_threshold",
-    "plan_jitter_threshold",
-    "plan_slippage_threshold",
-)
+#: Columns a table must find in ``metrics.csv`` rows of an agentic setting (the agentic contract,
+#: defined in :mod:`solarchain_eval.records_schema`).
+AGENTIC_COLUMNS = AGENTIC_NUMERIC_NAMES
 
 
 def size_fields(frame: pd.DataFrame) -> dict[str, int]:

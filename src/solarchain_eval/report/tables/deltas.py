@@ -17,8 +17,8 @@ from ..naming import (
     AGENTIC_BASE,
     AGENTIC_REWARD_LABELS,
     GOVERNANCE_LABELS,
-    alphabetical_order,
     learned_order,
+    paper_order,
     policy_label,
 )
 from ..options import ReportOptions
@@ -163,7 +163,7 @@ def agentic_effects(data: ReportData, options: ReportOptions) -> ReportTable | S
 
 
 def agentic_paired_deltas(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
-    """Appendix: RL+LLM minus raw RL for both rewards (policies A-Z)."""
+    """Appendix: RL+LLM minus raw RL for both rewards (policies in the report's one order)."""
     title = "Paired episode-level effects of the Planner/Auditor layer"
     pairs = [
         (AGENTIC_REWARD_LABELS[treated], base, treated)
@@ -174,7 +174,7 @@ def agentic_paired_deltas(data: ReportData, options: ReportOptions) -> ReportTab
         return Skipped(
             "agentic_paired_deltas", title, "needs an agentic setting (llm / llm_no_physics) and its raw-RL setting"
         )
-    rows, notes = _paired_rows(data, pairs, DETAIL_METRICS, alphabetical_order)
+    rows, notes = _paired_rows(data, pairs, DETAIL_METRICS, paper_order)
     if not rows:
         return Skipped("agentic_paired_deltas", title, "no policy was evaluated both with and without the LLM layer")
     frame = pd.DataFrame(rows).drop(columns="_policy")

@@ -54,42 +54,46 @@ def _comparisons(rollouts: pd.DataFrame) -> list[tuple[str, pd.DataFrame, pd.Dat
     ]
 
 
+def _comparison_row(
+    setting: str, label: str, a: pd.DataFrame, b: pd.DataFrame, unit: str, options: ReportOptions
+) -> dict:
+    """One comparison's figures: Welch test, paired cluster test, bootstrap Δ mean and P(A > B)."""
+    x, y = a["cumulative_reward"].to_numpy(float), b["cumulative_reward"].to_numpy(float)
+    welch = welch_test(x, y)
+    paired_p, shared = paired_cluster_test(x, a[unit], y, b[unit])
+    diff = bootstrap_mean_difference(x, a[unit], y, b[unit], **options.bootstrap())
+    poi = bootstrap_probability_of_improvement(x, a[unit], y, b[unit], **options.bootstrap())
+    return {
+        "setting": setting_label(setting),
+        "comparison": label,
+        **size_fields(pd.concat([a, b])),
+        "n_a": welch.n_a,
+        "n_b": welch.n_b,
+        "mean_a": welch.mean_a,
+        "mean_b": welch.mean_b,
+        "difference": diff.estimate,
+        "difference_low": diff.low,
+        "difference_high": diff.high,
+        "welch_t": welch.t_statistic,
+        "welch_dof": welch.dof,
+        "welch_p": welch.p_value,
+        "paired_cluster_p": paired_p,
+        "shared_clusters": shared,
+        "probability_of_improvement": poi.estimate,
+        "probability_of_improvement_low": poi.low,
+        "probability_of_improvement_high": poi.high,
+    }
+
+
 def statistical_tests(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """Cumulative-reward comparisons: Welch (as the paper), paired cluster test, bootstrap CI, P(A > B)."""
     title = "Statistical tests of cumulative reward"
     unit = options.cluster_by
-    rows = []
-    for setting in data.settings:
-        rollouts = data.rollouts(setting)
-        for label, a, b in _comparisons(rollouts):
-            x, y = a["cumulative_reward"].to_numpy(float), b["cumulative_reward"].to_numpy(float)
-            welch = welch_test(x, y)
-            paired_p, shared = paired_cluster_test(x, a[unit], y, b[unit])
-            diff = bootstrap_mean_difference(x, a[unit], y, b[unit], **options.bootstrap())
-            poi = bootstrap_probability_of_improvement(x, a[unit], y, b[unit], **options.bootstrap())
-            both = pd.concat([a, b])
-            rows.append(
-                {
-                    "setting": setting_label(setting),
-                    "comparison": label,
-                    **size_fields(both),
-                    "n_a": welch.n_a,
-                    "n_b": welch.n_b,
-                    "mean_a": welch.mean_a,
-                    "mean_b": welch.mean_b,
-                    "difference": diff.estimate,
-                    "difference_low": diff.low,
-                    "difference_high": diff.high,
-                    "welch_t": welch.t_statistic,
-                    "welch_dof": welch.dof,
-                    "welch_p": welch.p_value,
-                    "paired_cluster_p": paired_p,
-                    "shared_clusters": shared,
-                    "probability_of_improvement": poi.estimate,
-                    "probability_of_improvement_low": poi.low,
-                    "probability_of_improvement_high": poi.high,
-                }
-            )
+    rows = [
+        _comparison_row(setting, label, a, b, unit, options)
+        for setting in data.settings
+        for label, a, b in _comparisons(data.rollouts(setting))
+    ]
     if not rows:
         return Skipped("statistical_tests", title, "no setting has two or more policies to compare")
     frame = pd.DataFrame(rows)

@@ -153,6 +153,12 @@ def _range(values: Sequence[int]) -> str:
     return str(low) if low == high else f"{low}–{high}"
 
 
+#: Below this many distinct start days behind a row, every statistic carries a visible caveat: the
+#: cluster bootstrap resamples start days, and a handful of clusters cannot support an interval.
+SMALL_SAMPLE_START_DAYS = 5
+SMALL_SAMPLE_CAVEAT = "Small sample"
+
+
 def basis_sentence(sizes: Sequence[SampleSize], unit: str) -> str:
     """State n and the distinct episodes behind each row, flagging overlap.
 
@@ -170,7 +176,13 @@ def basis_sentence(sizes: Sequence[SampleSize], unit: str) -> str:
     overlap = unit != "steps" and any(s.n > s.start_days for s in sizes)
     if overlap:
         sentence += " (rollouts overlap: rows are not independent samples)"
-    return sentence + "."
+    sentence += "."
+    if min(days) < SMALL_SAMPLE_START_DAYS:
+        sentence += (
+            f" {SMALL_SAMPLE_CAVEAT}: as few as {min(days)} distinct start day(s) behind a row; standard "
+            "deviations, intervals and p-values rest on too few independent episodes to be trusted."
+        )
+    return sentence
 
 
 # ----------------------------------------------------------------------------- writers
@@ -207,7 +219,8 @@ def to_markdown(table: ReportTable, *, heading: bool = True) -> str:
     lines.append("|" + "|".join(aligns.get(c.align, ":--") for c in table.columns) + "|")
     for row in table.cells():
         lines.append("| " + " | ".join(value.replace("|", "\\|") for value in row) + " |")
-    lines += ["", table.caption, "", f"*{table.basis}*"]
+    basis, caveat = _split_caveat(table.basis)
+    lines += ["", table.caption, "", f"*{basis}*"] + ([f"**{caveat}**"] if caveat else [])
     lines += [f"- Note: {note}" for note in table.notes]
     return "\n".join(lines) + "\n"
 
@@ -240,6 +253,18 @@ def to_csv(table: ReportTable) -> str:
     return buffer.getvalue()
 
 
+def _split_caveat(basis: str) -> tuple[str, str]:
+    """The basis sentence and its small-sample caveat ("" when there is none), to show the caveat apart."""
+    at = basis.find(f" {SMALL_SAMPLE_CAVEAT}:")
+    return (basis, "") if at < 0 else (basis[:at], basis[at + 1 :])
+
+
+def _html_basis(basis: str) -> str:
+    text, caveat = _split_caveat(basis)
+    shown = f'<p class="basis">{html.escape(text)}</p>\n'
+    return shown + (f'<p class="caveat">{html.escape(caveat)}</p>\n' if caveat else "")
+
+
 def to_html(table: ReportTable) -> str:
     """An HTML ``<table>`` with caption, basis and notes (no scripts, no external resources)."""
     head = "".join(f"<th>{html.escape(c.header)}</th>" for c in table.columns)
@@ -251,7 +276,7 @@ def to_html(table: ReportTable) -> str:
         f'<figure class="table" id="{html.escape(table.key)}">\n'
         f"<figcaption><strong>{html.escape(table.title)}.</strong> {html.escape(table.caption)}</figcaption>\n"
         f"<table>\n<thead><tr>{head}</tr></thead>\n<tbody>\n{body}</tbody>\n</table>\n"
-        f'<p class="basis">{html.escape(table.basis)}</p>\n'
+        + _html_basis(table.basis)
         + (f'<ul class="notes">{notes}</ul>\n' if notes else "")
         + "</figure>\n"
     )

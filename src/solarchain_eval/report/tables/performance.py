@@ -6,7 +6,7 @@ import pandas as pd
 
 from ...experiments.rollout import SETTING_MAIN
 from ..loading import ReportData
-from ..naming import GOVERNANCE_LABELS, GOVERNANCE_ORDER, alphabetical_order, learned_order, paper_order, policy_label
+from ..naming import GOVERNANCE_LABELS, GOVERNANCE_ORDER, learned_order, paper_order, policy_label
 from ..options import ReportOptions
 from .common import learned_rollouts, means, moments, size_fields, sizes_of
 from .model import Column, ReportTable, Skipped, basis_sentence, cell, cell_pm, integer, span, text
@@ -64,13 +64,13 @@ def main_performance(data: ReportData, options: ReportOptions) -> ReportTable | 
 
 
 def main_detail(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
-    """Appendix detail of the main setting: reward min/max and the violation range (policies A-Z)."""
+    """Appendix detail of the main setting: reward min/max and the violation range (policies in the report's one order)."""
     title = "Detailed main-setting episode summaries"
     rollouts = data.rollouts(SETTING_MAIN)
     if rollouts.empty:
         return Skipped("main_detail", title, NO_MAIN)
     rows = []
-    for policy in alphabetical_order(rollouts["policy"]):
+    for policy in paper_order(rollouts["policy"]):
         group = rollouts[rollouts["policy"] == policy]
         stats = moments(group, ["cumulative_reward", "physics_violation_rate"], extremes=True)
         stats |= means(group, ["episode_volume", "artificial_liquidity_MWh", "mean_slippage", "action_jitter"])

@@ -1,0 +1,318 @@
+"""``solarchain-eval governance``: the governance leaderboard (docs/governance.md#leaderboard)."""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+import typer
+from rich.table import Table
+
+from ..agentic.calibrated import DEFAULT_TARGET_AUDIT_RATE
+from ..agentic.controls import DEFAULT_ORACLE_REWARD_LOSS, TRIGGER_SETS, SchedulerControls
+from ..agentic.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ..agentic.errors import LLMConfigError
+from ..agentic.request import GovernanceRequest
+from ..config import BenchmarkConfig, load_config
+from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS
+from ..experiments.governance import (
+    GOVERNANCE_SETTINGS,
+    Combination,
+    GovernanceSpec,
+    leaderboard_frames,
+    run_governance,
+)
+from ..experiments.rundir import RunDirWriter, check_target
+from ..io import atomic_write_csv, atomic_write_json, atomic_write_text, sha256_file
+from ..policies.registry import known_policies, parse_policy_list
+from ..policies.sb3 import parse_models
+from . import agentic as agentic_cli
+from . import app
+from .agentic import GOVERNANCE
+from .common import (
+    CliError,
+    cli_error,
+    console,
+    invoked_command,
+    parse_seeds,
+    progress_bar,
+    reports_errors,
+    say,
+    show_files,
+)
+from .evaluate import OVERWRITE
+
+LEADERBOARD = "leaderboard"
+BY_POLICY = "leaderboard_by_policy"
+METADATA = "governance_metadata.json"
+#: The Planner/Auditor options this command offers as they are: the LLM endpoint and its cache
+#: (planners, auditors and the model come from --planner/--auditors; diagnostics are always on).
+LLM_FIELDS = (
+    "llm_backend",
+    "llm_api",
+    "llm_base_url",
+    "llm_temperature",
+    "llm_timeout",
+    "llm_max_retries",
+    "llm_max_output_tokens",
+    "llm_cache",
+    "llm_cache_mode",
+)
+
+
+def _split(text: str, what: str) -> list[str]:
+    items = list(dict.fromkeys(part.strip() for part in text.split(",") if part.strip()))
+    if not items:
+        raise CliError(f"no {what} given")
+    return items
+
+
+def _kind(name: str) -> tuple[str, str | None]:
+    """``llm:MODEL`` -> ("llm", MODEL); anything else -> (name, None)."""
+    if name.startswith("llm:"):
+        model = name[4:].strip()
+        if not model:
+            raise CliError(f"'{name}': give the model after 'llm:'")
+        return "llm", model
+    return name, None
+
+
+def _combination(
+    planner: str, auditor: str, governance: GovernanceRequest, extra: dict[str, Any]
+) -> tuple[Combination, GovernanceRequest]:
+    """The combination of ``planner`` and ``auditor`` (``llm:MODEL`` names allowed) and the request behind it."""
+    planner_kind, planner_model = _kind(planner)
+    auditor_kind, auditor_model = _kind(auditor)
+    if planner_model and auditor_model and planner_model != auditor_model:
+        raise CliError(f"planner {planner} and auditor {auditor} name different models; one run uses one model")
+    request = dataclasses.replace(
+        governance,
+        agentic="planner_auditor",
+        planner=planner_kind,
+        auditor=auditor_kind,
+        llm_model=planner_model or auditor_model or governance.llm_model,
+    )
+    options = agentic_cli.resolve(request)
+    assert options is not None
+    try:
+        options = dataclasses.replace(options, **extra)
+    except LLMConfigError as error:
+        raise cli_error(error) from None
+    return Combination(planner, auditor, options), request
+
+
+def _leaderboard_table(frame: pd.DataFrame, title: str) -> Table:
+    table = Table(title=title, title_justify="left")
+    columns = (
+        ("#", "rank", "{:.0f}"),
+        ("planner", "planner", "{}"),
+        ("auditor", "auditor", "{}"),
+        ("setting", "setting", "{}"),
+        ("audit rate", "audit_rate", "{:.3f}"),
+        ("precision", "precision", "{:.3f}"),
+        ("recall", "recall", "{:.3f}"),
+        ("Δcost/step", "delta_cost_per_step", "{:+.5f}"),
+        ("Δreward/step", "delta_reward_per_step", "{:+.5f}"),
+        ("Δart.liq/step", "delta_artificial_liquidity_per_step", "{:+.6f}"),
+        ("Δcost vs none", "total_delta_cost_per_step", "{:+.5f}"),
+        ("calls", "llm_calls", "{:.0f}"),
+        ("tokens", "llm_tokens", "{:.0f}"),
+        ("latency s", "llm_mean_latency_s", "{:.3f}"),
+    )
+    for header, _, _ in columns:
+        table.add_column(header, justify="left" if header in ("planner", "auditor", "setting") else "right")
+    for row in frame.to_dict("records"):
+        table.add_row(*(fmt.format(row[key]) for _, key, fmt in columns))
+    return table
+
+
+def _write_outputs(staging: Path, runs, threshold: float, resamples: int) -> tuple[dict[str, Path], pd.DataFrame]:
+    """Ranked tables (CSV, Markdown) and figures of the leaderboard into ``staging``; the files
+    and the ranked leaderboard frame."""
+    from ..report.figures.governance import precision_recall_figure, revision_scatter_figure
+    from ..report.figures.style import FigureFile
+    from ..report.governance import audit_quality, step_frame
+    from ..report.tables.governance import quality_table, rank
+    from ..report.tables.model import to_markdown
+
+    diagnostics, usage = leaderboard_frames(runs)
+    pooled = audit_quality(
+        diagnostics, threshold=threshold, group_by=("planner", "auditor", "setting"), n_resamples=resamples
+    )
+    pooled = rank(pooled.merge(usage, on=["planner", "auditor", "setting"], how="left"))
+    detail = rank(audit_quality(diagnostics, threshold=threshold, n_resamples=resamples))
+    files: dict[str, Path] = {}
+    for key, frame, title, usage_columns in (
+        (LEADERBOARD, pooled, "Governance leaderboard", True),
+        (BY_POLICY, detail, "Governance leaderboard per policy", False),
+    ):
+        table = quality_table(frame, key=key, title=title, usage=usage_columns, threshold=threshold)
+        files[f"{key}.csv"] = atomic_write_csv(staging / f"{key}.csv", frame)
+        files[f"{key}.md"] = atomic_write_text(staging / f"{key}.md", to_markdown(table))
+    figures = staging / "figures"
+    made = [
+        precision_recall_figure(
+            audit_quality(diagnostics, threshold=threshold, group_by=("planner", "auditor"), n_resamples=resamples),
+            figures,
+        ),
+        revision_scatter_figure(step_frame(diagnostics, threshold), diagnostics, figures),
+    ]
+    for figure in made:
+        if isinstance(figure, FigureFile):  # the revision scatter is skipped when nothing was revised
+            files[f"figures/{figure.png.name}"] = figure.png
+            files[f"figures/{figure.svg.name}"] = figure.svg
+    return files, pooled
+
+
+@app.command("governance")
+@reports_errors
+@agentic_cli.governance_options(only=LLM_FIELDS)
+def governance(
+    data: Path | None = typer.Option(
+        None, "--data", help="Dataset directory (default: the config's data_dir, else the embedded default dataset)."
+    ),
+    auditors: str = typer.Option(
+        "rule,approve-only,random,oracle",
+        "--auditors",
+        help="Comma-separated auditors: rule, approve-only, always-audit, random (seeded; as many audits per "
+        "episode as the rule auditor of the same planner), oracle (least cost at bounded reward loss), llm:MODEL "
+        "(an OpenAI-compatible endpoint, see the LLM options).",
+    ),
+    planner: str = typer.Option(
+        "rule", "--planner", help="Comma-separated planners: rule, calibrated-rule, default, llm:MODEL."
+    ),
+    policies: str = typer.Option(
+        "static,random,myopic", help=f"Comma-separated policies ({', '.join(known_policies())})."
+    ),
+    models: list[str] | None = typer.Option(
+        None, "--models", metavar="DIR|NAME=PATH", help="Trained models: a directory, or NAME=PATH (repeatable)."
+    ),
+    seeds: str = typer.Option(",".join(str(s) for s in PAPER_SEEDS), help="Comma-separated run seeds."),
+    episodes: int = typer.Option(PAPER_EPISODES, min=1, help="Episodes per run seed."),
+    settings: str = typer.Option("llm", help=f"Comma-separated agentic settings ({', '.join(GOVERNANCE_SETTINGS)})."),
+    unsafe_threshold: float = typer.Option(
+        DEFAULT_UNSAFE_THRESHOLD, min=0.0, help="A step is unsafe when its proposal's avoidable cost exceeds this."
+    ),
+    oracle_reward_loss: float = typer.Option(
+        DEFAULT_ORACLE_REWARD_LOSS, min=0.0, help="The oracle's largest reward loss against ā per audited step."
+    ),
+    target_audit_rate: float = typer.Option(
+        DEFAULT_TARGET_AUDIT_RATE, min=0.0, max=1.0, help="The calibrated-rule planner's target audit rate."
+    ),
+    triggers: str = typer.Option(
+        "all",
+        help=f"Comma-separated trigger ablations ({', '.join(TRIGGER_SETS)}): each one is a further planner variant, "
+        "labelled PLANNER[TRIGGERS] (all: as planned).",
+    ),
+    max_audits: int | None = typer.Option(None, min=1, help="Override the plan's max audits per episode."),
+    cooldown: int | None = typer.Option(None, min=0, help="Override the plan's cooldown (steps)."),
+    random_seed: int = typer.Option(0, help="Seed of the random auditor's choice of steps."),
+    resamples: int = typer.Option(2000, min=100, help="Bootstrap resamples per interval."),
+    out: Path = typer.Option(..., "--out", help="Leaderboard directory (published as a whole)."),
+    config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
+    governance: GovernanceRequest = GOVERNANCE,
+    overwrite: bool = OVERWRITE,
+) -> None:
+    """Score planners and auditors against counterfactual ground truth.
+
+    Every planner × auditor combination governs the same policies over the same seeds and
+    episodes, with counterfactual diagnostics on. Writes runs/<setting>/<planner>--<auditor>/ (each
+    a full run directory with governance_diagnostics.csv), leaderboard.csv/.md ranked by Δcost per
+    step (audit rate, precision, recall, Δcost, Δreward, Δartificial liquidity with cluster-bootstrap
+    intervals over start days; LLM calls, tokens, latency), leaderboard_by_policy.csv/.md and
+    figures/ (precision–recall per auditor; Δcost vs Δreward per revision). See docs/governance.md.
+    """
+    cfg = load_config(config) if config else BenchmarkConfig()
+    check_target(out, overwrite=overwrite)
+    try:
+        names = parse_policy_list(policies)
+    except ValueError as error:
+        raise cli_error(error) from None
+    chosen_settings = _split(settings, "settings")
+    unknown = [s for s in chosen_settings if s not in GOVERNANCE_SETTINGS]
+    if unknown:
+        raise CliError(
+            f"--settings: unknown setting(s) {', '.join(unknown)} (choose from {', '.join(GOVERNANCE_SETTINGS)})"
+        )
+    combinations = []
+    llm_request: GovernanceRequest | None = None  # the request of the first combination that calls an LLM
+    for trigger_set in _split(triggers, "trigger sets"):
+        try:
+            controls = SchedulerControls(triggers=trigger_set, max_audits=max_audits, cooldown_steps=cooldown)
+        except LLMConfigError as error:
+            raise cli_error(error) from None
+        extra = {
+            "controls": controls,
+            "target_audit_rate": target_audit_rate,
+            "oracle_reward_loss": oracle_reward_loss,
+            "random_seed": random_seed,
+        }
+        for p in _split(planner, "planners"):
+            for a in _split(auditors, "auditors"):
+                combination, request = _combination(p, a, governance, extra)
+                if llm_request is None and combination.options.uses_llm:
+                    llm_request = request
+                if trigger_set != "all":
+                    combination = dataclasses.replace(combination, planner_label=f"{p}[{trigger_set}]")
+                combinations.append(combination)
+    spec = GovernanceSpec(
+        policies=names,
+        combinations=combinations,
+        settings=chosen_settings,
+        run_seeds=parse_seeds(seeds),
+        episodes=episodes,
+        data_dir=data,
+        config=cfg,
+        models=parse_models(models or []),
+    )
+    _check_models(spec, cfg)
+    total = len(combinations) * len(chosen_settings) * len(names) * len(spec.run_seeds) * episodes
+    llm_options = next((c.options for c in combinations if c.options.uses_llm), None)
+    with (
+        RunDirWriter(out, overwrite=overwrite) as writer,
+        agentic_cli.serving(llm_request or governance, llm_options),
+    ):
+        assert writer.staging is not None
+        with progress_bar("governing", total) as advance:
+            runs = run_governance(
+                spec,
+                writer.staging,
+                on_episode=lambda _r: advance(1),
+                on_combination=lambda c, s: say(f"{s}: {c.planner_label} planner, {c.auditor_label} auditor"),
+                command=invoked_command(),
+            )
+        files, pooled = _write_outputs(writer.staging, runs, unsafe_threshold, resamples)
+        metadata = {
+            "complete": True,
+            "command": invoked_command(),
+            "unsafe_threshold": unsafe_threshold,
+            "combinations": [
+                {"planner": c.planner_label, "auditor": c.auditor_label, "options": c.options.describe()}
+                for c in (run.combination for run in runs)
+            ],
+            "settings": chosen_settings,
+            "policies": names,
+            "files": {name: sha256_file(path) for name, path in sorted(files.items())},
+        }
+        atomic_write_json(writer.staging / METADATA, json.loads(json.dumps(metadata, default=str)))
+        writer.publish()
+    console.print(
+        _leaderboard_table(
+            pooled, f"Governance leaderboard ({', '.join(names)}; unsafe: avoidable cost > {unsafe_threshold:g})"
+        )
+    )
+    show_files({name: out / name for name in [*files, METADATA]}, f"wrote the leaderboard to {out}")
+
+
+def _check_models(spec: GovernanceSpec, cfg: BenchmarkConfig) -> None:
+    """Unknown policies or missing models fail before any work."""
+    from ..policies.registry import make_policy
+
+    try:
+        for name in spec.policies:
+            make_policy(name, cfg, spec.models)
+    except (ValueError, FileNotFoundError) as error:
+        raise cli_error(error) from None

@@ -1,0 +1,210 @@
+"""The governance leaderboard runs (docs/governance.md#leaderboard).
+
+Every (planner, auditor) combination governs the same policies over the same run seeds and
+episodes, in each asked setting, with counterfactual diagnostics on. Each combination is one run
+directory (``runs/<setting>/<planner>--<auditor>/``, written by :func:`run_evaluation`), all of
+them inside one leaderboard root published as a whole by :class:`~.rundir.RunDirWriter`; the
+caller (``solarchain-eval governance``) adds the ranked table and figures before publication.
+
+The ``random`` auditor matches the audits of a reference combination, episode by episode: the
+``rule`` auditor of the same planner, scheduler controls and setting when it is asked for, else
+the first other one.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import statistics
+import tempfile
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import pandas as pd
+
+from ..agentic.build import AgenticOptions
+from ..agentic.policy import EXTRA_LOG_KEY
+from ..config import BenchmarkConfig
+from .evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, run_evaluation
+from .records import diagnostics_frame
+from .rollout import EpisodeResult
+from .settings import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS, setting_has_physics_penalty
+
+RUNS_DIR = "runs"
+GOVERNANCE_SETTINGS = (SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS)
+
+
+@dataclass(frozen=True)
+class Combination:
+    """One leaderboard entry: display labels and the layer's options."""
+
+    planner_label: str
+    auditor_label: str
+    options: AgenticOptions
+
+    @property
+    def slug(self) -> str:
+        name = f"{self.planner_label}--{self.auditor_label}"
+        return "".join(c if c.isalnum() or c in "-_." else "_" for c in name)
+
+
+@dataclass
+class GovernanceSpec:
+    """What the leaderboard evaluates (policies, seeds and episodes as for ``evaluate``)."""
+
+    policies: Sequence[str]
+    combinations: Sequence[Combination]
+    settings: Sequence[str] = (SETTING_AGENTIC,)
+    run_seeds: Sequence[int] = PAPER_SEEDS
+    episodes: int = PAPER_EPISODES
+    data_dir: Path | None = None
+    config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    models: dict[str, Path] = field(default_factory=dict)
+
+
+@dataclass
+class CombinationRun:
+    """A finished combination in one setting."""
+
+    combination: Combination
+    setting: str
+    run_dir: Path
+    results: list[EpisodeResult]
+    wall_s: float
+
+
+def audit_counts(results: Sequence[EpisodeResult]) -> dict[tuple[str, int, int], int]:
+    """Audited steps per (policy, run seed, episode)."""
+    return {
+        (r.policy, int(r.run_seed), int(r.episode)): sum(1 for row in r.extras[EXTRA_LOG_KEY] if row["audited"])
+        for r in results
+    }
+
+
+def _ordered(combinations: Sequence[Combination]) -> list[Combination]:
+    """Random auditors last, so their reference has run; otherwise the order given."""
+    return sorted(combinations, key=lambda c: c.options.auditor == "random")
+
+
+def _reference(done: Sequence[CombinationRun], combination: Combination, setting: str) -> CombinationRun | None:
+    candidates = [
+        run
+        for run in done
+        if run.setting == setting
+        and run.combination.options.planner == combination.options.planner
+        and run.combination.options.controls == combination.options.controls
+        and run.combination.options.auditor != "random"
+    ]
+    preferred = [run for run in candidates if run.combination.options.auditor == "rule"]
+    return (preferred or candidates or [None])[0]
+
+
+def run_governance(
+    spec: GovernanceSpec,
+    root: Path,
+    *,
+    on_episode: Callable[[EpisodeResult], None] | None = None,
+    on_combination: Callable[[Combination, str], None] | None = None,
+    command: Sequence[str] | None = None,
+) -> list[CombinationRun]:
+    """Evaluate every combination in every setting into ``root/runs/<setting>/<slug>``."""
+    done: list[CombinationRun] = []
+    for setting in spec.settings:
+        for combination in _ordered(spec.combinations):
+            options = dataclasses.replace(combination.options, diagnostics=True)
+            if options.auditor == "random" and options.random_audit_rate is None:
+                reference = _reference(done, combination, setting)
+                if reference is not None:
+                    options = dataclasses.replace(options, random_audit_counts=audit_counts(reference.results))
+            if on_combination is not None:
+                on_combination(combination, setting)
+            evaluation = EvaluationSpec(
+                policies=list(spec.policies),
+                run_seeds=spec.run_seeds,
+                episodes=spec.episodes,
+                data_dir=spec.data_dir,
+                no_physics_penalty=not setting_has_physics_penalty(setting),
+                config=spec.config,
+                models=spec.models,
+                agentic=options,
+            )
+            run_dir = Path(root) / RUNS_DIR / setting / combination.slug
+            outcome = run_evaluation(evaluation, run_dir, on_episode=on_episode, command=command)
+            used = dataclasses.replace(combination, options=options)
+            done.append(CombinationRun(used, setting, run_dir, outcome.results, outcome.wall_s))
+    return done
+
+
+def leaderboard_frames(runs: Sequence[CombinationRun]) -> tuple[pd.DataFrame, pd.DataFrame]:
+    """(diagnostics of every run with display labels, LLM usage per combination and setting)."""
+    frames, usage = [], []
+    for run in runs:
+        frame = diagnostics_frame(run.results)
+        if frame is None:
+            continue
+        frames.append(frame.assign(planner=run.combination.planner_label, auditor=run.combination.auditor_label))
+        calls = tokens = 0
+        latency = 0.0
+        for r in run.results:
+            for row in r.extras.get(EXTRA_LOG_KEY, ()):
+                meta = row.get("llm")
+                if meta:
+                    calls += 1
+                    tokens += int(meta.get("input_tokens") or 0) + int(meta.get("output_tokens") or 0)
+                    latency += float(meta.get("latency_s") or 0.0)
+        usage.append(
+            {
+                "planner": run.combination.planner_label,
+                "auditor": run.combination.auditor_label,
+                "setting": run.setting,
+                "llm_calls": calls,
+                "llm_tokens": tokens,
+                "llm_mean_latency_s": latency / calls if calls else 0.0,
+                "wall_s": run.wall_s,
+            }
+        )
+    diagnostics = pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+    return diagnostics, pd.DataFrame(usage)
+
+
+@dataclass(frozen=True)
+class Overhead:
+    """Wall-clock seconds of the same agentic evaluation without and with diagnostics."""
+
+    without_s: list[float]
+    with_s: list[float]
+
+    @property
+    def ratio(self) -> float:
+        """Median with / median without."""
+        return float(statistics.median(self.with_s) / statistics.median(self.without_s))
+
+
+def diagnostics_overhead(
+    data_dir: Path,
+    *,
+    policies: Sequence[str] = ("static", "random", "myopic"),
+    run_seeds: Sequence[int] = (20260511,),
+    episodes: int = 30,
+    repeats: int = 3,
+    options: AgenticOptions | None = None,
+) -> Overhead:
+    """Time ``evaluate`` (files included) behind the layer, with and without diagnostics,
+    alternating the two so drifts of a shared machine hit both alike."""
+    base = options if options is not None else AgenticOptions()
+    times: dict[bool, list[float]] = {False: [], True: []}
+    with tempfile.TemporaryDirectory(prefix="solarchain-bench-diagnostics-") as tmp:
+        for repeat in range(repeats):
+            for diagnostics in (False, True):
+                spec = EvaluationSpec(
+                    policies=list(policies),
+                    run_seeds=run_seeds,
+                    episodes=episodes,
+                    data_dir=Path(data_dir),
+                    agentic=dataclasses.replace(base, diagnostics=diagnostics),
+                )
+                started = time.perf_counter()
+                run_evaluation(spec, Path(tmp) / f"{repeat}-{int(diagnostics)}", command=["bench"])
+                times[diagnostics].append(time.perf_counter() - started)
+    return Overhead(times[False], times[True])

@@ -1,0 +1,47 @@
+"""Library errors name options by field; the command line shows the same message with flags."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import pytest
+from typer.testing import CliRunner
+
+from solarchain_eval.agentic.request import GovernanceRequest, GovernanceRequestError
+from solarchain_eval.cli import app
+from solarchain_eval.experiments.rundir import RunDirError, check_target
+from solarchain_eval.option_errors import NamesOptions, flag_of
+
+
+def test_field_names_in_the_library_flags_on_the_command_line(tmp_path):
+    target = tmp_path / "{opt_x} {0}"  # braces in a value are shown as they are, never parsed
+    target.write_text("a file")
+    with pytest.raises(RunDirError) as caught:
+        check_target(target)
+    assert str(caught.value) == f"run_dir {target} is an existing file, not a run directory"
+    assert caught.value.message_for({"run_dir": "--out"}.__getitem__).startswith(f"--out {target} is")
+
+
+def test_governance_request_errors_name_fields():
+    with pytest.raises(GovernanceRequestError) as caught:
+        GovernanceRequest(planner="llm").resolve()
+    assert str(caught.value) == "planner/auditor need agentic planner_auditor"
+    assert caught.value.message_for() == "--planner/--auditor need --agentic planner_auditor"
+    with pytest.raises(GovernanceRequestError, match="^llm_cache_mode replay needs llm_cache DIR$"):
+        GovernanceRequest(
+            agentic="planner_auditor", planner="llm", llm_api="chat", llm_model="m", llm_cache_mode="replay"
+        ).resolve()
+
+
+def test_plain_messages_stay_plain():
+    error = RunDirError("a {plain} message")
+    assert isinstance(error, NamesOptions) and error.message_for() == "a {plain} message"
+    assert flag_of("llm_max_output_tokens") == "--llm-max-output-tokens"
+
+
+def test_cli_shows_flags(tmp_path: Path):
+    out = tmp_path / "taken"
+    out.write_text("x")
+    result = CliRunner().invoke(app, ["evaluate", "--out", str(out), "--episodes", "1"])
+    assert result.exit_code == 2
+    assert f"--out {out} is an existing file" in " ".join(result.output.split())
