@@ -257,3 +257,17 @@ axes:
         assert len(nodes) == cities * per_city and nodes["city"].nunique() == cities
         assert json.loads((data_dir / "manifest.json").read_text())["weather_source"].startswith("synthetic")
     assert len(pd.read_csv(tmp_path / "out" / "results.csv")) == 4
+
+
+def test_a_busy_sweep_root_is_a_one_line_error_naming_the_sweep(tmp_path):
+    """A second run on a locked root exits 2 before any work, and names the command that runs there."""
+    import fcntl
+
+    root = tmp_path / "out"
+    root.mkdir()
+    with open(root / ".lock", "a+") as handle:
+        fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        result = CliRunner().invoke(app, ["sweep", str(_write(tmp_path)), "--out", str(root)])
+    assert result.exit_code == 2, result.output
+    assert "another 'sweep' run is using" in result.output
+    assert sorted(p.name for p in root.iterdir()) == [".lock"]  # nothing written
