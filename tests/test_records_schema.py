@@ -29,6 +29,7 @@ from solarchain_eval.records_schema import (
     METRIC_NAMES,
     REMOVED_COLUMNS,
     RENAMED_COLUMNS,
+    SWEEP_RESULT_NAMES,
     upgrade_columns,
 )
 from solarchain_eval.report.loading import ACTION_KEYS, CITY_HOUR_KEYS, LOG_KEYS, load_report_data
@@ -97,7 +98,7 @@ def test_report_reads_only_schema_columns():
     assert set(REPORT_AGENTIC_COLUMNS) <= set(AGENTIC_NUMERIC_NAMES)
     assert {name for name, _ in agentic_tables.TRIGGER_COLUMNS} <= set(AGENTIC_NUMERIC_NAMES)
     known = set(ALL_COLUMNS) | set(LOG_KEYS) | set(STEP_INFO_KEYS) | set(ACTION_KEYS) | set(CITY_HOUR_KEYS)
-    known |= set(DIAGNOSTIC_NAMES)
+    known |= set(DIAGNOSTIC_NAMES) | set(SWEEP_RESULT_NAMES)
     unknown = []
     for path in sorted([*(PACKAGE / "report").rglob("*.py"), PACKAGE / "cli" / "agentic.py"]):
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
@@ -109,6 +110,14 @@ def test_report_reads_only_schema_columns():
             elif COLUMN_LIKE.match(name) and name not in known and name not in REPORT_DERIVED:
                 unknown.append(f"{path.name}:{node.lineno} reads {name!r}, which no record schema defines")
     assert not unknown, "\n".join(unknown)
+
+
+def test_sensitivity_report_reads_schema_columns():
+    """The sweep's sensitivity metrics are metrics.csv columns or the columns results.csv adds."""
+    from solarchain_eval.report.sensitivity import SENSITIVITY_METRICS
+
+    assert "episode_cost" in SWEEP_RESULT_NAMES
+    assert set(SENSITIVITY_METRICS) <= set(METRIC_NAMES) | set(SWEEP_RESULT_NAMES)
 
 
 def test_report_reads_schema_1_files(tmp_path):

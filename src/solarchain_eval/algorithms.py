@@ -13,6 +13,12 @@ from .option_errors import NamesOptions
 ALGOS = ("ppo", "sac", "dqn")
 #: Algorithm -> the env action mode it trains and acts in.
 ACTION_MODES = {"ppo": "continuous", "sac": "continuous", "dqn": "discrete"}
+#: Everything ``train`` accepts: the paper's algorithms plus the opt-in PPO-Lagrangian
+#: (docs/training.md#ppo-lagrangian; its model.zip is a plain PPO model).
+TRAINABLE_ACTION_MODES = {**ACTION_MODES, "ppo-lag": "continuous"}
+TRAINABLE_ALGOS = tuple(TRAINABLE_ACTION_MODES)
+#: Trainable algorithms a grid runs only when asked for (``paper --extra-policies``, a sweep).
+OPT_IN_ALGOS = tuple(a for a in TRAINABLE_ALGOS if a not in ALGOS)
 MODEL_FILE = "model.zip"
 TRAIN_CONFIG_FILE = "train_config.json"
 
@@ -22,10 +28,10 @@ class TrainingError(NamesOptions, ValueError):
 
 
 def check_algo(algo: str) -> str:
-    """``algo`` normalised (stripped, lower case); a :class:`TrainingError` if it is not in :data:`ALGOS`."""
+    """``algo`` normalised (stripped, lower case); a :class:`TrainingError` if it is not in :data:`TRAINABLE_ALGOS`."""
     key = algo.strip().lower()
-    if key not in ALGOS:
-        raise TrainingError(f"unknown algorithm '{algo}' (choose from {', '.join(ALGOS)})")
+    if key not in TRAINABLE_ALGOS:
+        raise TrainingError(f"unknown algorithm '{algo}' (choose from {', '.join(TRAINABLE_ALGOS)})")
     return key
 
 
@@ -33,4 +39,4 @@ def algorithm_class(algo: str) -> type:
     """The Stable-Baselines3 class of ``algo`` (imports SB3)."""
     from stable_baselines3 import DQN, PPO, SAC
 
-    return {"ppo": PPO, "sac": SAC, "dqn": DQN}[check_algo(algo)]
+    return {"ppo": PPO, "sac": SAC, "dqn": DQN, "ppo-lag": PPO}[check_algo(algo)]

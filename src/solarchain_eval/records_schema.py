@@ -107,6 +107,17 @@ AGENTIC_NUMERIC_NAMES = tuple(c.name for c in AGENTIC_COLUMNS if c.numeric)
 #: Every column ``metrics.csv`` may hold, by name.
 ALL_COLUMNS = {c.name: c for c in (*EPISODE_KEY_COLUMNS, *EPISODE_METRIC_COLUMNS, *AGENTIC_COLUMNS)}
 
+#: Columns a sweep's tidy ``results.csv`` (docs/stress.md) adds to the ``metrics.csv`` columns of
+#: each episode, besides one column per sweep axis.
+SWEEP_RESULT_COLUMNS = (
+    Column("point", "text", "the sweep point's id", numeric=False),
+    Column("cost_limit", "–", "the point's PPO-Lagrangian limit D on the episode cost"),
+    Column("episode_cost", "–", "Σ_t (V_t + A_t) over the episode, the cost PPO-Lagrangian constrains"),
+)
+SWEEP_RESULT_NAMES = names(SWEEP_RESULT_COLUMNS)
+#: The episode's constraint cost Σ (V + A) (a ``results.csv`` column, from the per-step records).
+EPISODE_COST = "episode_cost"
+
 #: ``governance_diagnostics.csv`` (docs/governance.md#counterfactual-step-records), one row per
 #: governed step: the episode keys, ``planner`` and ``auditor``, these step columns, then each
 #: outcome of :data:`DIAGNOSTIC_OUTCOMES` for each action of :data:`DIAGNOSTIC_ROLES`, then ``least_cost``.

@@ -35,7 +35,10 @@ from .algorithms import (  # noqa: F401  (re-exported: their home is .algorithms
     ACTION_MODES,
     ALGOS,
     MODEL_FILE,
+    OPT_IN_ALGOS,
     TRAIN_CONFIG_FILE,
+    TRAINABLE_ACTION_MODES,
+    TRAINABLE_ALGOS,
     TrainingError,
     algorithm_class,
     check_algo,
@@ -43,6 +46,7 @@ from .algorithms import (  # noqa: F401  (re-exported: their home is .algorithms
 from .config import BenchmarkConfig
 from .experiments.settings import setting_name
 from .io import atomic_write_csv, atomic_write_json, atomic_write_with
+from .lagrangian import LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 from .redaction import redact_command
 from .versions import git_commit, package_versions
 
@@ -81,7 +85,7 @@ class TrainSpec:
 
     Parameters
     ----------
-    algo : {"ppo", "sac", "dqn"}
+    algo : {"ppo", "sac", "dqn", "ppo-lag"}
     seed : int
         Seeds SB3 (torch, numpy, the action space) and the training env's first reset.
     timesteps : int
@@ -98,6 +102,8 @@ class TrainSpec:
     torch_threads : int
     device : str
         Torch device for the networks ("cpu" unless you know a GPU helps these small MLPs).
+    lagrangian : LagrangianSettings, optional
+        The cost limit and dual ascent of "ppo-lag" (required there, ignored otherwise).
     """
 
     algo: str
@@ -110,10 +116,11 @@ class TrainSpec:
     tensorboard_dir: Path | None = None
     torch_threads: int = 1
     device: str = "cpu"
+    lagrangian: LagrangianSettings | None = None  # required by (and only used for) "ppo-lag"
 
     def resolved_config(self) -> BenchmarkConfig:
         cfg = self.config.with_updates(
-            action_mode=ACTION_MODES[check_algo(self.algo)], no_physics_penalty=self.no_physics_penalty
+            action_mode=TRAINABLE_ACTION_MODES[check_algo(self.algo)], no_physics_penalty=self.no_physics_penalty
         )
         payload = cfg.model_dump()
         payload["training"]["timesteps"] = int(self.timesteps)
@@ -146,7 +153,9 @@ def _read_json(path: Path) -> dict[str, Any] | None:
 def _identity(spec: TrainSpec, dataset: dict[str, Any]) -> dict[str, Any]:
     """Everything that decides the trained model; a resume must match it exactly."""
     cfg = spec.resolved_config()
+    extra = {"lagrangian": spec.lagrangian.describe()} if spec.algo == LAGRANGIAN_ALGO and spec.lagrangian else {}
     return {
+        **extra,
         "algo": check_algo(spec.algo),
         "seed": int(spec.seed),
         "timesteps": int(spec.timesteps),
@@ -226,6 +235,8 @@ def train(
     algo = check_algo(spec.algo)
     if spec.timesteps < 1:
         raise TrainingError(f"timesteps must be at least 1, got {spec.timesteps}")
+    if algo == LAGRANGIAN_ALGO and spec.lagrangian is None:
+        raise TrainingError.about("ppo-lag needs a cost limit: pass {opt_lagrangian} (the limit D on the episode cost)")
     cfg = spec.resolved_config()
     data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir)
     table = load_table(data_dir)
@@ -302,6 +313,7 @@ class _TrainingSession:
     wall_before: float
     resumed_from: list[int]
     steps_before: int = 0
+    callbacks: list[Any] = field(default_factory=list)  # besides the monitor (ppo-lag: the dual ascent)
 
     @classmethod
     def start(cls, spec: TrainSpec, cfg: BenchmarkConfig, table: Any, out_dir: Path, identity: dict, metadata):
@@ -311,6 +323,10 @@ class _TrainingSession:
         env = _make_vec_env(cfg, table, cfg.training.n_envs)
         store = CheckpointStore(out_dir / CHECKPOINT_DIR)
         checkpoint = store.latest()
+        callbacks: list[Any] = []
+        if check_algo(spec.algo) == LAGRANGIAN_ALGO:
+            env, dual = _lagrangian(spec, env, out_dir, checkpoint.steps if checkpoint else 0)
+            callbacks.append(dual)
         tb_dir = str(spec.tensorboard_dir) if spec.tensorboard_dir is not None else None
         resumed_from = list((metadata or {}).get("resumed_from", []))
         if checkpoint is None:
@@ -340,7 +356,7 @@ class _TrainingSession:
             from stable_baselines3.common.logger import Logger
 
             model.set_logger(Logger(folder=None, output_formats=[]))
-        return cls(out_dir, model, env, store, log, checkpoint, wall_before, resumed_from)
+        return cls(out_dir, model, env, store, log, checkpoint, wall_before, resumed_from, callbacks=callbacks)
 
     def learn(self, spec: TrainSpec, algo: str, on_progress: Callable[[int], None] | None) -> float:
         """Train up to ``spec.timesteps``; the seconds it took."""
@@ -357,7 +373,7 @@ class _TrainingSession:
         learn_started = time.perf_counter()
         self.model.learn(
             total_timesteps=max(spec.timesteps - self.steps_before, 0),
-            callback=monitor,
+            callback=[monitor, *self.callbacks] if self.callbacks else monitor,
             reset_num_timesteps=self.checkpoint is None,
             tb_log_name=f"{algo}-{setting_name(agentic=False, no_physics_penalty=spec.no_physics_penalty)}-{spec.seed}",
         )
@@ -398,6 +414,19 @@ class _TrainingSession:
         return TrainOutcome(out_dir, model_path, steps_done, wall_s, steps_per_s, self.resumed_from)
 
 
+def _lagrangian(spec: TrainSpec, env: Any, out_dir: Path, resumed_at: int) -> tuple[Any, Any]:
+    """``env`` wrapped in the penalised reward, and the dual-ascent callback (λ and its log
+    restored from ``lagrangian_log.csv`` when resuming at step ``resumed_at``)."""
+    from .lagrangian import resume_multiplier
+    from .lagrangian_monitor import LagrangianCallback, Multiplier, PenalisedReward
+
+    assert spec.lagrangian is not None
+    value, rows = resume_multiplier(out_dir / LAGRANGIAN_LOG_FILE, spec.lagrangian, resumed_at)
+    multiplier = Multiplier(value)
+    callback = LagrangianCallback(spec.lagrangian, multiplier, out_dir / LAGRANGIAN_LOG_FILE, rows)
+    return PenalisedReward(env, multiplier), callback
+
+
 def _remove_tree(path: Path) -> None:
     import shutil
 
@@ -405,6 +434,6 @@ def _remove_tree(path: Path) -> None:
 
 
 def _clear_training_dir(out_dir: Path) -> None:
-    for name in (MODEL_FILE, TRAIN_LOG_FILE, TRAIN_METADATA_FILE, TRAIN_CONFIG_FILE):
+    for name in (MODEL_FILE, TRAIN_LOG_FILE, TRAIN_METADATA_FILE, TRAIN_CONFIG_FILE, LAGRANGIAN_LOG_FILE):
         (out_dir / name).unlink(missing_ok=True)
     _remove_tree(out_dir / CHECKPOINT_DIR)

@@ -244,7 +244,9 @@ class TrainingMonitor(BaseCallback):
         rewards = self.locals["rewards"]
         steps = int(self.num_timesteps)
         for i, info in enumerate(infos):
-            row = self.log.add_step(i, info, float(rewards[i]), bool(dones[i]), steps)
+            # PPO-Lagrangian trains on r - λ c; the log keeps the env's own reward r.
+            reward = float(info.get("reward_unpenalised", rewards[i]))
+            row = self.log.add_step(i, info, reward, bool(dones[i]), steps)
             if row is not None and self._writer is not None:
                 for key in ("episode_return", "physics_violation_rate", "artificial_liquidity_MWh", "episode_volume"):
                     self._writer.add_scalar(f"episode/{key}", row[key], steps)

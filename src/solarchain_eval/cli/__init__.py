@@ -23,6 +23,7 @@ COMMANDS = {
         "training_log.csv and train_metadata.json to --out.",
     ),
     "paper": ("paper", "The paper's experiment matrix: train, evaluate, combine, report."),
+    "sweep": ("sweep", "Run a sweep: every combination of the YAML's axes is one grid of the `paper` runner."),
     "governance": ("governance", "Score planners and auditors against counterfactual ground truth."),
     "report": (
         "report",
@@ -36,6 +37,7 @@ COMMANDS = {
         "a trivial env with the same spaces, then estimate the paper preset's wall time (300,000 steps, "
         "18 models, 54 evaluation units in 4 settings) on --workers workers by simulating the grid scheduler.",
     ),
+    "bench-scale": ("bench_scale", "Scale benchmark: build, load and step synthetic datasets of growing size."),
     "bench-llm": ("llm", "Median and p90 latency per planner and auditor call, tokens/s and schema validity."),
     "data": ("data", "Build and validate datasets."),
     "llm": ("llm", "The local OpenAI-compatible model server (llama-cpp-python). See docs/llm.md."),

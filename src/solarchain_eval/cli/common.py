@@ -48,7 +48,7 @@ def register_user_error(*types: type[BaseException]) -> None:
 
 
 #: Library field names whose command-line option has another name.
-FIELD_FLAGS = {"run_dir": "--out", "root": "--out", "tensorboard_dir": "--tensorboard"}
+FIELD_FLAGS = {"run_dir": "--out", "root": "--out", "tensorboard_dir": "--tensorboard", "lagrangian": "--cost-limit"}
 
 
 def cli_error(error: Exception) -> CliError:

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from enum import StrEnum
 from pathlib import Path
 
 import typer
@@ -17,17 +18,39 @@ from ..data.cities import (
     City,
     parse_city,
 )
+from ..data.fdia import FdiaError, FdiaScenario, parse_severity
 from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.published import matches_published
 from ..data.sources import Weather, WeatherSource, choose_weather
 from ..data.weather import WeatherError
 from ..io import sha256_file
 from . import app
-from .common import CliError, cli_error, console, progress_bar, reports_errors, say
+from .common import CliError, cli_error, console, progress_bar, register_user_error, reports_errors, say
 from .help import HelpGroup
 
 data_app = typer.Typer(help="Build and validate datasets.", cls=HelpGroup, no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(data_app, name="data")
+
+
+register_user_error(FdiaError)
+
+
+class FdiaPattern(StrEnum):
+    uniform = "uniform"
+    clustered = "clustered"
+    stealthy = "stealthy"
+
+
+def _scenario(rate: float, severity: str | None, pattern: str, burst_hours: int) -> FdiaScenario:
+    try:
+        return FdiaScenario(
+            rate=rate,
+            severity=parse_severity(severity) if severity is not None else None,
+            pattern=pattern,
+            burst_hours=burst_hours,
+        )
+    except ValueError as error:
+        raise CliError(f"--fdia-*: {error}") from None
 
 
 def _cities(specs: list[str] | None) -> tuple[City, ...]:
@@ -68,15 +91,35 @@ def build(
     refresh_weather: bool = typer.Option(False, help="Re-download Open-Meteo weather even if it is cached."),
     retries: int = typer.Option(4, min=0, help="Retries per Open-Meteo request (exponential back-off from 1 s)."),
     force: bool = typer.Option(False, "--force", help="Overwrite an existing dataset in --out."),
+    fdia_rate: float = typer.Option(
+        0.05, "--fdia-rate", min=0.0, max=1.0, help="Fraction of generation records injected with false data."
+    ),
+    fdia_severity: str | None = typer.Option(
+        None,
+        "--fdia-severity",
+        metavar="LO:HI",
+        help="Injection multiplier range: an injected daylight reading is P_max x uniform(LO, HI) "
+        "(default: the paper's multipliers 0.42, 1.38, 1.55, 1.82).",
+    ),
+    fdia_pattern: FdiaPattern = typer.Option(
+        FdiaPattern.uniform,
+        "--fdia-pattern",
+        help="uniform: records drawn uniformly (the paper's). clustered: bursts of --fdia-burst-hours consecutive "
+        "hours in one city, all its nodes. stealthy: daylight records reported at min(m, 1) x P_max, invisible to "
+        "the physics check, marked only by the verification flag.",
+    ),
+    fdia_burst_hours: int = typer.Option(6, "--fdia-burst-hours", min=1, help="Hours per clustered burst."),
 ) -> None:
     """Build a dataset: nodes, hourly PV generation, false-data injection, market, trades.
 
     Writes the four CSVs and manifest.json (row counts, sha256, seed, weather source,
     versions). With --weather-cache pointing at the paper's cached weather
     (open_meteo_weather_2026-04-01_2026-05-01.json) and the defaults, the four CSVs are
-    byte-identical to the paper's published dataset.
+    byte-identical to the paper's published dataset. The --fdia-* options choose the attack
+    scenario (docs/dataset.md#attack-scenarios); the manifest records it.
     """
     cities = _cities(city)
+    scenario = _scenario(fdia_rate, fdia_severity, fdia_pattern.value, fdia_burst_hours)
     if not force and ((out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES)):
         raise CliError(f"{out} already holds a dataset; pass --force to overwrite it")
     downloads = weather_cache is None and weather is WeatherSource.open_meteo
@@ -100,11 +143,11 @@ def build(
             raise
         except ValueError as error:  # dates the synthetic generator cannot cover
             raise cli_error(error) from None
-    result = _build(chosen, out, cities, seed, start, end, nodes_per_city, timezone)
+    result = _build(chosen, out, cities, seed, start, end, nodes_per_city, timezone, scenario)
     _show_build(result, out, chosen.source, seed, len(cities))
 
 
-def _build(chosen: Weather, out: Path, cities, seed, start, end, nodes_per_city, timezone):
+def _build(chosen: Weather, out: Path, cities, seed, start, end, nodes_per_city, timezone, scenario: FdiaScenario):
     """Build the dataset with a progress bar over its nodes."""
     from ..data.build import build_dataset
 
@@ -128,6 +171,7 @@ def _build(chosen: Weather, out: Path, cities, seed, start, end, nodes_per_city,
             weather_source=chosen.source,
             weather_sha256=chosen.sha256,
             progress=on_progress,
+            fdia=scenario,
         )
 
 
@@ -142,6 +186,8 @@ def _show_build(result, out: Path, source: str, seed: int, n_cities: int) -> Non
         table.add_row(name, f"{info['rows']:,}", info["sha256"])
     console.print(table)
     say(f"weather: {source}; seed {seed}; {result.manifest['hours']} hours; {n_cities} cities", err=False)
+    fdia = result.manifest["fdia"]
+    say(f"false data: {fdia['injected_records']:,} records, {fdia['pattern']}, rate {fdia['rate']}", err=False)
     if matches_published({name: info["sha256"] for name, info in files.items()}):
         say("byte-identical to the paper's published dataset", style="bold green", err=False)
 

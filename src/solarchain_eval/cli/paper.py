@@ -11,12 +11,14 @@ import typer
 from rich.text import Text
 
 from ..agentic.request import GovernanceRequest
+from ..algorithms import OPT_IN_ALGOS
 from ..config import BenchmarkConfig, load_config
 from ..experiments.grid import SETTING_REGISTRY, GridSpec, Unit, plan_units
 from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
 from ..experiments.records import SUMMARY_FILE
 from ..experiments.units import UnitResult
+from ..lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 from ..policies.registry import parse_policy_list
 from . import agentic as agentic_cli
 from . import app
@@ -55,6 +57,19 @@ def _settings(text: str | None) -> tuple[str, ...]:
     if unknown:
         raise CliError(f"unknown setting(s) {', '.join(unknown)} (available: {', '.join(SETTING_REGISTRY)})")
     return names
+
+
+def _policies(text: str | None, extra: str | None, settings: tuple[str, ...]) -> tuple[str, ...] | None:
+    """``--policies`` plus ``--extra-policies`` (None: every non-opt-in policy of the settings)."""
+    extras = parse_policy_list(extra) if extra else []
+    unknown = [p for p in extras if p not in OPT_IN_ALGOS]
+    if unknown:
+        raise ValueError(f"--extra-policies: {', '.join(unknown)} is not an opt-in policy ({', '.join(OPT_IN_ALGOS)})")
+    if not text and not extras:
+        return None
+    defaults = dict.fromkeys(p for s in settings for p in SETTING_REGISTRY[s].policies if p not in OPT_IN_ALGOS)
+    base = parse_policy_list(text) if text else list(defaults)
+    return tuple(dict.fromkeys([*base, *extras]))
 
 
 def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
@@ -139,6 +154,18 @@ def paper(
     policies: str | None = typer.Option(
         None, "--policies", help="Comma-separated subset of the policies to run (default: all; train units follow)."
     ),
+    extra_policies: str | None = typer.Option(
+        None,
+        "--extra-policies",
+        help=f"Comma-separated opt-in policies added to the run ({', '.join(OPT_IN_ALGOS)}: PPO-Lagrangian, "
+        "evaluated in main and no_physics).",
+    ),
+    cost_limit: float = typer.Option(
+        DEFAULT_COST_LIMIT, "--cost-limit", min=0.0, help="ppo-lag: the episode-cost limit D."
+    ),
+    multiplier_lr: float = typer.Option(
+        DEFAULT_MULTIPLIER_LR, "--multiplier-lr", min=0.0, help="ppo-lag: the dual-ascent step size."
+    ),
     workers: int = typer.Option(1, "--workers", min=1, help="Local worker processes (one torch thread each)."),
     backend: str = typer.Option(
         "sb3",
@@ -176,26 +203,31 @@ def paper(
     unless --planner/--auditor say otherwise); writes ROOT/combined/<setting>/ files,
     ROOT/paper_metadata.json and, after a complete grid, the report in ROOT/report.
 
+    --extra-policies ppo-lag adds PPO-Lagrangian (train --algo ppo-lag) in main and no_physics,
+    with --cost-limit and --multiplier-lr.
+
     Every unit (a trained model, or one policy × setting × seed evaluation) is a directory under
     ROOT/units with a DONE marker written last: re-running the same command skips finished units
     and redoes the ones that were in flight (training resumes from its last checkpoint).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     options = agentic_cli.resolve(governance)
+    chosen_settings = _settings(settings)
     try:
         spec = GridSpec.from_preset(
             preset.value,
             timesteps=timesteps,
             episodes=episodes,
             seeds=tuple(parse_seeds(seeds)) if seeds else None,
-            settings=_settings(settings),
-            policies=tuple(parse_policy_list(policies)) if policies else None,
+            settings=chosen_settings,
+            policies=_policies(policies, extra_policies, chosen_settings),
             episode_seed_protocol=episode_seeds.value,
             data_dir=data,
             config=cfg,
             checkpoint_every=checkpoint_every,
             agentic=options,
             backend=backend,
+            lagrangian=LagrangianSettings(cost_limit, multiplier_lr),
         )
         spec.validate()
     except ValueError as error:

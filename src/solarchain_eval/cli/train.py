@@ -9,7 +9,16 @@ from pathlib import Path
 import typer
 
 from ..config import BenchmarkConfig, load_config
-from ..training import ALGOS, DEFAULT_CHECKPOINT_EVERY, TRAIN_LOG_FILE, TrainingError, TrainSpec, check_algo, train
+from ..lagrangian import DEFAULT_MULTIPLIER_LR, LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
+from ..training import (
+    DEFAULT_CHECKPOINT_EVERY,
+    TRAIN_LOG_FILE,
+    TRAINABLE_ALGOS,
+    TrainingError,
+    TrainSpec,
+    check_algo,
+    train,
+)
 from . import app
 from .common import (
     CliError,
@@ -28,7 +37,12 @@ register_user_error(TrainingError)
 @app.command("train")
 @reports_errors
 def train_command(
-    algo: str = typer.Option(..., "--algo", help=f"Algorithm: {', '.join(ALGOS)} (DQN acts on the 125-point grid)."),
+    algo: str = typer.Option(
+        ...,
+        "--algo",
+        help=f"Algorithm: {', '.join(TRAINABLE_ALGOS)} (DQN acts on the 125-point grid; ppo-lag is PPO-Lagrangian, "
+        "which needs --cost-limit).",
+    ),
     seed: int | None = typer.Option(None, "--seed", help="Training seed (default: the config seed, 20260511)."),
     backend: str = typer.Option(
         "sb3",
@@ -72,12 +86,26 @@ def train_command(
     ),
     config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
     overwrite: bool = typer.Option(False, "--overwrite", help="Replace a finished or different training in --out."),
+    cost_limit: float | None = typer.Option(
+        None,
+        "--cost-limit",
+        min=0.0,
+        help="ppo-lag only: D, the limit on the expected episode cost (sum of info['cost'] = V + A over an episode).",
+    ),
+    multiplier_lr: float = typer.Option(
+        DEFAULT_MULTIPLIER_LR,
+        "--multiplier-lr",
+        min=0.0,
+        help="ppo-lag only: dual-ascent step size; after each rollout λ <- max(0, λ + lr (J_c - D)).",
+    ),
 ) -> None:
     """Train one model with Stable-Baselines3 (MlpPolicy; learning rate, batch size and gamma from
     the config: 3e-4, 64, 0.98; SB3 defaults otherwise) and write model.zip, train_config.json,
     training_log.csv and train_metadata.json to --out.
 
     A killed run resumes from its last checkpoint when the same command is run again.
+    --algo ppo-lag trains PPO-Lagrangian: PPO on r - λ c with λ updated by dual ascent after
+    every rollout (docs/training.md#ppo-lagrangian); it also writes lagrangian_log.csv.
     Evaluate the model with: solarchain-eval evaluate --policies ALGO --models OUT
 
     --backend jax trains one model per --seeds seed with rejax (the same hyperparameters; the
@@ -86,6 +114,10 @@ def train_command(
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     key = check_algo(algo)
+    if key != LAGRANGIAN_ALGO and cost_limit is not None:
+        raise TrainingError(f"--cost-limit applies to --algo {LAGRANGIAN_ALGO} only")
+    # An invalid value is a TrainingError naming its option.
+    lagrangian = LagrangianSettings(cost_limit, multiplier_lr) if cost_limit is not None else None
     steps = timesteps or cfg.training.timesteps
     out_dir = out or Path(cfg.output_dir) / f"{datetime.now().strftime('%Y%m%d-%H%M%S')}_train_{key}"
     if backend not in ("sb3", "jax"):
@@ -95,6 +127,8 @@ def train_command(
             raise CliError("--seeds trains several seeds at once with --backend jax; SB3 takes one --seed")
         if tensorboard is not None:
             raise CliError("--tensorboard is for the SB3 backend (rejax writes no TensorBoard scalars)")
+        if key == LAGRANGIAN_ALGO:
+            raise CliError(f"--algo {LAGRANGIAN_ALGO} trains with Stable-Baselines3 only (not --backend jax)")
         run_seeds = parse_seeds(seeds) if seeds else [cfg.seed if seed is None else seed]
         return _train_jax(key, run_seeds, steps, no_physics_penalty, data, cfg, out_dir, overwrite)
     spec = TrainSpec(
@@ -107,6 +141,7 @@ def train_command(
         checkpoint_every=checkpoint_every,
         tensorboard_dir=tensorboard,
         torch_threads=torch_threads,
+        lagrangian=lagrangian,
     )
     err_console.print(f"training {key.upper()} for {steps:,} steps (seed {spec.seed}) into {out_dir}", soft_wrap=True)
     with progress_bar(f"training {key}", steps) as advance:
@@ -128,6 +163,8 @@ def train_command(
         f"({outcome.steps_per_s:,.0f} steps/s in this session); model: {outcome.model_path}"
     )
     console.print(f"training log: {out_dir / TRAIN_LOG_FILE}", soft_wrap=True)
+    if key == LAGRANGIAN_ALGO:
+        console.print(f"multiplier log: {out_dir / LAGRANGIAN_LOG_FILE}", soft_wrap=True)
 
 
 def _train_jax(

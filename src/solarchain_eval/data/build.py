@@ -18,12 +18,11 @@ import pandas as pd
 from ..io import atomic_write_csv, atomic_write_json, sha256_file
 from ..versions import package_versions
 from .cities import City, check_unique_prefixes, factories_for
+from .fdia import FDIA_FRACTION, FDIA_MULTIPLIERS, FdiaScenario, inject_false_data  # noqa: F401
 from .files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE  # noqa: F401
 from .pv import capped_irradiance_wm2, max_power_w, solar_geometry, temperature_factor
 from .weather import CityWeather, WeatherError
 
-FDIA_FRACTION = 0.05
-FDIA_MULTIPLIERS = [0.42, 1.38, 1.55, 1.82]
 INSTALL_FIRST, INSTALL_LAST = dt.date(2020, 1, 1), dt.date(2024, 5, 31)
 TRADE_MIN_VERIFIED_MW = 0.002
 
@@ -150,24 +149,6 @@ def _build_generation(
     return pd.concat(parts, ignore_index=True)
 
 
-def _inject_false_data(rng: np.random.Generator, generation: pd.DataFrame) -> None:
-    n_rows = len(generation)
-    n_attacks = int(np.round(FDIA_FRACTION * n_rows))
-    chosen = rng.choice(np.arange(n_rows), size=n_attacks, replace=False)
-    p_max = generation["P_max_W"].to_numpy()
-    reported = generation["P_reported_W"].to_numpy().copy()
-    for row in chosen:
-        if p_max[row] <= 1:
-            reported[row] = np.round(rng.uniform(350, 1200), 2)
-        else:
-            reported[row] = np.round(p_max[row] * rng.choice(FDIA_MULTIPLIERS), 2)
-    generation["P_reported_W"] = reported
-    fdia = np.zeros(n_rows, dtype=bool)
-    fdia[chosen] = True
-    generation["fdia_detected"] = fdia
-    generation["verification_status"] = np.where(fdia, "rejected", "verified")
-
-
 def _build_market(generation: pd.DataFrame) -> pd.DataFrame:
     order = generation.drop_duplicates("timestamp")[["timestamp", "hour"]]
     verified = generation[generation["verification_status"] == "verified"]
@@ -248,11 +229,13 @@ def build_dataset(
     weather_source: str,
     weather_sha256: str | None = None,
     progress: Progress = _noop,
+    fdia: FdiaScenario | None = None,
 ) -> BuildResult:
     """Build the four dataset CSVs and ``manifest.json`` into ``out_dir``.
 
     Each file is written atomically and the manifest last, so a directory with a manifest
-    is a complete build.
+    is a complete build. ``fdia`` is the false-data injection scenario (default: the paper's,
+    5 % of the records, uniform, the paper's multipliers); the manifest records it.
     """
     if nodes_per_city < 1:
         raise ValueError("nodes_per_city must be at least 1")
@@ -268,7 +251,7 @@ def build_dataset(
     progress("nodes", 1, 1)
     hours = {city.name: _city_hours(city, weather[city.name], start, end, timezone) for city in cities}
     generation = _build_generation(rng, nodes, hours, progress)
-    _inject_false_data(rng, generation)
+    fdia_entry = inject_false_data(rng, generation, fdia)
     market = _build_market(generation)
     trades = _build_trades(rng, market, cities)
 
@@ -293,6 +276,7 @@ def build_dataset(
         "weather_source": weather_source,
         "weather_sha256": weather_sha256,
         "hours": int(len(market)),
+        "fdia": fdia_entry,
         "package_versions": package_versions(),
     }
     atomic_write_json(out / MANIFEST_FILE, manifest)

@@ -83,3 +83,22 @@ def check_unique_prefixes(cities: tuple[City, ...] | list[City]) -> None:
                 f"'{city.node_prefix}'; rename one of them"
             )
         seen[city.node_prefix] = city.name
+
+
+def synthetic_cities(count: int) -> tuple[City, ...]:
+    """``count`` made-up cities for scale and sensitivity runs (synthetic weather only).
+
+    City i is named by three letters (base 26 of i: "Baa", "Bab", …, so node-id prefixes are
+    unique) and placed by a Kronecker sequence over latitudes 22–40° N and longitudes 100–122° E,
+    the span of the paper's cities. Deterministic: city i does not depend on ``count``.
+    """
+    if not 1 <= count <= 25 * 26 * 26:
+        raise ValueError(f"the number of synthetic cities must be in 1..{25 * 26 * 26}, got {count}")
+    letters = "abcdefghijklmnopqrstuvwxyz"
+    cities = []
+    for i in range(count):
+        name = letters[1 + i // 676].upper() + letters[(i // 26) % 26] + letters[i % 26]
+        latitude = 22.0 + 18.0 * ((0.5 + i * 0.6180339887) % 1.0)
+        longitude = 100.0 + 22.0 * ((0.5 + i * 0.7548776662) % 1.0)
+        cities.append(City(name, round(latitude, 4), round(longitude, 4)))
+    return tuple(cities)

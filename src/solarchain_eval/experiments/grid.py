@@ -19,15 +19,16 @@ auditor kinds are the grid's :class:`~solarchain_eval.agentic.AgenticOptions` (r
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
 from ..agentic.build import AgenticOptions
-from ..algorithms import ALGOS
+from ..algorithms import ALGOS, OPT_IN_ALGOS, TRAINABLE_ALGOS
 from ..config import BenchmarkConfig
+from ..lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
 from ..policies.baselines import BASELINES
 from ..training import DEFAULT_CHECKPOINT_EVERY
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS
@@ -98,7 +99,7 @@ class GridSetting:
     agentic: bool = False
 
 
-_POLICIES = (*BASELINES, *ALGOS)
+_POLICIES = (*BASELINES, *TRAINABLE_ALGOS)  # opt-in ones (ppo-lag) only when asked for
 
 
 def _grid_setting(name: str, policies: tuple[str, ...]) -> GridSetting:
@@ -163,9 +164,12 @@ class GridSpec:
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     checkpoint_every: int = DEFAULT_CHECKPOINT_EVERY
     preset: str | None = None
-    policies: tuple[str, ...] | None = None  # None: every policy of each setting
+    policies: tuple[str, ...] | None = None  # None: every non-opt-in policy of each setting
     agentic: AgenticOptions = field(default_factory=AgenticOptions)  # the agentic settings' layer
     backend: str = "sb3"  # the train units' backend: "sb3" or "jax"
+    lagrangian: LagrangianSettings = field(default_factory=lambda: LagrangianSettings(DEFAULT_COST_LIMIT))
+    #: Per-setting policy lists ((setting, policies), ...) that override ``policies`` there.
+    policies_by_setting: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
     @property
     def has_agentic(self) -> bool:
@@ -173,7 +177,16 @@ class GridSpec:
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         listed = SETTING_REGISTRY[setting].policies
-        return listed if self.policies is None else tuple(p for p in listed if p in self.policies)
+        chosen = dict(self.policies_by_setting).get(setting)
+        if chosen is not None:
+            return tuple(p for p in listed if p in chosen)
+        if self.policies is None:
+            return tuple(p for p in listed if p not in OPT_IN_ALGOS)
+        return tuple(p for p in listed if p in self.policies)
+
+    @property
+    def uses_lagrangian(self) -> bool:
+        return any("ppo-lag" in self.setting_policies(s) for s in self.settings)
 
     @classmethod
     def from_preset(cls, name: str, **overrides: Any) -> GridSpec:
@@ -199,6 +212,8 @@ class GridSpec:
         unknown = [s for s in self.settings if s not in SETTING_REGISTRY]
         if unknown:
             raise ValueError(f"unknown setting(s) {', '.join(unknown)} (registered: {', '.join(SETTING_REGISTRY)})")
+        if self.backend != "sb3" and self.uses_lagrangian:
+            raise ValueError("ppo-lag trains with the sb3 backend only")
         if self.policies is not None:
             offered = {p for s in self.settings for p in SETTING_REGISTRY[s].policies}
             unknown = [p for p in self.policies if p not in offered]
@@ -206,6 +221,11 @@ class GridSpec:
                 raise ValueError(
                     f"unknown or no policies {', '.join(unknown)} (the settings offer {', '.join(sorted(offered))})"
                 )
+        for setting, chosen in self.policies_by_setting:
+            offered = SETTING_REGISTRY[setting].policies if setting in SETTING_REGISTRY else ()
+            unknown = [p for p in chosen if p not in offered]
+            if setting not in self.settings or unknown or not chosen:
+                raise ValueError(f"policies of setting '{setting}': {', '.join(unknown) or 'none'} not offered there")
         if self.episode_seed_protocol not in EPISODE_SEED_PROTOCOLS:
             raise ValueError(
                 f"unknown episode-seed protocol '{self.episode_seed_protocol}' (choose from {', '.join(EPISODE_SEED_PROTOCOLS)})"
@@ -221,23 +241,41 @@ class GridSpec:
 
 @dataclass(frozen=True)
 class Unit:
-    """One unit of work; ``name`` is its path under ``ROOT/units`` (``train/...`` or ``eval/...``)."""
+    """One unit of work; ``name`` is its path under ``ROOT/units`` (``train/...`` or ``eval/...``).
+
+    ``scope`` places the unit in a sub-root: a sweep point's units live in
+    ``ROOT/<scope>/units/...`` and their names start with ``<scope>/`` (empty for ``paper``).
+    """
 
     kind: str
     policy: str
     setting: str
     seed: int
     depends_on: tuple[str, ...] = ()
+    scope: str = ""  # a sweep point's sub-root ("" for a plain grid)
     backend: str = "sb3"  # train units: which library trains the model
 
     @property
     def name(self) -> str:
-        return f"{self.kind}/{self.policy}-{self.setting}-{self.seed}"
+        local = f"{self.kind}/{self.policy}-{self.setting}-{self.seed}"
+        return f"{self.scope}/{local}" if self.scope else local
 
     def directory(self, root: Path) -> Path:
+        base = Path(root) / self.scope if self.scope else Path(root)
         if self.kind == "train":
-            return train_unit_dir(root, self.policy, self.setting, self.seed)
-        return eval_unit_dir(root, self.policy, self.setting, self.seed)
+            return train_unit_dir(base, self.policy, self.setting, self.seed)
+        return eval_unit_dir(base, self.policy, self.setting, self.seed)
+
+    def unscoped(self) -> Unit:
+        """The unit as its own sub-root sees it."""
+        prefix = f"{self.scope}/" if self.scope else ""
+        deps = tuple(d[len(prefix) :] if prefix and d.startswith(prefix) else d for d in self.depends_on)
+        return replace(self, depends_on=deps, scope="")
+
+
+def scoped(units: list[Unit], scope: str) -> list[Unit]:
+    """``units`` moved into the sub-root ``scope`` (dependencies renamed with them)."""
+    return [replace(u, depends_on=tuple(f"{scope}/{d}" for d in u.depends_on), scope=scope) for u in units]
 
 
 def train_unit(algo: str, setting: str, seed: int, backend: str = "sb3") -> Unit:
@@ -254,11 +292,11 @@ def plan_units(spec: GridSpec) -> list[Unit]:
         for policy in spec.setting_policies(setting_name):
             for seed in spec.seeds:
                 deps: tuple[str, ...] = ()
-                if policy in ALGOS:
+                if policy in TRAINABLE_ALGOS:
                     needed.add((policy, setting.model_setting, seed))
                     deps = (train_unit(policy, setting.model_setting, seed).name,)
                 evals.append(Unit("eval", policy, setting_name, seed, deps))
-    order = {algo: i for i, algo in enumerate(("sac", "ppo", "dqn"))}
+    order = {algo: i for i, algo in enumerate(("sac", "ppo", "ppo-lag", "dqn"))}
     trains = [
         train_unit(algo, setting, seed, spec.backend)
         for algo, setting, seed in sorted(needed, key=lambda k: (order.get(k[0], 9), TRAIN_SETTINGS.index(k[1]), k[2]))

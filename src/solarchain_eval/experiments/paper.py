@@ -22,7 +22,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..algorithms import ALGOS, MODEL_FILE
+from ..algorithms import ALGOS, MODEL_FILE, TRAINABLE_ALGOS
 from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
@@ -56,7 +56,7 @@ class PaperOutcome:
 
 def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
     """What every unit's result depends on; a root accepts only grids with the same identity."""
-    return {
+    identity = {
         "timesteps": int(spec.timesteps),
         "episodes": int(spec.episodes),
         "episode_seed_protocol": spec.episode_seed_protocol,
@@ -66,6 +66,9 @@ def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
         # Only a JAX grid records its backend, so that the identity of existing SB3 roots is unchanged.
         **({"backend": spec.backend} if spec.backend != "sb3" else {}),
     }
+    if spec.uses_lagrangian:  # only then: grids without ppo-lag keep their earlier identity
+        identity["lagrangian"] = spec.lagrangian.describe()
+    return identity
 
 
 def model_file(backend: str) -> str:
@@ -87,13 +90,14 @@ def _agentic_identity(spec: GridSpec) -> dict[str, Any]:
 
 
 @contextmanager
-def _locked(root: Path) -> Iterator[None]:
+def _locked(root: Path, command: str = "paper") -> Iterator[None]:
+    """Hold ``root``'s lock (one ``command`` run per root at a time)."""
     handle = open(root / ".lock", "a+")  # noqa: SIM115 - held open for the lock's lifetime
     try:
         fcntl.flock(handle, fcntl.LOCK_EX | fcntl.LOCK_NB)
     except OSError:
         handle.close()
-        raise GridError(f"another 'paper' run is using {root} (it holds {root / '.lock'})") from None
+        raise GridError(f"another '{command}' run is using {root} (it holds {root / '.lock'})") from None
     try:
         yield
     finally:
@@ -115,7 +119,7 @@ def _read_metadata(root: Path) -> dict[str, Any] | None:
 
 def _stale_eval(root: Path, unit: Unit, backend: str) -> bool:
     """A done eval unit whose model changed since it was evaluated."""
-    if unit.policy not in ALGOS or not unit.depends_on:
+    if unit.policy not in TRAINABLE_ALGOS or not unit.depends_on:
         return False
     import json
 
@@ -278,6 +282,7 @@ def _task(
         agentic=spec.agentic if (setting is not None and setting.agentic and unit.kind == "eval") else None,
         identity=unit_identity,
         command=tuple(command or sys.argv),
+        lagrangian=spec.lagrangian if unit.policy == "ppo-lag" else None,
     )
 
 

@@ -116,13 +116,17 @@ class RayExecutor:
         token_path = self._root / TOKEN_FILE
         token_path.write_text(self._token if transfer == "auto" else secrets.token_hex(16), encoding="utf-8")
         self._token_path = str(token_path.resolve())
-        self._data = [ray.put(dataset_bundle(data_dir))]
+        # One shipped bundle per dataset directory (a sweep's points use several).
+        self._data: dict[str, list] = {str(Path(data_dir)): [ray.put(dataset_bundle(data_dir))]}
         self._remote = ray.remote(num_cpus=1, max_retries=0)(_run_remote)
         self._pending: dict[Any, UnitTask] = {}
 
     def submit(self, task: UnitTask) -> None:
         models = {name: Path(path).read_bytes() for name, path in task.model_paths.items()}
-        ref = self._remote.remote(task, self._token_path, self._token, self._data, models)
+        key = str(Path(task.data_dir))
+        if key not in self._data:
+            self._data[key] = [self._ray.put(dataset_bundle(task.data_dir))]
+        ref = self._remote.remote(task, self._token_path, self._token, self._data[key], models)
         self._pending[ref] = task
 
     def wait(self) -> list[UnitResult]:

@@ -22,6 +22,7 @@ from typing import Any
 from ..agentic.build import AgenticOptions
 from ..config import BenchmarkConfig
 from ..io import atomic_write_json, sha256_file
+from ..lagrangian import LagrangianSettings
 from ..training import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
 from .grid import EPISODE_SEED_PROTOCOLS, Unit
 from .layout import DONE_MARKER
@@ -47,6 +48,7 @@ class UnitTask:
     agentic: AgenticOptions | None = None  # set for units of an agentic setting
     identity: dict[str, Any] = field(default_factory=dict)
     command: tuple[str, ...] = ()
+    lagrangian: LagrangianSettings | None = None  # train units of ppo-lag
 
 
 @dataclass(frozen=True)
@@ -168,6 +170,7 @@ def _train_unit(task: UnitTask, log: _UnitLog) -> None:
         data_dir=task.data_dir,
         config=task.config,
         checkpoint_every=task.checkpoint_every,
+        lagrangian=task.lagrangian,
     )
     tenth = max(task.timesteps // 10, 1)
     reported = [0]

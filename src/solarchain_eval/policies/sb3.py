@@ -24,13 +24,13 @@ from typing import Any
 
 import numpy as np
 
-from ..algorithms import ACTION_MODES, MODEL_FILE, TRAIN_CONFIG_FILE, algorithm_class
+from ..algorithms import MODEL_FILE, TRAIN_CONFIG_FILE, TRAINABLE_ACTION_MODES, algorithm_class
 from ..config import BenchmarkConfig
 from ..market.observation import OBSERVATION_SHAPE
 from ..option_errors import NamesOptions
 
 #: Learned policy name -> the env action mode it acts in.
-LEARNED_POLICIES = dict(ACTION_MODES)
+LEARNED_POLICIES = dict(TRAINABLE_ACTION_MODES)  # ppo-lag's model is a plain PPO model
 
 
 def _trained_algo(directory: Path) -> str | None:

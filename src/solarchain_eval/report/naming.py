@@ -20,7 +20,15 @@ from ..experiments.settings import (
 from ..policies.baselines import BASELINES
 
 #: Policy display names (the paper's spelling).
-POLICY_DISPLAY = {"static": "Static", "random": "Random", "myopic": "Myopic", "ppo": "PPO", "sac": "SAC", "dqn": "DQN"}
+POLICY_DISPLAY = {
+    "static": "Static",
+    "random": "Random",
+    "myopic": "Myopic",
+    "ppo": "PPO",
+    "sac": "SAC",
+    "dqn": "DQN",
+    "ppo-lag": "PPO-Lag",
+}
 #: The paper's policy order in the main tables and figures.
 PAPER_POLICY_ORDER = ("static", "random", "myopic", "ppo", "sac", "dqn")
 #: The paper's learned-policy order in the body tables (PPO, SAC, DQN).

@@ -1,0 +1,315 @@
+"""``solarchain-eval sweep``: a sweep YAML expanded into units of the experiment grid, resumably.
+
+A sweep root holds::
+
+    ROOT/datasets/<key>/             one dataset per distinct set of build parameters (manifest last)
+    ROOT/points/<point>/             one grid per point, laid out like a ``paper`` root (units,
+                                     combined/<setting>/, paper_metadata.json with the point's axes)
+    ROOT/results.csv                 the tidy table: a row per point x setting x policy x seed x episode
+    ROOT/sensitivity/                each metric against each axis, and where a paper finding flips
+    ROOT/sweep_metadata.json         the sweep, the points' status, versions (written last)
+
+Every point's units are scoped into its directory (``points/<point>/train/...``) and all of them
+go through one :func:`~.pool.run_units` call, so ``--workers``, Ray, ``--keep-going`` and
+resume behave exactly as in ``paper``: a unit with a ``DONE`` marker is never run again, a point
+whose grid identity changed is refused.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field, replace
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from ..data.provenance import dataset_provenance
+from ..io import atomic_write_json, atomic_write_with
+from ..records_schema import EPISODE_COST
+from ..redaction import redact_command
+from ..versions import git_commit, package_versions
+from .combine import combine_setting
+from .grid import GridSpec, Unit, plan_units, scoped
+from .layout import PAPER_METADATA_FILE, combined_dir
+from .paper import GridError, _executor, _locked, _metadata, _read_metadata, _stale_eval, _task, grid_identity
+from .pool import RunReport, run_units
+from .records import ACTIONS_FILE, METRICS_FILE
+from .sweep_spec import Sweep, SweepDataset, SweepPoint, dataset_cities, fdia_scenario
+from .units import UnitResult, UnitTask, read_done, undo
+
+DATASETS_DIR = "datasets"
+POINTS_DIR = "points"
+RESULTS_FILE = "results.csv"
+SWEEP_METADATA_FILE = "sweep_metadata.json"
+
+
+@dataclass
+class _PointRun:
+    point: SweepPoint
+    root: Path
+    data_dir: Path
+    spec: GridSpec
+    identity: dict[str, Any]
+    units: list[Unit]
+
+
+@dataclass
+class SweepOutcome:
+    root: Path
+    units: list[Unit]
+    already_done: list[str]
+    report: RunReport
+    complete_points: list[str] = field(default_factory=list)
+    all_points: bool = False  # every point complete (results.csv and sensitivity/ written)
+    results_rows: int = 0
+    wall_s: float = 0.0
+
+
+def _resolve(sweep: Sweep, path: str) -> Path:
+    p = Path(path)
+    return p if p.is_absolute() else (sweep.source.parent / p)
+
+
+def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
+    """Build one point's dataset into ``out`` (skipped when ``out`` holds a complete build).
+
+    The paper's cities use the cached weather file when ``dataset.weather_cache`` is given; any
+    other cities (synthetic or listed) get synthetic weather.
+    """
+    from ..data.build import MANIFEST_FILE, build_dataset
+    from ..data.sources import WeatherSource, choose_weather
+
+    if (out / MANIFEST_FILE).is_file():
+        return out
+    cities = dataset_cities(dataset)
+    cached = dataset.weather_cache is not None and dataset.cities is None
+    weather = choose_weather(
+        cities,
+        dataset.start,
+        dataset.end,
+        seed=dataset.seed,
+        timezone=dataset.timezone,
+        weather_cache=_resolve(sweep, dataset.weather_cache) if cached else None,
+        source=WeatherSource.synthetic,
+    )
+    build_dataset(
+        weather.payload,
+        out,
+        cities=cities,
+        seed=dataset.seed,
+        start=dataset.start,
+        end=dataset.end,
+        nodes_per_city=dataset.nodes_per_city,
+        timezone=dataset.timezone,
+        weather_source=weather.source,
+        weather_sha256=weather.sha256,
+        fdia=fdia_scenario(dataset),
+    )
+    return out
+
+
+def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path) -> GridSpec:
+    g = sweep.spec.grid
+    try:
+        spec = GridSpec(
+            timesteps=g.timesteps,
+            episodes=g.episodes,
+            seeds=tuple(g.seeds),
+            settings=tuple(g.settings),
+            episode_seed_protocol=g.episode_seeds,
+            data_dir=data_dir,
+            config=point.config,
+            checkpoint_every=g.checkpoint_every,
+            preset="sweep",
+            policies=tuple(g.policies) if isinstance(g.policies, list) else None,
+            policies_by_setting=tuple((s, tuple(p)) for s, p in g.policies.items())
+            if isinstance(g.policies, dict)
+            else (),
+            lagrangian=point.lagrangian,
+        )
+        spec.validate()
+    except ValueError as error:
+        raise GridError(f"{sweep.source}: grid: {error}") from None
+    return spec
+
+
+def _prepare_points(
+    sweep: Sweep, root: Path, on_dataset: Callable[[str, bool], None] | None, command: list[str] | None
+) -> list[_PointRun]:
+    from ..data.table import load_table
+
+    runs, tables = [], {}
+    for point in sweep.points:
+        if point.uses_existing_data:
+            data_dir = _resolve(sweep, str(point.dataset.data)).resolve()
+        else:
+            data_dir = (root / DATASETS_DIR / point.dataset_key).resolve()
+            if str(data_dir) not in tables:
+                fresh = not (data_dir / "manifest.json").is_file()
+                if on_dataset is not None:  # before the build: a large one takes minutes
+                    on_dataset(point.dataset_key, fresh)
+                build_point_dataset(sweep, point.dataset, data_dir)
+        if str(data_dir) not in tables:
+            tables[str(data_dir)] = dataset_provenance(load_table(data_dir))
+        dataset = tables[str(data_dir)]
+        spec = _point_spec(sweep, point, data_dir)
+        identity = grid_identity(spec, dataset)
+        point_root = root / POINTS_DIR / point.point_id
+        previous = _read_metadata(point_root)
+        if previous is not None and previous.get("identity") != identity:
+            raise GridError.about(
+                "{point_root} holds a different grid than point {point} of {source}; use another {opt_root}",
+                point_root=point_root,
+                point=point.point_id,
+                source=sweep.source,
+            )
+        point_root.mkdir(parents=True, exist_ok=True)
+        meta = _metadata(spec, identity, dataset, data_dir, command, 1, None)
+        meta["sweep_point"] = {"point": point.point_id, "values": point.values}
+        atomic_write_json(point_root / PAPER_METADATA_FILE, {**meta, "status": "running", "complete": False})
+        units = scoped(plan_units(spec), f"{POINTS_DIR}/{point.point_id}")
+        runs.append(_PointRun(point, point_root, data_dir, spec, identity, units))
+    return runs
+
+
+def run_sweep(
+    sweep: Sweep,
+    root: Path,
+    *,
+    workers: int = 1,
+    ray_address: str | None = None,
+    keep_going: bool = False,
+    on_plan: Callable[[list[Unit], list[str]], None] | None = None,
+    on_result: Callable[[UnitResult], None] | None = None,
+    on_dataset: Callable[[str, bool], None] | None = None,
+    command: list[str] | None = None,
+    ray_transfer: str = "auto",
+) -> SweepOutcome:
+    """Run (or resume) ``sweep`` into ``root``; see the module docstring.
+
+    Raises
+    ------
+    GridError
+        Bad grid arguments, a point whose directory holds a different grid, or ``root`` busy.
+    """
+    started = time.perf_counter()
+    if workers < 1:
+        raise GridError.about("{opt_workers} must be at least 1, got {workers}", workers=workers)
+    root = Path(root).resolve()
+    root.mkdir(parents=True, exist_ok=True)
+    with _locked(root, "sweep"):
+        runs = _prepare_points(sweep, root, on_dataset, command)
+        by_scope = {f"{POINTS_DIR}/{r.point.point_id}": r for r in runs}
+        units = [u for r in runs for u in r.units]
+        done: set[str] = set()
+        for run in runs:
+            for unit in run.units:
+                if read_done(unit.directory(root)) is None:
+                    continue
+                if unit.kind == "eval" and _stale_eval(run.root, unit.unscoped()):
+                    undo(unit.directory(root))
+                else:
+                    done.add(unit.name)
+        already = [u.name for u in units if u.name in done]
+        if on_plan is not None:
+            on_plan(units, already)
+
+        def make_task(unit: Unit) -> UnitTask:
+            run = by_scope[unit.scope]
+            task = _task(run.spec, run.root, run.data_dir, run.identity, unit.unscoped(), command)
+            return replace(task, unit=unit)
+
+        executor = _executor(ray_address, root, runs[0].data_dir, ray_transfer, workers)
+        report = run_units(units, done, make_task, executor, keep_going=keep_going, on_result=on_result)
+        outcome = SweepOutcome(root, units, already, report)
+        for run in runs:
+            if _finish_point(root, run, done):
+                outcome.complete_points.append(run.point.point_id)
+        outcome.all_points = len(outcome.complete_points) == len(runs)
+        results = tidy_results(sweep, root, [r.point for r in runs if r.point.point_id in outcome.complete_points])
+        if not results.empty:
+            atomic_write_with(root / RESULTS_FILE, lambda tmp: results.to_csv(tmp, index=False))
+            outcome.results_rows = len(results)
+            if outcome.all_points:
+                from ..report.sensitivity import write_sensitivity
+
+                write_sensitivity(results, sweep.axes, root / "sensitivity", sweep.spec.bootstrap_resamples)
+        outcome.wall_s = time.perf_counter() - started
+        _write_metadata(sweep, root, runs, outcome, command)
+    return outcome
+
+
+def _finish_point(root: Path, run: _PointRun, done: set[str]) -> bool:
+    """Combine the point's settings when all of its units are done; True if the point is complete."""
+    complete = all(u.name in done for u in run.units)
+    meta = _read_metadata(run.root) or {}
+    if complete:
+        combined = {}
+        for setting in run.spec.settings:
+            evals = [u for u in run.units if u.kind == "eval" and u.setting == setting]
+            combined[setting] = combine_setting(run.root, setting, [u.directory(root) for u in evals])
+        meta.update({"combined": combined})
+    meta.update({"status": "complete" if complete else "incomplete", "complete": complete})
+    atomic_write_json(run.root / PAPER_METADATA_FILE, meta)
+    return complete
+
+
+_EPISODE = ["policy", "setting", "run_seed", "episode"]
+
+
+def tidy_results(sweep: Sweep, root: Path, points: list[SweepPoint]) -> pd.DataFrame:
+    """One row per point x setting x policy x seed x episode: the axes' values, the metrics,
+    and ``episode_cost`` = Σ_t (V_t + A_t) from the per-step records."""
+    frames = []
+    for point in points:
+        for setting in sweep.spec.grid.settings:
+            folder = combined_dir(root / POINTS_DIR / point.point_id, setting)
+            frame = pd.read_csv(folder / METRICS_FILE)
+            steps = pd.read_csv(
+                folder / ACTIONS_FILE, usecols=[*_EPISODE, "physics_violation_rate", "unsafe_backed_MWh"]
+            )
+            steps[EPISODE_COST] = steps["physics_violation_rate"] + steps["unsafe_backed_MWh"]
+            cost = steps.groupby(_EPISODE, sort=False)[EPISODE_COST].sum().reset_index()
+            frame = frame.merge(cost, on=_EPISODE, how="left", validate="one_to_one")
+            head = {"point": point.point_id, "cost_limit": point.lagrangian.cost_limit}
+            head.update({a: _cell(point.values[a]) for a in sweep.axes})
+            frames.append(pd.concat([pd.DataFrame([head] * len(frame)), frame], axis=1))
+    return pd.concat(frames, ignore_index=True) if frames else pd.DataFrame()
+
+
+def _cell(value: Any) -> Any:
+    return json.dumps(value) if isinstance(value, (list, dict)) else value
+
+
+def _write_metadata(sweep: Sweep, root: Path, runs: list[_PointRun], outcome: SweepOutcome, command) -> None:
+    failed = {r.unit: r.error for r in outcome.report.failed}
+    atomic_write_json(
+        root / SWEEP_METADATA_FILE,
+        {
+            "sweep_file": str(sweep.source),
+            "sweep": sweep.identity(),
+            "axes": list(sweep.axes),
+            "points": {
+                r.point.point_id: {
+                    "values": r.point.values,
+                    "data_dir": str(r.data_dir),
+                    "complete": r.point.point_id in outcome.complete_points,
+                    "units": len(r.units),
+                }
+                for r in runs
+            },
+            "failed_units": failed,
+            "complete": outcome.all_points,
+            "results_rows": outcome.results_rows,
+            "wall_s": round(outcome.wall_s, 3),
+            "command": redact_command(command or []),
+            "git_commit": git_commit(),
+            "package_versions": package_versions(),
+        },
+    )
+
+
+__all__ = ["SweepOutcome", "build_point_dataset", "run_sweep", "tidy_results"]

@@ -1,0 +1,250 @@
+"""The YAML of ``solarchain-eval sweep``: its schema, validation and expansion into points.
+
+A sweep is a base grid (budgets, seeds, settings, policies), a base dataset (an existing
+directory, or build parameters), an optional benchmark config, and ``axes``: each axis a list of
+values. The points are the Cartesian product of the axes, in the order the YAML lists them;
+each point is one grid (see :mod:`.sweep`). docs/stress.md#sweep-yaml documents every key.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import itertools
+import json
+import re
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Literal
+
+from pydantic import BaseModel, ConfigDict, Field, ValidationError
+
+from ..config import BenchmarkConfig, ConfigError, _read_text, _UniqueKeyLoader, config_from_mapping, load_config
+from ..data.cities import (
+    DEFAULT_END,
+    DEFAULT_NODES_PER_CITY,
+    DEFAULT_SEED,
+    DEFAULT_START,
+    DEFAULT_TIMEZONE,
+    PAPER_CITIES,
+    City,
+    check_unique_prefixes,
+    parse_city,
+    synthetic_cities,
+)
+from ..data.fdia import FDIA_FRACTION, FdiaScenario, parse_severity
+from ..lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
+
+
+class SweepError(ValueError):
+    """A sweep YAML that is unreadable or invalid (the message names the file and key)."""
+
+
+class _Section(BaseModel):
+    model_config = ConfigDict(extra="forbid", allow_inf_nan=False)
+
+
+class SweepGrid(_Section):
+    timesteps: int = Field(2048, ge=1, le=10**9)
+    episodes: int = Field(5, ge=1, le=10**6)
+    seeds: list[int] = Field(default_factory=lambda: [DEFAULT_SEED], min_length=1)
+    settings: list[str] = Field(default_factory=lambda: ["main", "no_physics"], min_length=1)
+    policies: list[str] | dict[str, list[str]] | None = None  # a list, or a list per setting
+    episode_seeds: Literal["paper", "independent"] = "paper"
+    checkpoint_every: int = Field(0, ge=0)
+
+
+class SweepDataset(_Section):
+    data: str | None = None
+    weather_cache: str | None = None
+    seed: int = Field(DEFAULT_SEED, ge=0, le=2**32 - 1)
+    start: str = DEFAULT_START
+    end: str = DEFAULT_END
+    timezone: str = DEFAULT_TIMEZONE
+    nodes_per_city: int = Field(DEFAULT_NODES_PER_CITY, ge=1, le=100_000)
+    cities: int | list[str] | None = None
+    fdia_rate: float = Field(FDIA_FRACTION, ge=0.0, le=1.0)
+    fdia_pattern: Literal["uniform", "clustered", "stealthy"] = "uniform"
+    fdia_severity: str | None = None
+    fdia_burst_hours: int = Field(6, ge=1)
+
+
+class SweepLagrangian(_Section):
+    cost_limit: float = Field(DEFAULT_COST_LIMIT, ge=0.0)
+    multiplier_lr: float = Field(DEFAULT_MULTIPLIER_LR, ge=0.0)
+
+
+class SweepFile(_Section):
+    grid: SweepGrid = Field(default_factory=SweepGrid)
+    dataset: SweepDataset = Field(default_factory=SweepDataset)
+    config: str | None = None
+    ppo_lag: SweepLagrangian = Field(default_factory=SweepLagrangian)
+    axes: dict[str, list[Any]] = Field(default_factory=dict)
+    bootstrap_resamples: int = Field(2000, ge=100, le=100_000)
+
+
+#: Axis name -> where it acts. Reward weights also answer to the config's own key.
+DATASET_AXES = ("fdia_rate", "fdia_pattern", "fdia_severity", "fdia_burst_hours", "nodes_per_city", "cities")
+REWARD_AXES = {
+    "lambda_p": "physics_penalty",
+    "lambda_d": "drawdown_penalty",
+    "lambda_j": "action_jitter_penalty",
+    "lambda_u": "unmet_demand_penalty",
+    "lambda_f": "fairness_penalty",
+}
+LAGRANGIAN_AXES = ("cost_limit", "multiplier_lr")
+AXES = (*DATASET_AXES, *REWARD_AXES, *REWARD_AXES.values(), *LAGRANGIAN_AXES)
+
+
+@dataclass(frozen=True)
+class SweepPoint:
+    """One point of the sweep: axis values, its dataset and its grid's config."""
+
+    point_id: str
+    values: dict[str, Any]
+    dataset: SweepDataset
+    dataset_key: str
+    config: BenchmarkConfig
+    lagrangian: LagrangianSettings
+
+    @property
+    def uses_existing_data(self) -> bool:
+        return self.dataset.data is not None
+
+
+@dataclass(frozen=True)
+class Sweep:
+    source: Path
+    spec: SweepFile
+    points: tuple[SweepPoint, ...]
+
+    @property
+    def axes(self) -> tuple[str, ...]:
+        return tuple(self.spec.axes)
+
+    def identity(self) -> dict[str, Any]:
+        return self.spec.model_dump(mode="json")
+
+
+def _slug(value: Any) -> str:
+    text = str(value)
+    return re.sub(r"[^A-Za-z0-9.]+", "-", text).strip("-") or "x"
+
+
+def point_id(values: dict[str, Any]) -> str:
+    """A readable directory name: ``axis-value`` pairs joined by ``__`` (``base`` without axes)."""
+    return "__".join(f"{k}-{_slug(v)}" for k, v in values.items()) or "base"
+
+
+def dataset_cities(dataset: SweepDataset) -> tuple[City, ...]:
+    if dataset.cities is None:
+        return PAPER_CITIES
+    if isinstance(dataset.cities, int):
+        return synthetic_cities(dataset.cities)
+    return tuple(parse_city(spec) for spec in dataset.cities)
+
+
+def fdia_scenario(dataset: SweepDataset) -> FdiaScenario:
+    severity = parse_severity(dataset.fdia_severity) if dataset.fdia_severity is not None else None
+    return FdiaScenario(dataset.fdia_rate, severity, dataset.fdia_pattern, dataset.fdia_burst_hours)
+
+
+def dataset_key(dataset: SweepDataset) -> str:
+    """Directory name of a built dataset: a hash of its build parameters."""
+    payload = json.dumps(dataset.model_dump(mode="json"), sort_keys=True)
+    return "ds-" + hashlib.sha256(payload.encode()).hexdigest()[:12]
+
+
+def _where(item: dict) -> str:
+    return ".".join(str(part) for part in item["loc"]) or "<top level>"
+
+
+def _load_yaml(path: Path) -> dict[str, Any]:
+    import yaml
+
+    try:
+        text = _read_text(path)
+    except ConfigError as error:
+        raise SweepError(str(error).replace("config file", "sweep file")) from None
+    try:
+        payload = yaml.load(text, Loader=_UniqueKeyLoader)
+    except yaml.YAMLError as error:
+        mark = getattr(error, "problem_mark", None)
+        where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""
+        raise SweepError(f"{path} is not valid YAML: {getattr(error, 'problem', None) or error}{where}") from None
+    if not isinstance(payload, dict):
+        raise SweepError(f"{path}: the top level must be a mapping of keys to values")
+    return payload
+
+
+def _point(
+    source: Path, spec: SweepFile, base: BenchmarkConfig, values: dict[str, Any], where: dict[str, str]
+) -> SweepPoint:
+    data_values = {k: v for k, v in values.items() if k in DATASET_AXES}
+    try:
+        dataset = SweepDataset.model_validate({**spec.dataset.model_dump(), **data_values})
+    except ValidationError as error:
+        item = error.errors()[0]
+        raise SweepError(f"{source}: {where.get(str(item['loc'][0]), _where(item))}: {item['msg']}") from None
+    if data_values and dataset.data is not None:
+        key = next(iter(data_values))
+        raise SweepError(f"{source}: {where[key]}: a dataset axis needs build parameters, not dataset.data")
+    reward = base.reward.model_dump()
+    for k, v in values.items():
+        if k in REWARD_AXES or k in REWARD_AXES.values():
+            reward[REWARD_AXES.get(k, k)] = v
+    try:
+        config = config_from_mapping({**base.model_dump(), "reward": reward}, str(source))
+        check_unique_prefixes(dataset_cities(dataset))
+        fdia_scenario(dataset)
+        lag = {**spec.ppo_lag.model_dump(), **{k: v for k, v in values.items() if k in LAGRANGIAN_AXES}}
+        lagrangian = LagrangianSettings(float(lag["cost_limit"]), float(lag["multiplier_lr"]))
+    except (ConfigError, ValueError, TypeError) as error:
+        keys = ", ".join(where[k] for k in values) or "dataset/ppo_lag"
+        raise SweepError(f"{source}: {keys}: {error}") from None
+    key = dataset_key(dataset) if dataset.data is None else "given"
+    return SweepPoint(point_id(values), values, dataset, key, config, lagrangian)
+
+
+def load_sweep(path: str | Path) -> Sweep:
+    """Read and validate a sweep YAML and expand its axes into points.
+
+    Raises
+    ------
+    SweepError
+        One line naming the file and the key at fault.
+    """
+    source = Path(path)
+    payload = _load_yaml(source)
+    try:
+        spec = SweepFile.model_validate(payload)
+    except ValidationError as error:
+        item = error.errors()[0]
+        problem = "unknown key" if item["type"] == "extra_forbidden" else item["msg"]
+        raise SweepError(f"{source}: {_where(item)}: {problem}") from None
+    for axis, values in spec.axes.items():
+        if axis not in AXES:
+            raise SweepError(f"{source}: axes.{axis}: unknown axis (choose from {', '.join(AXES)})")
+        if not values:
+            raise SweepError(f"{source}: axes.{axis}: give at least one value")
+        if len({json.dumps(v, sort_keys=True) for v in values}) != len(values):
+            raise SweepError(f"{source}: axes.{axis}: a value is listed twice")
+    canonical = [REWARD_AXES.get(a, a) for a in spec.axes]
+    if len(set(canonical)) != len(canonical):
+        raise SweepError(f"{source}: axes: a reward weight is given twice (by its λ name and its config key)")
+    base = BenchmarkConfig()
+    if spec.config is not None:
+        config_path = Path(spec.config) if Path(spec.config).is_absolute() else source.parent / spec.config
+        try:
+            base = load_config(config_path)
+        except ConfigError as error:
+            raise SweepError(f"{source}: config: {error}") from None
+    points = []
+    names = list(spec.axes)
+    for combo in itertools.product(*(enumerate(spec.axes[a]) for a in names)):
+        values = {a: v for a, (_, v) in zip(names, combo, strict=True)}
+        where = {a: f"axes.{a}[{i}]" for a, (i, _) in zip(names, combo, strict=True)}
+        points.append(_point(source, spec, base, values, where))
+    ids = [p.point_id for p in points]
+    if len(set(ids)) != len(ids):
+        raise SweepError(f"{source}: axes: two points share the directory name {ids[0]!r}; use distinct values")
+    return Sweep(source, spec, tuple(points))
