@@ -209,7 +209,7 @@ def run_sweep(
             for unit in run.units:
                 if read_done(unit.directory(root)) is None:
                     continue
-                if unit.kind == "eval" and _stale_eval(run.root, unit.unscoped()):
+                if unit.kind == "eval" and _stale_eval(run.root, unit.unscoped(), run.spec.backend):
                     undo(unit.directory(root))
                 else:
                     done.add(unit.name)
