@@ -374,10 +374,17 @@ class SolarChainEnv(gym.Env):
         (docs/governance.md#counterfactual-step-records). The caller passes the action as the
         env would execute it (float32 values, sanitised).
         """
-        k = self._k
-        if not self._episode_open or k >= self.episode_steps:
+        if not self._episode_open or self._k >= self.episode_steps:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
-        hour = min(self._start + k, self._n_hours - 1)
+        return self._outcome(executed, self._hour())
+
+    def _hour(self) -> int:
+        """The hourly-table row of the current step (the last row once an episode runs past the data)."""
+        hour = self._start + self._k
+        return hour if hour < self._n_hours else self._n_hours - 1
+
+    def _outcome(self, executed: tuple[float, float, float], hour: int) -> StepOutcome:
+        """``market_step`` of ``executed`` at ``hour`` from the current state and price shock (pure)."""
         return market_step(
             SCALAR,
             self.weights,
@@ -392,7 +399,7 @@ class SolarChainEnv(gym.Env):
             self._peak_price,
             executed,
             action_jitter_f32(executed, self._prev),
-            self._noise[k],
+            self._noise[self._k],
         )
 
     def step(self, action: Any):
@@ -400,25 +407,8 @@ class SolarChainEnv(gym.Env):
         if not self._episode_open or k >= self.episode_steps:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
         executed = self.decode_action(action)
-        hour = self._start + k
-        if hour >= self._n_hours:
-            hour = self._n_hours - 1
-        out = market_step(
-            SCALAR,
-            self.weights,
-            self._verified[hour],
-            self._unsafe[hour],
-            self._demand[hour],
-            self._share[hour],
-            self._trust[hour],
-            self._liquidity,
-            self._peak_liquidity,
-            self._price,
-            self._peak_price,
-            executed,
-            action_jitter_f32(executed, self._prev),
-            self._noise[k],
-        )
+        hour = self._hour()
+        out = self._outcome(executed, hour)
         self._liquidity, self._peak_liquidity = out.liquidity, out.peak_liquidity
         self._price, self._peak_price = out.token_price, out.peak_price
         self._prev = executed
