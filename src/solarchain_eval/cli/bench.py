@@ -9,7 +9,7 @@ import typer
 from rich.table import Table
 
 from . import app
-from .common import console, err_console, reports_errors
+from .common import CliError, console, err_console, reports_errors
 
 
 @app.command("bench")
@@ -27,6 +27,13 @@ def bench(
         help="numpy, or jax: also the jitted JAX env (4,096 envs by default) beside the numpy vector env.",
     ),
     episodes: int = typer.Option(10, min=1, help="JAX backend: episodes per env per repeat."),
+    jax_devices: int | None = typer.Option(
+        None,
+        "--jax-devices",
+        min=1,
+        help="JAX backend: devices to split the envs over. Default: every device; on a CPU, one XLA host "
+        "device per core (XLA runs each device's program on one thread).",
+    ),
     diagnostics: bool = typer.Option(
         False,
         "--diagnostics",
@@ -53,7 +60,7 @@ def bench(
         return
     results = []
     if backend == "jax":
-        _bench_jax(data_dir, 4096 if num_envs == 1024 else num_envs, calls, episodes, repeats)
+        _bench_jax(data_dir, 4096 if num_envs == 1024 else num_envs, calls, episodes, repeats, jax_devices)
         return
     err_console.print("measuring the single env...")
     results.append((measure.single_env_steps_per_s(data_dir, steps, repeats), 50_000, True))
@@ -89,15 +96,37 @@ def _bench_diagnostics(data_dir: Path, repeats: int) -> None:
     console.print(table)
 
 
-def _bench_jax(data_dir: Path, num_envs: int, calls: int, episodes: int, repeats: int) -> None:
+def host_device_count(devices: int | None) -> int:
+    """Ask XLA for one CPU host device per core (or ``devices``), before JAX starts.
+
+    XLA reads ``XLA_FLAGS`` once, when JAX initialises its backends; a flag already given by the
+    user wins. Returns the count asked for (the devices JAX will report may differ when JAX was
+    already initialised in this process, or on a GPU, whose devices are used instead).
+    """
+    import os
+    import sys
+
+    count = devices or len(os.sched_getaffinity(0))
+    flags = os.environ.get("XLA_FLAGS", "")
+    if "jax" not in sys.modules and "xla_force_host_platform_device_count" not in flags:
+        os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={count}".strip()
+    return count
+
+
+def _bench_jax(data_dir: Path, num_envs: int, calls: int, episodes: int, repeats: int, devices: int | None) -> None:
     """The numpy vector env and the JAX env at the same number of envs, and their ratio."""
     from .. import bench as measure
+
+    host_device_count(devices)
     from ..jax.bench import jax_env_steps_per_s
 
     err_console.print(f"measuring the numpy vector env ({num_envs} envs)...")
     numpy_result = measure.vector_env_steps_per_s(data_dir, num_envs, calls, repeats)
     err_console.print(f"compiling and measuring the JAX env ({num_envs} envs)...")
-    jax_result = jax_env_steps_per_s(data_dir, num_envs, episodes, repeats)
+    try:
+        jax_result = jax_env_steps_per_s(data_dir, num_envs, episodes, repeats, devices)
+    except ValueError as error:
+        raise CliError(f"--jax-devices: {error}") from None
     table = Table(title=f"env throughput on {data_dir}", title_justify="left")
     for column in ("measurement", "median", "best", "unit", "goal"):
         table.add_column(column, justify="left" if column in ("measurement", "unit") else "right")

@@ -44,19 +44,62 @@ def make_rollout(env: SolarChainJaxEnv, params, num_envs: int, episodes: int):
     return jax.jit(run), episodes * steps * num_envs
 
 
-def jax_env_steps_per_s(data_dir: Path, num_envs: int, episodes: int, repeats: int) -> Throughput:
-    """env-steps/s of the jitted, vmapped JAX env (compilation excluded, resets included)."""
+def shard_rollout(env: SolarChainJaxEnv, params, num_envs: int, episodes: int, devices: list):
+    """:func:`make_rollout` with the envs split evenly over ``devices`` (``shard_map``).
+
+    Each device runs ``num_envs / len(devices)`` envs with its own key; the function takes one
+    key per device, (D,), and the (8, num_envs, 3) actions, and returns the devices' totals, (D,).
+    On a CPU the devices are XLA host devices (``--xla_force_host_platform_device_count``), one
+    per core: XLA runs one device's program on one thread, so this is how the scan uses them all.
+    """
+    count = len(devices)
+    if num_envs % count:
+        raise ValueError(f"{num_envs} envs cannot be split evenly over {count} devices")
+    run, _ = make_rollout(env, params, num_envs // count, episodes)
+    mesh = jax.sharding.Mesh(np.array(devices), ("envs",))
+    spec = jax.sharding.PartitionSpec
+
+    def per_device(keys: jax.Array, actions: jax.Array) -> jax.Array:
+        return run(keys[0], actions)[None]
+
+    sharded = jax.shard_map(
+        per_device, mesh=mesh, in_specs=(spec("envs"), spec(None, "envs")), out_specs=spec("envs"), check_vma=False
+    )
+    return (
+        jax.jit(sharded),
+        jax.sharding.NamedSharding(mesh, spec(None, "envs")),
+        episodes * params.episode_steps * num_envs,
+    )
+
+
+def jax_env_steps_per_s(
+    data_dir: Path, num_envs: int, episodes: int, repeats: int, devices: int | None = None
+) -> Throughput:
+    """env-steps/s of the jitted, vmapped JAX env (compilation excluded, resets included).
+
+    ``devices``: how many of JAX's devices to split the envs over (default: all of them).
+    """
     params = make_env_params(data_dir)
     env = SolarChainJaxEnv(params)
-    run, transitions = make_rollout(env, params, num_envs, episodes)
-    actions = jnp.asarray(np.random.default_rng(1).random((8, num_envs, 3), dtype=np.float32))
-    run(jax.random.key(0), actions).block_until_ready()  # compile
+    available = jax.devices()
+    used = available[: len(available) if devices is None else devices]
+    if not 1 <= len(used) == (devices or len(used)):
+        raise ValueError(f"asked for {devices} JAX devices; {len(available)} available")
+    run, actions_sharding, transitions = shard_rollout(env, params, num_envs, episodes, used)
+    actions = np.random.default_rng(1).random((8, num_envs, 3), dtype=np.float32)
+    actions = jax.device_put(actions, actions_sharding)
+
+    def keys(seed: int) -> jax.Array:
+        return jax.random.split(jax.random.key(seed), len(used))
+
+    run(keys(0), actions).block_until_ready()  # compile
     samples = []
     for repeat in range(repeats):
         start = time.perf_counter()
-        run(jax.random.key(repeat + 1), actions).block_until_ready()
+        run(keys(repeat + 1), actions).block_until_ready()
         samples.append(transitions / (time.perf_counter() - start))
-    device = jax.devices()[0].platform
+    platform = used[0].platform
+    where = f"{len(used)} {platform} device{'s' if len(used) > 1 else ''}"
     return Throughput(
-        f"JAX env on {device}, {num_envs} envs (jit, vmap, lax.scan; resets included)", "env-steps/s", tuple(samples)
+        f"JAX env on {where}, {num_envs} envs (jit, vmap, lax.scan; resets included)", "env-steps/s", tuple(samples)
     )
