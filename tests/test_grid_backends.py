@@ -36,3 +36,43 @@ def test_train_cli_refuses_ppo_lag_on_jax(tmp_path):
     assert result.exit_code == 2, result.output
     assert "Stable-Baselines3 only" in result.output
     assert not (tmp_path / "m").exists()
+
+
+def test_jax_grid_trains_each_algorithm_and_setting_as_one_seed_group(tmp_path):
+    from solarchain_eval.experiments.grid import eval_model_path
+
+    spec = GridSpec.from_preset("paper", backend="jax")
+    units = plan_units(spec)
+    trains = [u for u in units if u.kind == "train"]
+    # SAC first (the longest), then PPO and DQN; main before no_physics; every seed in each group
+    assert [(u.policy, u.setting) for u in trains] == [
+        ("sac", "main"), ("sac", "no_physics"), ("ppo", "main"), ("ppo", "no_physics"),
+        ("dqn", "main"), ("dqn", "no_physics"),
+    ]  # fmt: skip
+    assert all(u.seed_group == spec.seeds and u.seed == spec.seeds[0] for u in trains)
+    names = {u.name for u in trains}
+    evals = [u for u in units if u.kind == "eval" and u.depends_on]
+    assert evals and all(u.depends_on[0] in names for u in evals)
+    llm_sac = next(u for u in evals if u.policy == "sac" and u.setting == "llm" and u.seed == spec.seeds[1])
+    group = "+".join(map(str, spec.seeds))
+    assert llm_sac.depends_on == (f"train/sac-main-{group}",)
+    path = eval_model_path(tmp_path, llm_sac, "jax", "jax_model.msgpack")
+    assert path == tmp_path / "units" / "train" / f"sac-main-{group}" / f"seed_{spec.seeds[1]}" / "jax_model.msgpack"
+    # the SB3 grid keeps one unit (and one model directory) per seed
+    sb3 = plan_units(GridSpec.from_preset("paper"))
+    assert sum(u.kind == "train" for u in sb3) == 3 * len(trains)
+    sb3_sac = next(u for u in sb3 if u.name == f"eval/sac-llm-{spec.seeds[1]}")
+    assert eval_model_path(tmp_path, sb3_sac, "sb3", "model.zip") == (
+        tmp_path / "units" / "train" / f"sac-main-{spec.seeds[1]}" / "model.zip"
+    )
+
+
+def test_the_wall_time_estimate_charges_a_seed_group_once():
+    from solarchain_eval.bench_train import UnitTimes, estimate_paper_wall_time
+
+    times = UnitTimes({"ppo": 1000.0, "sac": 100.0, "dqn": 1000.0}, 5.0, {"static": 1.0}, "test")
+    jax = estimate_paper_wall_time(times, 2, GridSpec.from_preset("paper", backend="jax"))
+    sb3 = estimate_paper_wall_time(times, 2, GridSpec.from_preset("paper"))
+    per_model = 5.0 + 300_000 / 100.0
+    assert jax["train_sac_cpu_s"] == 2 * per_model  # two groups (main, no_physics) of three seeds
+    assert sb3["train_sac_cpu_s"] == 6 * per_model

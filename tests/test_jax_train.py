@@ -16,6 +16,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from solarchain_eval.io import sha256_file
+
 pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
 pytest.importorskip("rejax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
 
@@ -163,28 +165,47 @@ def test_both_backends_for_one_name_in_one_directory_is_refused(trained, tmp_pat
 
 
 def test_paper_backend_jax_runs_the_smoke_grid_through_train_units(tiny_dataset, tmp_path):
+    """One JAX train unit trains both seeds in one vmap; each eval unit loads its seed's model."""
     from solarchain_eval.experiments.grid import GridSpec, plan_units
 
-    spec = GridSpec.from_preset("smoke", settings=("main",), policies=("static", "dqn"), backend="jax")
-    assert [u.backend for u in plan_units(spec) if u.kind == "train"] == ["jax"]
+    seeds = (20260511, 20260512)
+    spec = GridSpec.from_preset("smoke", settings=("main",), policies=("static", "dqn"), backend="jax", seeds=seeds)
+    trains = [u for u in plan_units(spec) if u.kind == "train"]
+    assert [(u.backend, u.seed_group, u.name) for u in trains] == [("jax", seeds, "train/dqn-main-20260511+20260512")]
     root = tmp_path / "root"
     args = (
         "paper", "--backend", "jax", "--preset", "smoke", "--settings", "main", "--policies", "static,dqn",
-        "--data", str(tiny_dataset), "--out", str(root), "--no-report",
+        "--seeds", "20260511,20260512", "--data", str(tiny_dataset), "--out", str(root), "--no-report",
     )  # fmt: skip
     done = _cli(*args)
     assert done.returncode == 0, done.stderr
-    train_dir = root / "units" / "train" / "dqn-main-20260511"
-    meta = json.loads((train_dir / "train_metadata.json").read_text())
-    assert meta["backend"] == "jax" and meta["timesteps_done"] == 300 and (train_dir / "DONE").is_file()
-    unit = json.loads((root / "units" / "eval" / "dqn-main-20260511" / "unit.json").read_text())
-    assert list(unit["model_sha256"]) == ["dqn"] and unit["grid"]["backend"] == "jax"
+    train_dir = root / "units" / "train" / "dqn-main-20260511+20260512"
+    assert (train_dir / "DONE").is_file()
+    digests = {}
+    for seed in seeds:
+        meta = json.loads((train_dir / f"seed_{seed}" / "train_metadata.json").read_text())
+        assert meta["backend"] == "jax" and meta["timesteps_done"] == 300 and meta["seed"] == seed
+        unit = json.loads((root / "units" / "eval" / f"dqn-main-{seed}" / "unit.json").read_text())
+        assert list(unit["model_sha256"]) == ["dqn"] and unit["grid"]["backend"] == "jax"
+        assert unit["grid"]["train_units"] == "seed groups"
+        digests[seed] = unit["model_sha256"]["dqn"]
+        assert digests[seed] == sha256_file(train_dir / f"seed_{seed}" / "jax_model.msgpack")
+    assert digests[seeds[0]] != digests[seeds[1]]
+    # the grid's seed group is the same training as `train --backend jax --seeds a,b`
+    alone = tmp_path / "alone"
+    trained = _cli(
+        "train", "--backend", "jax", "--algo", "dqn", "--seeds", "20260511,20260512", "--timesteps", "300",
+        "--data", str(tiny_dataset), "--out", str(alone),
+    )  # fmt: skip
+    assert trained.returncode == 0, trained.stderr
+    for seed in seeds:
+        assert sha256_file(alone / f"seed_{seed}" / "jax_model.msgpack") == digests[seed]
     metrics = pd.read_csv(root / "combined" / "main" / "metrics.csv")
-    assert sorted(metrics["policy"].unique()) == ["dqn", "static"] and len(metrics) == 4
-    stamp = (train_dir / "jax_model.msgpack").stat().st_mtime_ns
+    assert sorted(metrics["policy"].unique()) == ["dqn", "static"] and len(metrics) == 8
+    stamp = (train_dir / f"seed_{seeds[0]}" / "jax_model.msgpack").stat().st_mtime_ns
     again = _cli(*args)  # resume: every unit done, nothing retrained
-    assert again.returncode == 0 and "3 of 3 units already done" in again.stderr
-    assert (train_dir / "jax_model.msgpack").stat().st_mtime_ns == stamp
+    assert again.returncode == 0 and "5 of 5 units already done" in again.stderr
+    assert (train_dir / f"seed_{seeds[0]}" / "jax_model.msgpack").stat().st_mtime_ns == stamp
     sb3 = _cli(*[a if a != "jax" else "sb3" for a in args])
     assert sb3.returncode == 2 and "holds a different grid" in sb3.stderr and "backend" in sb3.stderr
 

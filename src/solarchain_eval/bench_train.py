@@ -114,7 +114,11 @@ def unit_times_from_root(root: Path) -> UnitTimes:
         wall = float(json.loads(done.read_text())["wall_s"])
         policy = unit_dir.name.split("-")[0]
         if unit_dir.parent.name == "train":
-            meta = json.loads((unit_dir / TRAIN_METADATA_FILE).read_text())
+            # A JAX seed group keeps one metadata file per seed (seed_<s>/), all with the group's times.
+            path = unit_dir / TRAIN_METADATA_FILE
+            meta = json.loads(
+                (path if path.is_file() else min(unit_dir.glob(f"seed_*/{TRAIN_METADATA_FILE}"))).read_text()
+            )
             rates.setdefault(policy, []).append(meta["timesteps_done"] / meta["wall_s"])
             overheads.append(max(wall - meta["wall_s"], 0.0))
         else:
@@ -132,7 +136,11 @@ def unit_times_from_root(root: Path) -> UnitTimes:
 
 
 def unit_duration(unit: Unit, times: UnitTimes, spec: GridSpec) -> float:
-    """Seconds of one unit: training scales with the timesteps, evaluation with the episodes."""
+    """Seconds of one unit: training scales with the timesteps, evaluation with the episodes.
+
+    ``times.steps_per_s`` is per model of a train unit as planned (a JAX seed group's models
+    train at once, so the group takes the time of one model at the group's rate).
+    """
     if unit.kind == "train":
         overhead = times.train_overhead_by_algo.get(unit.policy, times.train_overhead_s)
         return overhead + spec.timesteps / times.steps_per_s[unit.policy]

@@ -4,7 +4,9 @@ A grid is a list of *units*, each one directory under ``ROOT/units`` (see :mod:`
 
 - train units ``train/<algo>-<setting>-<seed>``: one model per algorithm × training setting ×
   seed (``main`` trains with the physics penalty, ``no_physics`` without), trained with the
-  grid's backend (``sb3``, or ``jax``: rejax on the JAX environment, docs/jax.md);
+  grid's backend (``sb3``, or ``jax``: rejax on the JAX environment, docs/jax.md). With the JAX
+  backend one train unit ``train/<algo>-<setting>-<seed>+<seed>+...`` trains every seed of an
+  algorithm and setting in one ``vmap``, each model in ``seed_<seed>/`` of the unit;
 - eval units ``eval/<policy>-<setting>-<seed>``: one policy evaluated in one setting for one
   run seed over the grid's episodes. An eval unit of a learned policy depends on the train unit
   of the same algorithm, seed and the setting's ``model_setting``.
@@ -32,7 +34,7 @@ from ..lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
 from ..policies.baselines import BASELINES
 from ..training import DEFAULT_CHECKPOINT_EVERY
 from .evaluate import PAPER_EPISODES, PAPER_SEEDS
-from .layout import eval_unit_dir, train_unit_dir
+from .layout import UNITS_DIR, eval_unit_dir, seed_model_dir, train_unit_dir
 from .rollout import paper_episode_seeds
 from .settings import (
     KNOWN_SETTINGS,
@@ -254,16 +256,23 @@ class Unit:
     depends_on: tuple[str, ...] = ()
     scope: str = ""  # a sweep point's sub-root ("" for a plain grid)
     backend: str = "sb3"  # train units: which library trains the model
+    #: JAX train units: every seed trained together in one vmap (``seed`` is the first); empty
+    #: for a unit of one seed, whose model is the unit directory's own.
+    seed_group: tuple[int, ...] = ()
+
+    @property
+    def seed_label(self) -> str:
+        return "+".join(str(s) for s in self.seed_group) if self.seed_group else str(self.seed)
 
     @property
     def name(self) -> str:
-        local = f"{self.kind}/{self.policy}-{self.setting}-{self.seed}"
+        local = f"{self.kind}/{self.policy}-{self.setting}-{self.seed_label}"
         return f"{self.scope}/{local}" if self.scope else local
 
     def directory(self, root: Path) -> Path:
         base = Path(root) / self.scope if self.scope else Path(root)
         if self.kind == "train":
-            return train_unit_dir(base, self.policy, self.setting, self.seed)
+            return train_unit_dir(base, self.policy, self.setting, self.seed_label)
         return eval_unit_dir(base, self.policy, self.setting, self.seed)
 
     def unscoped(self) -> Unit:
@@ -278,27 +287,52 @@ def scoped(units: list[Unit], scope: str) -> list[Unit]:
     return [replace(u, depends_on=tuple(f"{scope}/{d}" for d in u.depends_on), scope=scope) for u in units]
 
 
-def train_unit(algo: str, setting: str, seed: int, backend: str = "sb3") -> Unit:
-    return Unit("train", algo, setting, seed, backend=backend)
+def train_unit(algo: str, setting: str, seed: int, backend: str = "sb3", seed_group: tuple[int, ...] = ()) -> Unit:
+    return Unit("train", algo, setting, seed_group[0] if seed_group else seed, backend=backend, seed_group=seed_group)
 
 
 def plan_units(spec: GridSpec) -> list[Unit]:
     """Every unit of the grid in a fixed order: train units (SAC first: the longest), then eval
-    units by setting, policy and seed. Train units are planned only where an eval unit needs them."""
-    evals: list[Unit] = []
-    needed: set[tuple[str, str, int]] = set()
+    units by setting, policy and seed. Train units are planned only where an eval unit needs them.
+
+    With the JAX backend the seeds of an algorithm and training setting form one train unit
+    (rejax trains them in one ``vmap``: on a CPU about 20 % more steps per second in total than
+    one at a time, on a GPU nearly the time of one).
+    """
+    needed: dict[tuple[str, str], list[int]] = {}
+    wanted: list[tuple[str, str, int]] = []
     for setting_name in spec.settings:
         setting = SETTING_REGISTRY[setting_name]
         for policy in spec.setting_policies(setting_name):
             for seed in spec.seeds:
-                deps: tuple[str, ...] = ()
+                wanted.append((policy, setting_name, seed))
                 if policy in TRAINABLE_ALGOS:
-                    needed.add((policy, setting.model_setting, seed))
-                    deps = (train_unit(policy, setting.model_setting, seed).name,)
-                evals.append(Unit("eval", policy, setting_name, seed, deps))
+                    seeds = needed.setdefault((policy, setting.model_setting), [])
+                    if seed not in seeds:
+                        seeds.append(seed)
     order = {algo: i for i, algo in enumerate(("sac", "ppo", "ppo-lag", "dqn"))}
-    trains = [
-        train_unit(algo, setting, seed, spec.backend)
-        for algo, setting, seed in sorted(needed, key=lambda k: (order.get(k[0], 9), TRAIN_SETTINGS.index(k[1]), k[2]))
-    ]
-    return trains + evals
+    trains: dict[tuple[str, str, int], Unit] = {}
+    for algo, setting in sorted(needed, key=lambda k: (order.get(k[0], 9), TRAIN_SETTINGS.index(k[1]))):
+        seeds = sorted(needed[(algo, setting)])
+        if spec.backend == "jax":
+            group = train_unit(algo, setting, seeds[0], spec.backend, tuple(seeds))
+            trains.update({(algo, setting, seed): group for seed in seeds})
+        else:
+            trains.update({(algo, setting, seed): train_unit(algo, setting, seed, spec.backend) for seed in seeds})
+    evals = []
+    for policy, setting_name, seed in wanted:
+        train = trains.get((policy, SETTING_REGISTRY[setting_name].model_setting, seed))
+        evals.append(Unit("eval", policy, setting_name, seed, (train.name,) if train else ()))
+    return list(dict.fromkeys(trains.values())) + evals
+
+
+def eval_model_path(root: Path, unit: Unit, backend: str, model_file: str) -> Path | None:
+    """The model file an eval unit loads (None for a baseline): its seed's, in its train unit.
+
+    An SB3 train unit holds its one model; a JAX train unit (always a seed group, see
+    :func:`plan_units`) holds each seed's in ``seed_<seed>/``.
+    """
+    if unit.kind != "eval" or not unit.depends_on:
+        return None
+    directory = Path(root) / UNITS_DIR / unit.depends_on[0]
+    return (seed_model_dir(directory, unit.seed) if backend == "jax" else directory) / model_file

@@ -9,6 +9,7 @@ A paper root (``solarchain-eval paper --out ROOT``)::
 
     ROOT/paper_metadata.json                            the grid spec, versions, dataset provenance
     ROOT/units/train/<algo>-<setting>-<seed>/           one trained model (SB3 .zip, config, log)
+    ROOT/units/train/<algo>-<setting>-<s1>+<s2>+.../    JAX backend: a seed group, seed_<s>/ per model
     ROOT/units/eval/<policy>-<setting>-<seed>/          one evaluation = a run directory
     ROOT/combined/<setting>/metrics.csv ...             every unit of a setting concatenated
     ROOT/report/                                        tables, figures, index.html
@@ -32,8 +33,14 @@ COMBINED_DIR = "combined"
 REPORT_DIR = "report"
 
 
-def train_unit_dir(root: Path, algo: str, setting: str, seed: int) -> Path:
+def train_unit_dir(root: Path, algo: str, setting: str, seed: int | str) -> Path:
+    """``seed`` is a seed, or a seed group's label (``<seed>+<seed>+...``, JAX backend)."""
     return Path(root) / UNITS_DIR / "train" / f"{algo}-{setting}-{seed}"
+
+
+def seed_model_dir(train_dir: Path, seed: int) -> Path:
+    """Where a seed group's train unit (JAX backend) keeps the model of ``seed``."""
+    return Path(train_dir) / f"seed_{seed}"
 
 
 def eval_unit_dir(root: Path, policy: str, setting: str, seed: int) -> Path:
@@ -78,6 +85,7 @@ __all__ = [
     "DONE_MARKER",
     "PAPER_METADATA_FILE",
     "train_unit_dir",
+    "seed_model_dir",
     "eval_unit_dir",
     "combined_dir",
     "is_done",

@@ -32,8 +32,8 @@ from ..redaction import redact_command
 from ..training import differences
 from ..versions import git_commit, package_versions
 from .combine import combine_setting
-from .grid import SETTING_REGISTRY, GridSpec, Unit, independent_episode_seeds, plan_units
-from .layout import PAPER_METADATA_FILE, UNITS_DIR
+from .grid import SETTING_REGISTRY, GridSpec, Unit, eval_model_path, independent_episode_seeds, plan_units
+from .layout import PAPER_METADATA_FILE
 from .pool import Executor, InlineExecutor, LocalPool, RunReport, run_units
 from .settings import setting_has_physics_penalty
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
@@ -65,6 +65,8 @@ def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
         "agentic": _agentic_identity(spec),
         # Only a JAX grid records its backend, so that the identity of existing SB3 roots is unchanged.
         **({"backend": spec.backend} if spec.backend != "sb3" else {}),
+        # JAX train units train an algorithm's seeds together (one vmap): another layout of units.
+        **({"train_units": "seed groups"} if spec.backend == "jax" else {}),
     }
     if spec.uses_lagrangian:  # only then: grids without ppo-lag keep their earlier identity
         identity["lagrangian"] = spec.lagrangian.describe()
@@ -127,8 +129,8 @@ def _stale_eval(root: Path, unit: Unit, backend: str) -> bool:
         recorded = json.loads((unit.directory(root) / UNIT_FILE).read_text(encoding="utf-8")).get("model_sha256")
     except (OSError, ValueError):
         return True
-    model = root / UNITS_DIR / unit.depends_on[0] / model_file(backend)
-    return not model.is_file() or recorded != model_digest({unit.policy: model})
+    model = eval_model_path(root, unit, backend, model_file(backend))
+    return model is None or not model.is_file() or recorded != model_digest({unit.policy: model})
 
 
 def run_paper(
@@ -266,7 +268,7 @@ def _task(
         "seed": unit.seed,
     }
     if unit.kind == "eval" and unit.depends_on:
-        models = {unit.policy: root / UNITS_DIR / unit.depends_on[0] / model_file(spec.backend)}
+        models = {unit.policy: eval_model_path(root, unit, spec.backend, model_file(spec.backend))}
         unit_identity["model_sha256"] = model_digest(models)
     return UnitTask(
         unit=unit,

@@ -25,7 +25,7 @@ from ..io import atomic_write_json, sha256_file
 from ..lagrangian import LagrangianSettings
 from ..training import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
 from .grid import EPISODE_SEED_PROTOCOLS, Unit
-from .layout import DONE_MARKER
+from .layout import DONE_MARKER, seed_model_dir
 
 UNIT_FILE = "unit.json"
 UNIT_LOG = "unit.log"
@@ -187,12 +187,17 @@ def _train_unit(task: UnitTask, log: _UnitLog) -> None:
 
 
 def _train_jax_unit(task: UnitTask, log: _UnitLog) -> None:
-    """One seed with the JAX backend (no checkpoints: a redone unit trains again unless it had finished)."""
+    """A seed group with the JAX backend, one vmap, each model in ``seed_<s>/`` (no checkpoints:
+    a redone unit trains again unless it had finished)."""
     from ..jax.train import JaxTrainSpec, train_jax
 
     unit = task.unit
-    spec = JaxTrainSpec(unit.policy, (unit.seed,), task.timesteps, task.no_physics_penalty, task.data_dir, task.config)
-    outcome = train_jax(spec, {unit.seed: task.unit_dir}, command=list(task.command))
+    seeds = unit.seed_group or (unit.seed,)
+    spec = JaxTrainSpec(unit.policy, seeds, task.timesteps, task.no_physics_penalty, task.data_dir, task.config)
+    out_dirs = {seed: seed_model_dir(task.unit_dir, seed) for seed in seeds}
+    for directory in out_dirs.values():
+        directory.mkdir(parents=True, exist_ok=True)
+    outcome = train_jax(spec, out_dirs, command=list(task.command))
     if outcome.already_complete:
         log.write("the finished training was already there")
     else:
