@@ -11,6 +11,7 @@ import pytest
 from conftest import shared_data_dir
 from solarchain_eval.env import SolarChainEnv
 from solarchain_eval.experiments.rollout import run_policy
+from solarchain_eval.io import read_csv_exact
 from solarchain_eval.metrics import METRIC_NAMES
 from solarchain_eval.policies import make_baseline
 
@@ -74,7 +75,7 @@ def original_release() -> dict[tuple[str, int, int], dict[str, float]]:
     out = {}
     for run_seed in SEEDS:
         path = Path(folder) / f"metrics_seed{run_seed}_ep30.csv"
-        frame = pd.read_csv(path, float_precision="round_trip")
+        frame = read_csv_exact(path)
         # The release's `seed` column is the episode's reset seed, run seed + episode.
         assert (frame["seed"] == run_seed + frame["episode"]).all(), path
         for row in frame.to_dict("records"):

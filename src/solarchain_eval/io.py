@@ -91,6 +91,18 @@ def _json_default(value: Any) -> Any:
     raise TypeError(f"cannot serialise {type(value).__name__} to JSON")
 
 
+def read_csv_exact(path: Path | str, **kwargs: Any) -> Any:
+    """``pandas.read_csv`` with floats parsed exactly (so written floats read back bit for bit).
+
+    pandas 3 parses exactly by default and deprecates ``float_precision``; pandas 2 needs asking.
+    """
+    import pandas as pd
+
+    if int(pd.__version__.split(".")[0]) < 3:
+        kwargs.setdefault("float_precision", "round_trip")
+    return pd.read_csv(path, **kwargs)
+
+
 def sha256_file(path: Path | str) -> str:
     digest = hashlib.sha256()
     with open(path, "rb") as handle:

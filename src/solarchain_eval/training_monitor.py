@@ -28,7 +28,7 @@ from stable_baselines3.common.buffers import ReplayBuffer
 from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 
-from .io import atomic_write_csv, atomic_write_json, atomic_write_with
+from .io import atomic_write_csv, atomic_write_json, atomic_write_with, read_csv_exact
 
 #: Columns of ``training_log.csv`` (one row per finished training episode).
 TRAIN_LOG_COLUMNS = (
@@ -91,7 +91,7 @@ class EpisodeLog:
 
     @staticmethod
     def read(path: Path) -> list[dict[str, float]]:
-        frame = pd.read_csv(path, float_precision="round_trip")
+        frame = read_csv_exact(path)
         missing = [c for c in TRAIN_LOG_COLUMNS if c not in frame.columns]
         if missing:
             raise ValueError(f"{path}: training log lacks column(s) {', '.join(missing)}")

@@ -14,7 +14,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..io import atomic_write_json, atomic_write_with
+from ..io import atomic_write_json, atomic_write_with, read_csv_exact
 from .layout import AGENTIC_LOG_FILE, combined_dir
 from .records import ACTIONS_FILE, CITY_HOUR_FILE, DIAGNOSTICS_FILE, METRICS_FILE, SUMMARY_FILE, summarize
 
@@ -42,7 +42,7 @@ def concat_csv(sources: Sequence[Path], target: Path) -> int:
 
         atomic_write_with(target, write)
         return rows[0]
-    frame = pd.concat([pd.read_csv(p, float_precision="round_trip") for p in sources], ignore_index=True)
+    frame = pd.concat([read_csv_exact(p) for p in sources], ignore_index=True)
     atomic_write_with(target, lambda tmp: frame.to_csv(tmp, index=False))
     return len(frame)
 
@@ -61,10 +61,6 @@ def concat_lines(sources: Sequence[Path], target: Path) -> int:
 
     atomic_write_with(target, write)
     return count[0]
-
-
-# pandas 3 parses floats exactly by default (and deprecates the option); pandas 2 needs asking.
-_ROUND_TRIP = {} if int(pd.__version__.split(".")[0]) >= 3 else {"float_precision": "round_trip"}
 
 
 def combine_setting(root: Path, setting: str, unit_dirs: Sequence[Path]) -> dict[str, int]:
@@ -87,6 +83,6 @@ def combine_setting(root: Path, setting: str, unit_dirs: Sequence[Path]) -> dict
         rows[DIAGNOSTICS_FILE] = concat_csv(diagnostics, out / DIAGNOSTICS_FILE)
     else:
         (out / DIAGNOSTICS_FILE).unlink(missing_ok=True)
-    metrics = pd.read_csv(out / METRICS_FILE, **_ROUND_TRIP)
+    metrics = read_csv_exact(out / METRICS_FILE)
     atomic_write_json(out / SUMMARY_FILE, summarize(metrics))
     return rows
