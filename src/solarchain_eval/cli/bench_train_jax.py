@@ -26,13 +26,16 @@ def bench_jax(
     from .. import bench_train as measure
     from ..experiments.grid import GridSpec
 
+    pinned = _pin_before_jax_starts()
     try:
         from ..jax.bench_train import DEFAULT_STEPS, describe_flags, jax_eval_unit_s, jax_training_steps_per_s
     except ImportError as error:
         raise CliError(str(error)) from None
     flags = describe_flags()
+    where = f"JAX on CPU {pinned}, as a grid worker runs" if pinned is not None else "JAX unpinned"
     table = Table(
-        title=f"JAX (rejax) vs SB3 training throughput, steps/s per model (XLA_FLAGS={flags['XLA_FLAGS'] or '-'})",
+        title=f"JAX (rejax) vs SB3 training throughput, steps/s per model ({where}; "
+        f"XLA_FLAGS={flags['XLA_FLAGS'] or '-'})",
         title_justify="left",
     )
     columns = ("algorithm", "SB3 median", "JAX median", "JAX best", "JAX / SB3", "per CPU-s: SB3", "JAX", "JAX / SB3")
@@ -100,6 +103,26 @@ def bench_jax(
         "(the per-CPU-second estimate is what a machine with its cores to itself would take; "
         "the wall-clock one includes this run's load)"
     )
+
+
+def _pin_before_jax_starts() -> int | None:
+    """Run JAX on one CPU, as the grid's pinned workers do (:func:`~..experiments.pool.worker_cpus`).
+
+    XLA starts its threads when JAX first runs; they inherit this thread's affinity. Unpinned, a
+    JAX training keeps about a third of a second core busy with the same steps/s, which two
+    workers sharing two cores would pay for. Returns the CPU, or None where nothing was pinned
+    (JAX already started, one CPU only, or no affinity control).
+    """
+    import os
+    import sys
+
+    if "jax" in sys.modules or not hasattr(os, "sched_getaffinity"):
+        return None
+    cpus = sorted(os.sched_getaffinity(0))
+    if len(cpus) < 2:
+        return None
+    os.sched_setaffinity(0, {cpus[0]})
+    return cpus[0]
 
 
 def _seed_group_rates(
