@@ -1,8 +1,8 @@
 """Where the JAX backend changes rejax to follow Stable-Baselines3 (docs/jax.md lists the rest).
 
 rejax has no setting for these, so :func:`sb3_variant` subclasses its algorithm: SB3's
-optimiser and SB3's bootstrapping at the time limit for all three algorithms, and SB3's value
-loss and initialisation for PPO.
+optimiser, initialisation and bootstrapping at the time limit for all three algorithms, and
+SB3's value loss for PPO.
 """
 
 from __future__ import annotations
@@ -23,6 +23,9 @@ TIME_LIMIT = {
     "dqn": "bootstrapped: the buffer stores the terminal obs as next obs and done False at a truncation",
 }
 
+#: SB3's SAC and DQN networks keep torch's default ``nn.Linear`` initialisation.
+TORCH_INIT = "torch nn.Linear default: kernels and biases uniform in +-1/sqrt(fan_in)"
+
 #: Where this backend changes rejax to follow SB3 (recorded in each model's identity).
 SB3_ALIGNMENT = {
     "ppo": {
@@ -32,8 +35,8 @@ SB3_ALIGNMENT = {
         "init": "orthogonal: hidden gain sqrt(2), action mean 0.01, value 1; zero biases",
         "time_limit": TIME_LIMIT["ppo"],
     },
-    "sac": {"gradient_clip": "global norm", "adam_eps": 1e-8, "time_limit": TIME_LIMIT["sac"]},
-    "dqn": {"gradient_clip": "global norm", "adam_eps": 1e-8, "time_limit": TIME_LIMIT["dqn"]},
+    "sac": {"gradient_clip": "global norm", "adam_eps": 1e-8, "init": TORCH_INIT, "time_limit": TIME_LIMIT["sac"]},
+    "dqn": {"gradient_clip": "global norm", "adam_eps": 1e-8, "init": TORCH_INIT, "time_limit": TIME_LIMIT["dqn"]},
 }
 
 
@@ -48,8 +51,9 @@ def sb3_variant(algo: str) -> type:
       and halves the squared error; SB3 (``clip_range_vf=None``) uses ``vf_coef * mean((V - R)²)``.
       With returns near -20 and values starting at 0, the clipped loss lets the value move only
       0.2 per rollout.
-    - PPO's initialisation: SB3's ``ortho_init`` (:func:`_orthogonal_ppo`) instead of flax's
-      LeCun-normal kernels.
+    - The initialisation: for PPO SB3's ``ortho_init`` (:func:`_orthogonal_ppo`), for SAC and
+      DQN torch's default (:func:`_torch_default_init`), instead of flax's LeCun-normal kernels
+      and zero biases (whose kernels are √3 times wider than torch's).
     - The time limit: rejax treats gymnax's ``done`` as the end of the return; SB3 bootstraps
       where an episode is truncated (the env's ``info["truncated"]``, from the true last
       observation ``info["terminal_obs"]``). PPO adds γ·V(terminal obs) to the last reward
@@ -69,8 +73,7 @@ def sb3_variant(algo: str) -> type:
         @register_init
         def initialize_network_params(self, rng):
             state = super().initialize_network_params(rng)
-            if algo == "ppo":
-                state = _orthogonal_ppo(state, rng)
+            state = _orthogonal_ppo(state, rng) if algo == "ppo" else _torch_default_init(state, rng)
             tx = optax.chain(
                 optax.clip_by_global_norm(self.max_grad_norm),
                 optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS[algo]),
@@ -194,3 +197,32 @@ def _step_for_buffer(step: Any) -> Any:
         return info["terminal_obs"], state, reward, done & ~info["truncated"], info
 
     return step_for_buffer
+
+
+def _torch_default_init(state: dict[str, Any], rng: jax.Array) -> dict[str, Any]:
+    """torch's default ``nn.Linear`` initialisation (SB3's SAC and DQN): every kernel and bias
+    uniform in ±1/√fan_in (``kaiming_uniform_(a=√5)``); target networks start as copies.
+
+    Works on every dense layer of the train states' parameters, including SAC's twin critics
+    stacked along a leading axis (the fan-in is a kernel's second-to-last dimension).
+    """
+    from flax.training.train_state import TrainState
+
+    def reinit(params: Any, key: jax.Array) -> Any:
+        flat = jax.tree_util.tree_flatten_with_path(params)[0]
+        fan_in = {jax.tree_util.keystr(path[:-1]): leaf.shape[-2] for path, leaf in flat if path[-1].key == "kernel"}
+        keys = iter(jax.random.split(key, len(flat)))
+        leaves = []
+        for path, leaf in flat:
+            bound = 1.0 / np.sqrt(fan_in[jax.tree_util.keystr(path[:-1])])
+            leaves.append(jax.random.uniform(next(keys), leaf.shape, leaf.dtype, -bound, bound))
+        return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(params), leaves)
+
+    key = jax.random.fold_in(rng, 2)
+    out = dict(state)
+    for i, name in enumerate(sorted(k for k, v in state.items() if isinstance(v, TrainState) and k != "alpha_ts")):
+        out[name] = state[name].replace(params=reinit(state[name].params, jax.random.fold_in(key, i)))
+    for ts_name, target in (("q_ts", "q_target_params"), ("critic_ts", "critic_target_params")):
+        if target in out:
+            out[target] = out[ts_name].params
+    return out
