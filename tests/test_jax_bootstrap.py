@@ -119,7 +119,7 @@ def test_replay_buffer_stores_the_terminal_observation_not_done(algo, tiny_datas
 def test_rejax_without_the_alignment_fails_these_checks(algo, tiny_dataset):
     """rejax's own algorithms end the return at the 24th hour: the checks above must catch that."""
     instance, params = _algorithm(algo, tiny_dataset, aligned=False, timesteps=2048 if algo == "ppo" else 1000)
-    with pytest.raises(AssertionError):
+    with pytest.raises(AssertionError, match="Not equal to tolerance"):  # the reward or the next obs
         if algo == "ppo":
             _check_ppo_rollout(instance, params)
         else:
