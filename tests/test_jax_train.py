@@ -260,3 +260,37 @@ def test_ppo_starts_from_sb3s_orthogonal_initialisation(tiny_dataset):
         "['Dense_1']['kernel']": 1.4142,
         "['Dense_2']['kernel']": 1.0,
     }
+
+
+@pytest.mark.parametrize("algo", ["sac", "dqn"])
+def test_sac_and_dqn_start_from_torchs_default_initialisation(tiny_dataset, algo):
+    """Every kernel and bias uniform in ±1/√fan_in (torch's nn.Linear); targets start as copies."""
+    import jax
+
+    from solarchain_eval.config import BenchmarkConfig
+    from solarchain_eval.jax.env import make_env_params
+    from solarchain_eval.jax.train import make_algo
+
+    params = make_env_params(tiny_dataset, action_mode="discrete" if algo == "dqn" else "continuous")
+    state = make_algo(algo, params, BenchmarkConfig(), 1000).init_state(jax.random.key(0))
+    networks = {"q": state.q_ts.params} if algo == "dqn" else {"actor": state.actor_ts.params}
+    if algo == "sac":
+        networks["critics"] = state.critic_ts.params  # twin critics stacked on a leading axis
+    target, online = (state.q_target_params, state.q_ts.params) if algo == "dqn" else (
+        state.critic_target_params, state.critic_ts.params)  # fmt: skip
+    jax.tree.map(np.testing.assert_array_equal, target, online)
+    layers = 0
+    for net, tree in networks.items():
+        flat = {jax.tree_util.keystr(p): np.asarray(x) for p, x in jax.tree_util.tree_flatten_with_path(tree)[0]}
+        for name, kernel in flat.items():
+            if not name.endswith("['kernel']"):
+                continue
+            bias = flat[name.replace("['kernel']", "['bias']")]
+            bound = 1 / np.sqrt(kernel.shape[-2])
+            for values in (kernel, bias):
+                assert np.abs(values).max() <= bound, f"{net}{name}"
+            # uniform in ±bound: standard deviation bound/√3 (LeCun normal's is bound, zero biases 0)
+            assert abs(kernel.std() / (bound / np.sqrt(3)) - 1) < 0.15, f"{net}{name}"
+            assert bias.size < 8 or bias.std() > 0.4 * bound, f"{net}{name}"
+            layers += 1
+    assert layers == (3 if algo == "dqn" else 4 + 3)

@@ -1,7 +1,8 @@
 """Where the JAX backend changes rejax to follow Stable-Baselines3 (docs/jax.md lists the rest).
 
 rejax has no setting for these, so :func:`sb3_variant` subclasses its algorithm: SB3's
-optimiser for all three algorithms, and SB3's value loss and initialisation for PPO.
+optimiser, initialisation and bootstrapping at the time limit for all three algorithms, and
+SB3's value loss for PPO.
 """
 
 from __future__ import annotations
@@ -15,6 +16,16 @@ import numpy as np
 #: Adam's epsilon in SB3: PPO's policies use 1e-5, SAC and DQN torch's default 1e-8.
 ADAM_EPS = {"ppo": 1e-5, "sac": 1e-8, "dqn": 1e-8}
 
+#: How each algorithm bootstraps when the 24th hour truncates the episode (SB3's way).
+TIME_LIMIT = {
+    "ppo": "bootstrapped: reward + gamma * V(terminal obs) at a truncation, which ends GAE there",
+    "sac": "bootstrapped: the buffer stores the terminal obs as next obs and done False at a truncation",
+    "dqn": "bootstrapped: the buffer stores the terminal obs as next obs and done False at a truncation",
+}
+
+#: SB3's SAC and DQN networks keep torch's default ``nn.Linear`` initialisation.
+TORCH_INIT = "torch nn.Linear default: kernels and biases uniform in +-1/sqrt(fan_in)"
+
 #: Where this backend changes rejax to follow SB3 (recorded in each model's identity).
 SB3_ALIGNMENT = {
     "ppo": {
@@ -22,9 +33,10 @@ SB3_ALIGNMENT = {
         "adam_eps": 1e-5,
         "value_loss": "unclipped, vf_coef * mean squared error",
         "init": "orthogonal: hidden gain sqrt(2), action mean 0.01, value 1; zero biases",
+        "time_limit": TIME_LIMIT["ppo"],
     },
-    "sac": {"gradient_clip": "global norm", "adam_eps": 1e-8},
-    "dqn": {"gradient_clip": "global norm", "adam_eps": 1e-8},
+    "sac": {"gradient_clip": "global norm", "adam_eps": 1e-8, "init": TORCH_INIT, "time_limit": TIME_LIMIT["sac"]},
+    "dqn": {"gradient_clip": "global norm", "adam_eps": 1e-8, "init": TORCH_INIT, "time_limit": TIME_LIMIT["dqn"]},
 }
 
 
@@ -39,8 +51,15 @@ def sb3_variant(algo: str) -> type:
       and halves the squared error; SB3 (``clip_range_vf=None``) uses ``vf_coef * mean((V - R)²)``.
       With returns near -20 and values starting at 0, the clipped loss lets the value move only
       0.2 per rollout.
-    - PPO's initialisation: SB3's ``ortho_init`` (:func:`_orthogonal_ppo`) instead of flax's
-      LeCun-normal kernels.
+    - The initialisation: for PPO SB3's ``ortho_init`` (:func:`_orthogonal_ppo`), for SAC and
+      DQN torch's default (:func:`_torch_default_init`), instead of flax's LeCun-normal kernels
+      and zero biases (whose kernels are √3 times wider than torch's).
+    - The time limit: rejax treats gymnax's ``done`` as the end of the return; SB3 bootstraps
+      where an episode is truncated (the env's ``info["truncated"]``, from the true last
+      observation ``info["terminal_obs"]``). PPO adds γ·V(terminal obs) to the last reward
+      (SB3's ``collect_rollouts``) and GAE stops there as before (:func:`_bootstrapped_rollout`);
+      SAC and DQN store the terminal observation as the transition's next observation with
+      done False (SB3's ``handle_timeout_termination``; :func:`_step_for_buffer`).
     """
     import jax.numpy as jnp
     import optax
@@ -54,8 +73,7 @@ def sb3_variant(algo: str) -> type:
         @register_init
         def initialize_network_params(self, rng):
             state = super().initialize_network_params(rng)
-            if algo == "ppo":
-                state = _orthogonal_ppo(state, rng)
+            state = _orthogonal_ppo(state, rng) if algo == "ppo" else _torch_default_init(state, rng)
             tx = optax.chain(
                 optax.clip_by_global_norm(self.max_grad_norm),
                 optax.adam(learning_rate=self.learning_rate, eps=ADAM_EPS[algo]),
@@ -74,6 +92,23 @@ def sb3_variant(algo: str) -> type:
 
                 grads = jax.grad(critic_loss_fn)(ts.critic_ts.params)
                 return ts.replace(critic_ts=ts.critic_ts.apply_gradients(grads=grads))
+
+            collect_trajectories = _bootstrapped_rollout
+
+        else:
+
+            @property
+            def vmap_step(self):
+                return _step_for_buffer(jax.vmap(self.env.step, in_axes=(0, 0, 0, None)))
+
+            def collect_transitions(self, ts, *args, **kwargs):
+                # rejax's, with the buffer's transitions from _step_for_buffer; then the
+                # observation the next action is chosen from is the env's own again: after an
+                # auto-reset the new episode's first (gymnax's step returns get_obs(state)).
+                _check_unnormalised(self)
+                ts, batch = super().collect_transitions(ts, *args, **kwargs)
+                observe = jax.vmap(self.env.get_obs, in_axes=(0, None))
+                return ts.replace(last_obs=observe(ts.env_state, self.env_params)), batch
 
     SB3Variant.__name__ = f"{base.__name__}SB3Variant"
     return SB3Variant
@@ -104,3 +139,90 @@ def _orthogonal_ppo(state: dict[str, Any], rng: jax.Array) -> dict[str, Any]:
     last = sorted(k for k in critic_params["params"] if k.startswith("Dense_"))[-1]  # the value head
     critic = state["critic_ts"].replace(params=reinit(critic_params, 1.0, last, critic_key))
     return {**state, "actor_ts": actor, "critic_ts": critic}
+
+
+def _check_unnormalised(algo: Any) -> None:
+    """The time-limit bootstrap below feeds raw observations and rewards (SB3's setting here)."""
+    if getattr(algo, "normalize_observations", False) or getattr(algo, "normalize_rewards", False):
+        raise ValueError("the SB3 time-limit bootstrap does not support rejax's observation or reward normalisation")
+
+
+def _bootstrapped_rollout(self: Any, ts: Any) -> tuple[Any, Any]:
+    """rejax PPO's ``collect_trajectories`` with SB3's bootstrap at a truncation.
+
+    SB3's ``OnPolicyAlgorithm.collect_rollouts`` adds γ·V(terminal obs), with the rollout's own
+    critic, to the reward of a step whose episode the time limit cut; the step stays ``done``,
+    so GAE does not bootstrap from the (reset) next observation. Otherwise as rejax's.
+    """
+    import jax.numpy as jnp
+    from rejax.algos.ppo import Trajectory
+
+    _check_unnormalised(self)
+    space = self.env.action_space(self.env_params)
+
+    def env_step(ts: Any, unused: Any) -> tuple[Any, Any]:
+        rng, new_rng = jax.random.split(ts.rng)
+        ts = ts.replace(rng=rng)
+        rng_steps, rng_action = jax.random.split(new_rng, 2)
+        rng_steps = jax.random.split(rng_steps, self.num_envs)
+        unclipped_action, log_prob = self.actor.apply(
+            ts.actor_ts.params, ts.last_obs, rng_action, method="action_log_prob"
+        )
+        value = self.critic.apply(ts.critic_ts.params, ts.last_obs)
+        action = unclipped_action if self.discrete else jnp.clip(unclipped_action, space.low, space.high)
+        next_obs, env_state, reward, done, info = self.vmap_step(rng_steps, ts.env_state, action, self.env_params)
+        terminal_value = self.critic.apply(ts.critic_ts.params, info["terminal_obs"])
+        reward = jnp.where(info["truncated"], reward + self.gamma * terminal_value, reward)
+        transition = Trajectory(ts.last_obs, unclipped_action, log_prob, reward, value, done)
+        ts = ts.replace(
+            env_state=env_state, last_obs=next_obs, last_done=done, global_step=ts.global_step + self.num_envs
+        )
+        return ts, transition
+
+    return jax.lax.scan(env_step, ts, None, self.num_steps)
+
+
+def _step_for_buffer(step: Any) -> Any:
+    """A vmapped gymnax step returning what SB3's replay buffer stores at a truncation.
+
+    SB3's buffer with ``handle_timeout_termination`` stores the true last observation as the
+    next observation and counts a truncation as not done, so the target bootstraps from it.
+    rejax's ``collect_transitions`` uses one array for the buffer's next observation and for
+    the observation the next action is chosen from; this step hands it the terminal one (and
+    done only where an episode terminated), and ``collect_transitions`` puts the env's back.
+    """
+
+    def step_for_buffer(keys: Any, state: Any, action: Any, params: Any) -> tuple[Any, ...]:
+        _, state, reward, done, info = step(keys, state, action, params)
+        return info["terminal_obs"], state, reward, done & ~info["truncated"], info
+
+    return step_for_buffer
+
+
+def _torch_default_init(state: dict[str, Any], rng: jax.Array) -> dict[str, Any]:
+    """torch's default ``nn.Linear`` initialisation (SB3's SAC and DQN): every kernel and bias
+    uniform in ±1/√fan_in (``kaiming_uniform_(a=√5)``); target networks start as copies.
+
+    Works on every dense layer of the train states' parameters, including SAC's twin critics
+    stacked along a leading axis (the fan-in is a kernel's second-to-last dimension).
+    """
+    from flax.training.train_state import TrainState
+
+    def reinit(params: Any, key: jax.Array) -> Any:
+        flat = jax.tree_util.tree_flatten_with_path(params)[0]
+        fan_in = {jax.tree_util.keystr(path[:-1]): leaf.shape[-2] for path, leaf in flat if path[-1].key == "kernel"}
+        keys = iter(jax.random.split(key, len(flat)))
+        leaves = []
+        for path, leaf in flat:
+            bound = 1.0 / np.sqrt(fan_in[jax.tree_util.keystr(path[:-1])])
+            leaves.append(jax.random.uniform(next(keys), leaf.shape, leaf.dtype, -bound, bound))
+        return jax.tree_util.tree_unflatten(jax.tree_util.tree_structure(params), leaves)
+
+    key = jax.random.fold_in(rng, 2)
+    out = dict(state)
+    for i, name in enumerate(sorted(k for k, v in state.items() if isinstance(v, TrainState) and k != "alpha_ts")):
+        out[name] = state[name].replace(params=reinit(state[name].params, jax.random.fold_in(key, i)))
+    for ts_name, target in (("q_ts", "q_target_params"), ("critic_ts", "critic_target_params")):
+        if target in out:
+            out[target] = out[ts_name].params
+    return out

@@ -235,7 +235,9 @@ class SolarChainJaxEnv(environment.Environment[EnvState, EnvParams]):
     -----
     ``step`` auto-resets after the last hour (gymnax convention) and returns ``done`` = True
     there; episodes truncate, they never terminate. ``info`` holds the numpy env's per-step
-    quantities (``cost`` = V + A included) and ``city_rewards`` (C,).
+    quantities (``cost`` = V + A included), ``city_rewards`` (C,), ``truncated`` (= ``done``)
+    and ``terminal_obs``: the observation after the step before any auto-reset (the step's
+    own observation when the episode goes on).
     """
 
     def __init__(self, params: EnvParams | None = None) -> None:
@@ -346,4 +348,9 @@ class SolarChainJaxEnv(environment.Environment[EnvState, EnvParams]):
         info["city_rewards"] = city_rewards
         done = self.is_terminal(state, params)
         obs = self.get_obs(state, params)
+        # gymnax's step replaces obs by the reset one after the last hour; keep the true last obs
+        # and say that the episode was cut by the time limit, so that training can bootstrap
+        # there as SB3 does (jax/alignment.py). Episodes never terminate, they only truncate.
+        info["terminal_obs"] = obs
+        info["truncated"] = done
         return obs, state, out.reward, done, info
