@@ -41,6 +41,15 @@ LOCAL_TEMPERATURE = 0.0
 LOCAL_MAX_OUTPUT_TOKENS = 512
 LOCAL_CONTEXT_TOKENS = 4096
 DEFAULT_THREADS = 1  # the benchmark's machines are small and shared; see docs/llm.md
+#: Server settings that only make a call cheaper: the replies are those of the server's defaults
+#: (tests/test_llm_local_model.py checks). The default (True) computes and copies the logits of
+#: every prompt token; greedy sampling reads the last one's only. Speculative prompt-lookup
+#: decoding, which would need them all, is not used: it changed the replies and doubled the CPU
+#: time per call (docs/llm.md#speed).
+FAST_SETTINGS = {"--logits_all": "False"}
+#: Settings that change the arithmetic: replies differ from the defaults' but are the same from
+#: run to run. Fused attention costs less CPU per prompt and per generated token.
+KERNEL_SETTINGS = {"--flash_attn": "True"}
 START_TIMEOUT_S = 180.0
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
@@ -184,6 +193,7 @@ class LocalServer:
             str(s.threads),
             "--n_ctx",
             str(s.context_tokens),
+            *(item for pair in {**KERNEL_SETTINGS, **FAST_SETTINGS}.items() for item in pair),
             # A new request must not cut off one in flight (concurrent episodes).
             "--interrupt_requests",
             "False" if s.parallel > 1 else "True",
