@@ -152,17 +152,18 @@ class _DefaultsServer(local_server.LocalServer):
 
 def test_fast_settings_leave_the_replies_unchanged(server):
     # The settings that only make calls cheaper against the server's defaults, on a planner
-    # call and then an audit that reuses its prefix: the same greedy replies.
+    # call and then audits that reuse its prefix: the same greedy replies, whole.
     codec = ActionCodec.from_config(MarketConfig())
     requests = [
         (planner_messages(episode_situation("risky", 1).to_prompt(codec)), PlannerOutput),
         (auditor_messages(step_situation("risky", codec, 7, 1).to_prompt(codec)), AuditorOutput),
+        (auditor_messages(step_situation("calm", codec, 8, 1).to_prompt(codec)), AuditorOutput),
     ]
     replies = []
     for running in (server, None):
         context = contextlib.nullcontext(running) if running else _DefaultsServer(server.spec)
         with context as live:
-            client = StructuredLLM(_settings(live, 80))  # a prefix of each reply is enough
+            client = StructuredLLM(_settings(live, local_server.LOCAL_MAX_OUTPUT_TOKENS))
             try:
                 replies.append(
                     [

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+import pytest
+
 from solarchain_eval.agentic import local_server
 from solarchain_eval.agentic.bench import episode_situation, step_situation
 from solarchain_eval.agentic.prompts import auditor_messages, planner_messages
@@ -48,3 +50,32 @@ def test_every_call_shares_the_system_prompt_and_audits_share_the_episode_part()
     # ... and, between two audits of an episode, only what follows the plan
     user = [a[1]["content"] for a in audits]
     assert _shared_prefix(*user) >= user[0].index('"step":') > user[0].index('"planner_policy":')
+
+
+def _request(**values):
+    from solarchain_eval.agentic.request import GovernanceRequest
+
+    return GovernanceRequest(agentic="planner_auditor", planner="llm", auditor="llm", **values)
+
+
+def test_model_threads_default_to_the_available_cpus_at_most_two(monkeypatch):
+    monkeypatch.setattr(local_server.os, "sched_getaffinity", lambda pid: {0, 1, 2, 3})
+    assert local_server.default_threads() == 2
+    monkeypatch.setattr(local_server.os, "sched_getaffinity", lambda pid: {5})
+    assert local_server.default_threads() == 1
+    assert local_server.ServerSpec(model_path=Path("m.gguf"), model_name="m").threads == 1
+
+
+def test_llm_threads_reach_the_server_and_are_checked(monkeypatch):
+    from solarchain_eval.agentic.request import GovernanceRequestError
+
+    monkeypatch.setattr(local_server, "resolve_model", lambda model: ("m", Path("m.gguf")))
+    request = _request(llm_backend="local", llm_threads=3)
+    spec = request.server_spec(request.resolve())
+    assert spec.threads == 3 and _flag(local_server.LocalServer(spec).command(), "--n_threads_batch") == "3"
+    default = _request(llm_backend="local")
+    assert default.server_spec(default.resolve()).threads == local_server.default_threads()
+    for bad, message in (({"llm_backend": "local", "llm_threads": 0}, ">= 1"), ({"llm_threads": 2}, "local")):
+        with pytest.raises(GovernanceRequestError) as caught:
+            _request(llm_api="chat", llm_model="x", **bad).resolve()
+        assert message in caught.value.message_for() and "--llm-threads" in caught.value.message_for()

@@ -24,7 +24,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import httpx
@@ -40,7 +40,9 @@ LOCAL_TEMPERATURE = 0.0
 #: Enough for the capped fields of both outputs; the context holds the prompt and the reply.
 LOCAL_MAX_OUTPUT_TOKENS = 512
 LOCAL_CONTEXT_TOKENS = 4096
-DEFAULT_THREADS = 1  # the benchmark's machines are small and shared; see docs/llm.md
+#: At most this many model threads by default: on the benchmark's 2-core machine two threads
+#: halve a call's latency (docs/llm.md#speed).
+MAX_DEFAULT_THREADS = 2
 #: Server settings that only make a call cheaper: the replies are those of the server's defaults
 #: (tests/test_llm_local_model.py checks). The default (True) computes and copies the logits of
 #: every prompt token; greedy sampling reads the last one's only. Speculative prompt-lookup
@@ -53,6 +55,16 @@ KERNEL_SETTINGS = {"--flash_attn": "True"}
 START_TIMEOUT_S = 180.0
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
+
+
+def default_threads() -> int:
+    """Model threads when none are asked for: the CPUs this process may use, at most
+    :data:`MAX_DEFAULT_THREADS`."""
+    try:
+        available = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        available = os.cpu_count() or 1
+    return max(1, min(MAX_DEFAULT_THREADS, available))
 
 
 def llama_cpp_available() -> bool:
@@ -141,7 +153,9 @@ class ServerSpec:
         Requests in flight. llama-cpp-python serialises them; >1 only stops a new request
         from interrupting a running one.
     threads : int
-        CPU threads of the model.
+        CPU threads of the model (default :func:`default_threads`). The replies depend on
+        it (the sums run in another order), and on a machine busy with other work one thread
+        is the safer choice.
     context_tokens : int
     """
 
@@ -149,7 +163,7 @@ class ServerSpec:
     model_name: str
     port: int = 0
     parallel: int = 1
-    threads: int = DEFAULT_THREADS
+    threads: int = field(default_factory=default_threads)
     context_tokens: int = LOCAL_CONTEXT_TOKENS
 
 
