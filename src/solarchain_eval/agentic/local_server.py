@@ -24,7 +24,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 from pathlib import Path
 
 import httpx
@@ -40,31 +40,21 @@ LOCAL_TEMPERATURE = 0.0
 #: Enough for the capped fields of both outputs; the context holds the prompt and the reply.
 LOCAL_MAX_OUTPUT_TOKENS = 512
 LOCAL_CONTEXT_TOKENS = 4096
-#: At most this many model threads by default: on the benchmark's 2-core machine two threads
-#: halve a call's latency (docs/llm.md#speed).
-MAX_DEFAULT_THREADS = 2
+#: Model threads by default. Two threads halve a call's latency on an idle 2-core machine, but
+#: when another process keeps a core busy a call can take minutes (the threads wait for each
+#: other), and the replies depend on the thread count, so the default is the safe one
+#: (docs/llm.md#speed); ``--llm-threads`` asks for more.
+DEFAULT_THREADS = 1
 #: Server settings that only make a call cheaper: the replies are those of the server's defaults
 #: (tests/test_llm_local_model.py checks). The default (True) computes and copies the logits of
 #: every prompt token; greedy sampling reads the last one's only. Speculative prompt-lookup
 #: decoding, which would need them all, is not used: it changed the replies and doubled the CPU
 #: time per call (docs/llm.md#speed).
+#: (Flash attention, which changes the arithmetic, was measured slower here and is not used.)
 FAST_SETTINGS = {"--logits_all": "False"}
-#: Settings that change the arithmetic: replies differ from the defaults' but are the same from
-#: run to run. Fused attention costs less CPU per prompt and per generated token.
-KERNEL_SETTINGS = {"--flash_attn": "True"}
 START_TIMEOUT_S = 180.0
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
-
-
-def default_threads() -> int:
-    """Model threads when none are asked for: the CPUs this process may use, at most
-    :data:`MAX_DEFAULT_THREADS`."""
-    try:
-        available = len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        available = os.cpu_count() or 1
-    return max(1, min(MAX_DEFAULT_THREADS, available))
 
 
 def llama_cpp_available() -> bool:
@@ -153,9 +143,8 @@ class ServerSpec:
         Requests in flight. llama-cpp-python serialises them; >1 only stops a new request
         from interrupting a running one.
     threads : int
-        CPU threads of the model (default :func:`default_threads`). The replies depend on
-        it (the sums run in another order), and on a machine busy with other work one thread
-        is the safer choice.
+        CPU threads of the model (default :data:`DEFAULT_THREADS`). The replies depend on
+        it (the sums run in another order).
     context_tokens : int
     """
 
@@ -163,7 +152,7 @@ class ServerSpec:
     model_name: str
     port: int = 0
     parallel: int = 1
-    threads: int = field(default_factory=default_threads)
+    threads: int = DEFAULT_THREADS
     context_tokens: int = LOCAL_CONTEXT_TOKENS
 
 
@@ -207,7 +196,7 @@ class LocalServer:
             str(s.threads),
             "--n_ctx",
             str(s.context_tokens),
-            *(item for pair in {**KERNEL_SETTINGS, **FAST_SETTINGS}.items() for item in pair),
+            *(item for pair in FAST_SETTINGS.items() for item in pair),
             # A new request must not cut off one in flight (concurrent episodes).
             "--interrupt_requests",
             "False" if s.parallel > 1 else "True",
