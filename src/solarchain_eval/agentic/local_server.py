@@ -40,9 +40,9 @@ LOCAL_TEMPERATURE = 0.0
 #: Enough for the capped fields of both outputs; the context holds the prompt and the reply.
 LOCAL_MAX_OUTPUT_TOKENS = 512
 LOCAL_CONTEXT_TOKENS = 4096
-#: Model threads by default. Two threads halve a call's latency on an idle 2-core machine, but
-#: when another process keeps a core busy a call can take minutes (the threads wait for each
-#: other), and the replies depend on the thread count, so the default is the safe one
+#: Model threads by default. Two threads cut a call's latency by about 40 % on an otherwise idle
+#: 2-core machine (the same replies), but when another process keeps a core busy a call can take
+#: minutes (the threads wait for each other), so the default is the safe one
 #: (docs/llm.md#speed); ``--llm-threads`` asks for more.
 DEFAULT_THREADS = 1
 #: Server settings that only make a call cheaper: the replies are those of the server's defaults
@@ -143,8 +143,7 @@ class ServerSpec:
         Requests in flight. llama-cpp-python serialises them; >1 only stops a new request
         from interrupting a running one.
     threads : int
-        CPU threads of the model (default :data:`DEFAULT_THREADS`). The replies depend on
-        it (the sums run in another order).
+        CPU threads of the model (default :data:`DEFAULT_THREADS`).
     context_tokens : int
     """
 

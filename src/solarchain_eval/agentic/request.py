@@ -89,8 +89,8 @@ class GovernanceRequest:
     llm_threads: int | None = _option(
         None,
         f"With --llm-backend local: CPU threads of the model server (default {local_server.DEFAULT_THREADS}). 2 "
-        "halves a call's latency on an idle 2-core machine but stalls while other work keeps a core busy; the "
-        "replies depend on it (docs/llm.md#speed).",
+        "cut a call's latency by about 40 % on an idle 2-core machine but stall while other work keeps a core "
+        "busy (docs/llm.md#speed).",
     )
     llm_cache: Path | None = _option(None, "Directory of the record/replay response cache.")
     llm_cache_mode: str | None = _option(
