@@ -58,8 +58,15 @@ def _request(**values):
     return GovernanceRequest(agentic="planner_auditor", planner="llm", auditor="llm", **values)
 
 
+def test_model_threads_default_to_the_available_cpus_at_most_two(monkeypatch):
+    monkeypatch.setattr(local_server.os, "sched_getaffinity", lambda pid: {0, 1, 2, 3})
+    assert local_server.default_threads() == 2
+    assert local_server.ServerSpec(model_path=Path("m.gguf"), model_name="m").threads == 2
+    monkeypatch.setattr(local_server.os, "sched_getaffinity", lambda pid: {5})
+    assert local_server.default_threads() == 1
+
+
 def test_llm_threads_reach_the_server_and_are_checked(monkeypatch):
-    # one thread unless asked: two stall while other work keeps a core busy (docs/llm.md#speed)
     from solarchain_eval.agentic.request import GovernanceRequestError
 
     monkeypatch.setattr(local_server, "resolve_model", lambda model: ("m", Path("m.gguf")))
@@ -67,7 +74,7 @@ def test_llm_threads_reach_the_server_and_are_checked(monkeypatch):
     spec = request.server_spec(request.resolve())
     assert spec.threads == 3 and _flag(local_server.LocalServer(spec).command(), "--n_threads_batch") == "3"
     default = _request(llm_backend="local")
-    assert default.server_spec(default.resolve()).threads == local_server.DEFAULT_THREADS == 1
+    assert default.server_spec(default.resolve()).threads == local_server.default_threads()
     for bad, message in (({"llm_backend": "local", "llm_threads": 0}, ">= 1"), ({"llm_threads": 2}, "local")):
         with pytest.raises(GovernanceRequestError) as caught:
             _request(llm_api="chat", llm_model="x", **bad).resolve()

@@ -24,7 +24,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import httpx
@@ -40,11 +40,10 @@ LOCAL_TEMPERATURE = 0.0
 #: Enough for the capped fields of both outputs; the context holds the prompt and the reply.
 LOCAL_MAX_OUTPUT_TOKENS = 512
 LOCAL_CONTEXT_TOKENS = 4096
-#: Model threads by default. Two threads cut a call's latency by about 40 % on an otherwise idle
-#: 2-core machine (the same replies), but when another process keeps a core busy a call can take
-#: minutes (the threads wait for each other), so the default is the safe one
-#: (docs/llm.md#speed); ``--llm-threads`` asks for more.
-DEFAULT_THREADS = 1
+#: Model threads by default, at most: on the benchmark's 2-core machine two threads cut a call's
+#: latency by about 40 % (the same replies as one); while another process keeps a core busy they
+#: are slower than one (docs/llm.md#speed), which ``--llm-threads 1`` then asks for.
+MAX_DEFAULT_THREADS = 2
 #: Server settings that only make a call cheaper: the replies are those of the server's defaults
 #: (tests/test_llm_local_model.py checks). The default (True) computes and copies the logits of
 #: every prompt token; greedy sampling reads the last one's only. Speculative prompt-lookup
@@ -55,6 +54,16 @@ FAST_SETTINGS = {"--logits_all": "False"}
 START_TIMEOUT_S = 180.0
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
+
+
+def default_threads() -> int:
+    """Model threads when none are asked for: the CPUs this process may use, at most
+    :data:`MAX_DEFAULT_THREADS`."""
+    try:
+        available = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        available = os.cpu_count() or 1
+    return max(1, min(MAX_DEFAULT_THREADS, available))
 
 
 def llama_cpp_available() -> bool:
@@ -143,7 +152,7 @@ class ServerSpec:
         Requests in flight. llama-cpp-python serialises them; >1 only stops a new request
         from interrupting a running one.
     threads : int
-        CPU threads of the model (default :data:`DEFAULT_THREADS`).
+        CPU threads of the model (default :func:`default_threads`).
     context_tokens : int
     """
 
@@ -151,7 +160,7 @@ class ServerSpec:
     model_name: str
     port: int = 0
     parallel: int = 1
-    threads: int = DEFAULT_THREADS
+    threads: int = field(default_factory=default_threads)
     context_tokens: int = LOCAL_CONTEXT_TOKENS
 
 

@@ -88,9 +88,8 @@ class GovernanceRequest:
     )
     llm_threads: int | None = _option(
         None,
-        f"With --llm-backend local: CPU threads of the model server (default {local_server.DEFAULT_THREADS}). 2 "
-        "cut a call's latency by about 40 % on an idle 2-core machine but stall while other work keeps a core "
-        "busy (docs/llm.md#speed).",
+        "With --llm-backend local: CPU threads of the model server (default: the CPUs available, at most 2; the "
+        "same replies either way). Use 1 on a machine busy with other work (docs/llm.md#speed).",
     )
     llm_cache: Path | None = _option(None, "Directory of the record/replay response cache.")
     llm_cache_mode: str | None = _option(
@@ -215,7 +214,7 @@ class GovernanceRequest:
         if path is None:
             local_server.default_model_path()  # raises with the install hint
         port = int(str(settings.base_url).rsplit(":", 1)[1].split("/", 1)[0])
-        threads = local_server.DEFAULT_THREADS if self.llm_threads is None else self.llm_threads
+        threads = local_server.default_threads() if self.llm_threads is None else self.llm_threads
         return local_server.ServerSpec(
             model_path=path, model_name=settings.model, port=port, parallel=parallel, threads=threads
         )
