@@ -47,9 +47,9 @@ MAX_DEFAULT_THREADS = 2
 #: Server settings that only make a call cheaper: the replies are those of the server's defaults
 #: (tests/test_llm_local_model.py checks). The default (True) computes and copies the logits of
 #: every prompt token; greedy sampling reads the last one's only. Speculative prompt-lookup
-#: decoding, which would need them all, is not used: it changed the replies and doubled the CPU
-#: time per call (docs/llm.md#speed).
-#: (Flash attention, which changes the arithmetic, was measured slower here and is not used.)
+#: decoding, which would need them all, is not used: it changed the replies and cost 1.3-2.3x
+#: the CPU time per call; flash attention changed the replies and was slower at one thread
+#: (docs/llm.md#speed).
 FAST_SETTINGS = {"--logits_all": "False"}
 START_TIMEOUT_S = 180.0
 STOP_TIMEOUT_S = 10.0
