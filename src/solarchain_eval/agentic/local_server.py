@@ -41,7 +41,7 @@ LOCAL_TEMPERATURE = 0.0
 LOCAL_MAX_OUTPUT_TOKENS = 512
 LOCAL_CONTEXT_TOKENS = 4096
 #: Model threads by default, at most: on the benchmark's 2-core machine two threads cut a call's
-#: latency by about 40 % (the same replies as one); while another process keeps a core busy they
+#: latency by 30-40 % (the same replies as one); while another process keeps a core busy they
 #: are slower than one (docs/llm.md#speed), which ``--llm-threads 1`` then asks for.
 MAX_DEFAULT_THREADS = 2
 #: Server settings that only make a call cheaper: the replies are those of the server's defaults
