@@ -6,6 +6,7 @@ Skipped, with the reason, when llama-cpp-python or the default model package is 
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
 import signal
@@ -127,6 +128,53 @@ def test_planner_and_auditor_answers_of_the_real_model_validate(server):
     assert all(" " <= c <= "~" for c in plan.output.rationale + audit.output.reason)
     for reply in (plan, audit):
         assert reply.meta["output_tokens"] > 0 and reply.meta["latency_s"] > 0
+
+
+def _settings(server: local_server.LocalServer, max_output_tokens: int):
+    return resolve_llm_settings(
+        api=local_server.LOCAL_API,
+        model=server.spec.model_name,
+        base_url=server.base_url,
+        temperature=local_server.LOCAL_TEMPERATURE,
+        max_output_tokens=max_output_tokens,
+        seed=local_server.LOCAL_SEED,
+        environ={"SOLARCHAIN_LLM_API_KEY": "none"},
+    )
+
+
+class _DefaultsServer(local_server.LocalServer):
+    """The server without the settings that only make calls cheaper: its own defaults."""
+
+    def command(self) -> list[str]:
+        command, fast = super().command(), local_server.FAST_SETTINGS
+        return [item for i, item in enumerate(command) if item not in fast and command[i - 1] not in fast]
+
+
+def test_fast_settings_leave_the_replies_unchanged(server):
+    # The settings that only make calls cheaper against the server's defaults, on a planner
+    # call and then audits that reuse its prefix: the same greedy replies, whole.
+    codec = ActionCodec.from_config(MarketConfig())
+    requests = [
+        (planner_messages(episode_situation("risky", 1).to_prompt(codec)), PlannerOutput),
+        (auditor_messages(step_situation("risky", codec, 7, 1).to_prompt(codec)), AuditorOutput),
+        (auditor_messages(step_situation("calm", codec, 8, 1).to_prompt(codec)), AuditorOutput),
+    ]
+    replies = []
+    for running in (server, None):
+        context = contextlib.nullcontext(running) if running else _DefaultsServer(server.spec)
+        with context as live:
+            client = StructuredLLM(_settings(live, local_server.LOCAL_MAX_OUTPUT_TOKENS))
+            try:
+                replies.append(
+                    [
+                        client._call(client.canonical_request(messages, kind))["response"]["choices"][0]["message"]
+                        for messages, kind in requests
+                    ]
+                )
+            finally:
+                client.close()
+    assert replies[0] == replies[1]
+    assert all(message["content"] for message in replies[0])
 
 
 def _evaluate_args(data, out, cache, *extra):

@@ -24,7 +24,7 @@ import sys
 import threading
 import time
 from collections.abc import Iterator
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import httpx
@@ -40,10 +40,30 @@ LOCAL_TEMPERATURE = 0.0
 #: Enough for the capped fields of both outputs; the context holds the prompt and the reply.
 LOCAL_MAX_OUTPUT_TOKENS = 512
 LOCAL_CONTEXT_TOKENS = 4096
-DEFAULT_THREADS = 1  # the benchmark's machines are small and shared; see docs/llm.md
+#: Model threads by default, at most: on the benchmark's 2-core machine two threads cut a call's
+#: latency by 30-40 % (the same replies as one); while another process keeps a core busy they
+#: are slower than one (docs/llm.md#speed), which ``--llm-threads 1`` then asks for.
+MAX_DEFAULT_THREADS = 2
+#: Server settings that only make a call cheaper: the replies are those of the server's defaults
+#: (tests/test_llm_local_model.py checks). The default (True) computes and copies the logits of
+#: every prompt token; greedy sampling reads the last one's only. Speculative prompt-lookup
+#: decoding, which would need them all, is not used: it changed the replies and cost 1.3-2.3x
+#: the CPU time per call; flash attention changed the replies and was slower at one thread
+#: (docs/llm.md#speed).
+FAST_SETTINGS = {"--logits_all": "False"}
 START_TIMEOUT_S = 180.0
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
+
+
+def default_threads() -> int:
+    """Model threads when none are asked for: the CPUs this process may use, at most
+    :data:`MAX_DEFAULT_THREADS`."""
+    try:
+        available = len(os.sched_getaffinity(0))
+    except AttributeError:  # not Linux
+        available = os.cpu_count() or 1
+    return max(1, min(MAX_DEFAULT_THREADS, available))
 
 
 def llama_cpp_available() -> bool:
@@ -132,7 +152,7 @@ class ServerSpec:
         Requests in flight. llama-cpp-python serialises them; >1 only stops a new request
         from interrupting a running one.
     threads : int
-        CPU threads of the model.
+        CPU threads of the model (default :func:`default_threads`).
     context_tokens : int
     """
 
@@ -140,7 +160,7 @@ class ServerSpec:
     model_name: str
     port: int = 0
     parallel: int = 1
-    threads: int = DEFAULT_THREADS
+    threads: int = field(default_factory=default_threads)
     context_tokens: int = LOCAL_CONTEXT_TOKENS
 
 
@@ -184,6 +204,7 @@ class LocalServer:
             str(s.threads),
             "--n_ctx",
             str(s.context_tokens),
+            *(item for pair in FAST_SETTINGS.items() for item in pair),
             # A new request must not cut off one in flight (concurrent episodes).
             "--interrupt_requests",
             "False" if s.parallel > 1 else "True",

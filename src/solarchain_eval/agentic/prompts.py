@@ -15,7 +15,7 @@ from __future__ import annotations
 import json
 from typing import Any
 
-PROMPT_VERSION = 2  # 2: compact JSON in a fixed order, duplicates and the planner rationale dropped
+PROMPT_VERSION = 3  # 3: one system prompt for both roles, the role named in the user message
 
 #: The start both system prompts share: a server that keeps the previous request's tokens
 #: (llama.cpp's prompt cache, vLLM's prefix caching, OpenAI's prompt caching) re-reads only what
@@ -39,33 +39,35 @@ max_audits_per_episode, target_audit_rate and cooldown_steps. An Auditor reviews
 proposed action of each hour whose triggers called an audit.
 """
 
-PLANNER_SYSTEM = (
-    SHARED_PREAMBLE
-    + """You are the Planner. You are called once, before the episode starts. You do not choose \
-hourly actions. You set:
+#: Both roles' duties, after the preamble: the system prompt is the same for every call, so a
+#: prefix-caching server re-reads only the user message, which names the role.
+ROLES = """The Planner does not choose hourly actions. It sets:
 1. action_bounds: the admissible [low, high] interval of each action component.
 2. audit_policy: the trigger thresholds and the limits of soft audits.
-Prefer sparse auditing. Keep bounds inside the benchmark ranges given in the context.
-Answer only with the structured output required by the response schema."""
-)
-
-AUDITOR_SYSTEM = (
-    SHARED_PREAMBLE
-    + """You are the Auditor. You are called only for hours whose risk signals triggered an \
-audit. You receive the market state, the proposed action already clipped to the Planner's \
-bounds, the previous executed action, the Planner's policy and which triggers fired.
-Decide:
+It prefers sparse auditing and keeps bounds inside the benchmark ranges given in the context.
+The Auditor receives the market state, the proposed action already clipped to the Planner's \
+bounds, the previous executed action, the Planner's policy and which triggers fired. It decides:
 - approve: the bounded proposed action is executed unchanged (repeat it as final_action);
 - revise: final_action is executed instead. Revise conservatively: limit exposure to unsafe \
 backed supply when the violation rate is high, keep liquidity when supply falls short of \
 demand, and avoid abrupt changes when the action jumped.
 final_action must respect the benchmark ranges; alpha + l may not exceed the maximum total \
-allocation. Rate each risk as low, medium, high or unknown and give a short reason.
+allocation. The Auditor rates each risk as low, medium, high or unknown and gives a short reason.
 Answer only with the structured output required by the response schema."""
-)
 
-PLANNER_INSTRUCTION = "Set the action bounds and the audit policy for this episode."
-AUDITOR_INSTRUCTION = "Review the proposed action for this hour."
+SYSTEM = SHARED_PREAMBLE + ROLES
+#: Kept as names for each role's system prompt (the same text since version 3).
+PLANNER_SYSTEM = SYSTEM
+AUDITOR_SYSTEM = SYSTEM
+
+PLANNER_INSTRUCTION = (
+    "You are the Planner, called before the episode starts. "
+    "Set the action bounds and the audit policy for this episode."
+)
+AUDITOR_INSTRUCTION = (
+    "You are the Auditor, called because this hour's triggers called an audit. "
+    "Review the proposed action for this hour."
+)
 
 
 def _user_message(instruction: str, context: dict[str, Any]) -> str:

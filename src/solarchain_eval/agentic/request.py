@@ -86,6 +86,11 @@ class GovernanceRequest:
     llm_max_output_tokens: int = _option(
         DEFAULT_MAX_OUTPUT_TOKENS, "Output-token budget per call (reasoning included)."
     )
+    llm_threads: int | None = _option(
+        None,
+        "With --llm-backend local: CPU threads of the model server (default: the CPUs available, at most 2; the "
+        "same replies either way). Use 1 on a machine busy with other work (docs/llm.md#speed).",
+    )
     llm_cache: Path | None = _option(None, "Directory of the record/replay response cache.")
     llm_cache_mode: str | None = _option(
         None,
@@ -142,6 +147,11 @@ class GovernanceRequest:
                 backends=", ".join(LLM_BACKENDS),
                 got=self.llm_backend,
             )
+        if self.llm_threads is not None:
+            if self.llm_threads < 1:
+                raise GovernanceRequestError.about("{opt_llm_threads} must be >= 1, got {got}", got=self.llm_threads)
+            if self.llm_backend != "local":
+                raise GovernanceRequestError.about("{opt_llm_threads} is for {opt_llm_backend} local")
         llm = None
         if "llm" in (planner, auditor):
             settings = self._local_settings() if self.llm_backend == "local" else self._remote_settings()
@@ -204,7 +214,10 @@ class GovernanceRequest:
         if path is None:
             local_server.default_model_path()  # raises with the install hint
         port = int(str(settings.base_url).rsplit(":", 1)[1].split("/", 1)[0])
-        return local_server.ServerSpec(model_path=path, model_name=settings.model, port=port, parallel=parallel)
+        threads = local_server.default_threads() if self.llm_threads is None else self.llm_threads
+        return local_server.ServerSpec(
+            model_path=path, model_name=settings.model, port=port, parallel=parallel, threads=threads
+        )
 
 
 __all__ = ["AGENTIC_MODES", "LLM_BACKENDS", "GovernanceRequest", "GovernanceRequestError", "LLMError"]

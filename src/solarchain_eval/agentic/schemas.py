@@ -26,7 +26,7 @@ TEXT_MAX_CHARS = 2000
 #: ``maxLength`` of the free-text fields in the ``json_object`` schema: a grammar-constrained
 #: local model otherwise runs on in them until the token budget ends (see docs/llm.md), and
 #: every character is a token to generate.
-SCHEMA_TEXT_MAX_CHARS = {"governance_mode": 32, "rationale": 120, "reason": 120}
+SCHEMA_TEXT_MAX_CHARS = {"governance_mode": 32, "rationale": 64, "reason": 64}
 #: The characters those fields may hold: printable ASCII except ``"`` and ``\\``. llama-cpp-python
 #: compiles a plain string (with or without ``maxLength``) to a grammar that admits raw control
 #: characters, which no JSON parser accepts; a ``pattern`` takes precedence over that rule.

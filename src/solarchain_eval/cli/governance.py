@@ -58,6 +58,7 @@ LLM_FIELDS = (
     "llm_timeout",
     "llm_max_retries",
     "llm_max_output_tokens",
+    "llm_threads",
     "llm_cache",
     "llm_cache_mode",
 )

@@ -20,11 +20,17 @@ llm_app = typer.Typer(
 app.add_typer(llm_app, name="llm")
 
 
-def _spec(model: str | None, port: int, parallel: int, threads: int) -> local_server.ServerSpec:
+def _spec(model: str | None, port: int, parallel: int, threads: int | None) -> local_server.ServerSpec:
     name, path = local_server.resolve_model(model)
     if path is None:
         path = local_server.default_model_path()  # raises with the install hint
-    return local_server.ServerSpec(model_path=path, model_name=name, port=port, parallel=parallel, threads=threads)
+    return local_server.ServerSpec(
+        model_path=path,
+        model_name=name,
+        port=port,
+        parallel=parallel,
+        threads=local_server.default_threads() if threads is None else threads,
+    )
 
 
 @llm_app.command("serve")
@@ -35,7 +41,13 @@ def serve(
     ),
     port: int = typer.Option(0, "--port", min=0, max=65535, help="Port on 127.0.0.1 (0: a free one)."),
     parallel: int = typer.Option(1, "--parallel", min=1, help="Requests in flight without interrupting each other."),
-    threads: int = typer.Option(local_server.DEFAULT_THREADS, "--threads", min=1, help="CPU threads of the model."),
+    threads: int | None = typer.Option(
+        None,
+        "--threads",
+        min=1,
+        help="CPU threads of the model (default: the CPUs available, at most 2); 1 on a machine busy with other "
+        "work (docs/llm.md#speed).",
+    ),
 ) -> None:
     """Serve a GGUF model on 127.0.0.1 until Ctrl-C or SIGTERM.
 
