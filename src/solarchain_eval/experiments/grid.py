@@ -296,8 +296,7 @@ def plan_units(spec: GridSpec) -> list[Unit]:
     units by setting, policy and seed. Train units are planned only where an eval unit needs them.
 
     With the JAX backend the seeds of an algorithm and training setting form one train unit
-    (rejax trains them in one ``vmap``: on a CPU about 20 % more steps per second in total than
-    one at a time, on a GPU nearly the time of one).
+    (rejax trains them in one ``vmap``, compiled once; on a GPU in about the time of one).
     """
     needed: dict[tuple[str, str], list[int]] = {}
     wanted: list[tuple[str, str, int]] = []
