@@ -30,6 +30,10 @@ COMMANDS = {
         "Regenerate the paper's tables (Markdown, LaTeX booktabs, CSV) and figures (PNG, SVG) from a "
         "run, with cluster-bootstrap statistics, and write a self-contained ROOT/report/index.html.",
     ),
+    "compare": (
+        "compare",
+        "Compare two runs of the same episodes: mean(OTHER) - mean(BASE) per policy, setting and metric.",
+    ),
     "bench": ("bench", "Throughput of the single env, the vector env and the evaluation runner."),
     "bench-train": (
         "bench_train",
