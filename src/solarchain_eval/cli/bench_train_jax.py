@@ -113,15 +113,14 @@ def _pin_before_jax_starts() -> int | None:
     workers sharing two cores would pay for. Returns the CPU, or None where nothing was pinned
     (JAX already started, one CPU only, or no affinity control).
     """
-    import os
     import sys
 
-    if "jax" in sys.modules or not hasattr(os, "sched_getaffinity"):
+    from ..cpus import available_cpus, can_pin, pin_to_cpu
+
+    cpus = available_cpus()
+    if "jax" in sys.modules or not can_pin() or len(cpus) < 2:
         return None
-    cpus = sorted(os.sched_getaffinity(0))
-    if len(cpus) < 2:
-        return None
-    os.sched_setaffinity(0, {cpus[0]})
+    pin_to_cpu(cpus[0])
     return cpus[0]
 
 

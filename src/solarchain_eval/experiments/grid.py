@@ -298,7 +298,7 @@ def plan_units(spec: GridSpec) -> list[Unit]:
     With the JAX backend the seeds of an algorithm and training setting form one train unit
     (rejax trains them in one ``vmap``, compiled once; on a GPU in about the time of one).
     """
-    needed: dict[tuple[str, str], list[int]] = {}
+    needed: dict[tuple[str, str], set[int]] = {}
     wanted: list[tuple[str, str, int]] = []
     for setting_name in spec.settings:
         setting = SETTING_REGISTRY[setting_name]
@@ -306,9 +306,7 @@ def plan_units(spec: GridSpec) -> list[Unit]:
             for seed in spec.seeds:
                 wanted.append((policy, setting_name, seed))
                 if policy in TRAINABLE_ALGOS:
-                    seeds = needed.setdefault((policy, setting.model_setting), [])
-                    if seed not in seeds:
-                        seeds.append(seed)
+                    needed.setdefault((policy, setting.model_setting), set()).add(seed)
     order = {algo: i for i, algo in enumerate(("sac", "ppo", "ppo-lag", "dqn"))}
     trains: dict[tuple[str, str, int], Unit] = {}
     for algo, setting in sorted(needed, key=lambda k: (order.get(k[0], 9), TRAIN_SETTINGS.index(k[1]))):

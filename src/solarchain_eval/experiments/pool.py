@@ -27,6 +27,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Protocol
 
+from ..cpus import available_cpus, can_pin, pin_to_cpu
 from .grid import Unit
 from .units import UnitResult, UnitTask, execute_unit
 
@@ -82,19 +83,16 @@ def worker_cpus(workers: int) -> list[int | None]:
     Pinned only where it cannot hurt: two or more workers, and no more than the CPUs this
     process may run on (``os.sched_getaffinity``); where that is unknown, nothing is pinned.
     """
-    try:
-        cpus = sorted(os.sched_getaffinity(0))
-    except (AttributeError, OSError):  # not on Linux
+    cpus = available_cpus()
+    if not can_pin() or not 2 <= workers <= len(cpus):
         return [None] * workers
-    if not 2 <= workers <= len(cpus):
-        return [None] * workers
-    return list(cpus[:workers])
+    return cpus[:workers]
 
 
 def _worker_main(conn: Connection, parent_pid: int, cpu: int | None = None) -> None:
     _die_with_parent(parent_pid)
     if cpu is not None:  # before any library starts its threads: they inherit the affinity
-        os.sched_setaffinity(0, {cpu})
+        pin_to_cpu(cpu)
     signal.signal(signal.SIGINT, signal.SIG_IGN)
     for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
         os.environ[name] = "1"

@@ -82,9 +82,9 @@ def jax_env_steps_per_s(
     params = make_env_params(data_dir)
     env = SolarChainJaxEnv(params)
     available = jax.devices()
-    used = available[: len(available) if devices is None else devices]
-    if not 1 <= len(used) == (devices or len(used)):
+    if devices is not None and not 1 <= devices <= len(available):
         raise ValueError(f"asked for {devices} JAX devices; {len(available)} available")
+    used = available[:devices]
     run, actions_sharding, transitions = shard_rollout(env, params, num_envs, episodes, used)
     actions = np.random.default_rng(1).random((8, num_envs, 3), dtype=np.float32)
     actions = jax.device_put(actions, actions_sharding)
