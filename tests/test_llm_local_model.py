@@ -186,7 +186,7 @@ def test_the_server_jump_forward_decodes_and_the_grammar_path_stays_available(se
     codec = ActionCodec.from_config(MarketConfig())
     messages = auditor_messages(step_situation("risky", codec, 9, 2).to_prompt(codec))
     texts = {}
-    grammar_spec = dataclasses.replace(server.spec, chat_format="chat_template.default")
+    grammar_spec = dataclasses.replace(server.spec, decoding="grammar")
     for name, context in (
         ("jump", contextlib.nullcontext(server)),
         ("grammar", local_server.LocalServer(grammar_spec)),

@@ -79,3 +79,32 @@ def test_llm_threads_reach_the_server_and_are_checked(monkeypatch):
         with pytest.raises(GovernanceRequestError) as caught:
             _request(llm_api="chat", llm_model="x", **bad).resolve()
         assert message in caught.value.message_for() and "--llm-threads" in caught.value.message_for()
+
+
+def test_llm_decoding_reaches_the_server_and_the_cache_key(monkeypatch):
+    from solarchain_eval.agentic.cache import request_key
+    from solarchain_eval.agentic.llm_client import StructuredLLM
+    from solarchain_eval.agentic.request import GovernanceRequestError
+    from solarchain_eval.agentic.schemas import AuditorOutput
+
+    monkeypatch.setattr(local_server, "resolve_model", lambda model: ("m", Path("m.gguf")))
+    keys = {}
+    for decoding in (None, "jump-forward", "grammar"):
+        request = _request(llm_backend="local", llm_decoding=decoding)
+        options = request.resolve()
+        spec = request.server_spec(options)
+        chat_format = _flag(local_server.LocalServer(spec).command(), "--chat_format")
+        assert chat_format == local_server.DECODINGS[decoding or "jump-forward"]
+        assert options.llm.describe()["decoding"] == (decoding or "jump-forward")
+        client = StructuredLLM(options.llm.settings)
+        keys[decoding] = request_key(client.canonical_request([{"role": "user", "content": "x"}], AuditorOutput))
+        client.close()
+    # the two decodings answer differently: a recording of one never replays for the other
+    assert keys[None] == keys["jump-forward"] != keys["grammar"]
+    for bad, message in (
+        ({"llm_backend": "local", "llm_decoding": "beam"}, "jump-forward, grammar"),
+        ({"llm_decoding": "grammar"}, "local"),
+    ):
+        with pytest.raises(GovernanceRequestError) as caught:
+            _request(llm_api="chat", llm_model="x", **bad).resolve()
+        assert message in caught.value.message_for() and "--llm-decoding" in caught.value.message_for()

@@ -75,6 +75,10 @@ class LLMSettings:
     seed : int or None
         Sampling seed, sent (and part of the cache key) only when given; llama.cpp servers
         honour it.
+    decoding : str or None
+        How the local model server decodes (:data:`~.local_server.DECODINGS`); set by
+        ``--llm-backend local`` only, and then part of the cache key (the two decodings answer
+        differently).
     """
 
     api: str
@@ -86,6 +90,7 @@ class LLMSettings:
     max_retries: int = DEFAULT_MAX_RETRIES
     max_output_tokens: int = DEFAULT_MAX_OUTPUT_TOKENS
     seed: int | None = None
+    decoding: str | None = None
 
     def describe(self) -> dict[str, Any]:
         """The settings for run metadata: no key, and no credentials inside the URL."""
@@ -98,6 +103,7 @@ class LLMSettings:
             "max_retries": self.max_retries,
             "max_output_tokens": self.max_output_tokens,
             "seed": self.seed,
+            **({"decoding": self.decoding} if self.decoding is not None else {}),
         }
 
 
@@ -231,6 +237,8 @@ class StructuredLLM:
         parameters: dict[str, Any] = {"temperature": s.temperature, "max_output_tokens": s.max_output_tokens}
         if s.seed is not None:  # only when set, so recordings made without a seed keep their keys
             parameters["seed"] = s.seed
+        if s.decoding is not None:
+            parameters["decoding"] = s.decoding
         return {
             "api": s.api,
             "model": s.model,

@@ -56,6 +56,11 @@ MAX_DEFAULT_THREADS = 2
 FAST_SETTINGS = {"--logits_all": "False"}
 #: The module the server child runs (its command line names it: tests find the process by it).
 SERVER_MODULE = "solarchain_eval.agentic.model_server"
+#: ``--llm-decoding``: the server's chat format for each. ``jump-forward`` (the default) fills the
+#: schema's fixed text in batches and runs the model only inside values (:mod:`.jump_forward`);
+#: ``grammar`` samples every token under llama-cpp-python's JSON grammar.
+DECODINGS = {"jump-forward": CHAT_FORMAT, "grammar": "chat_template.default"}
+DEFAULT_DECODING = "jump-forward"
 START_TIMEOUT_S = 180.0
 STOP_TIMEOUT_S = 10.0
 _PR_SET_PDEATHSIG = 1
@@ -155,9 +160,8 @@ class ServerSpec:
     threads : int
         CPU threads of the model (default :func:`default_threads`).
     context_tokens : int
-    chat_format : str
-        :data:`~.jump_forward.CHAT_FORMAT` (the default) jump-forward decodes schema-constrained
-        replies; ``chat_template.default`` samples every token under llama-cpp-python's grammar.
+    decoding : str
+        A key of :data:`DECODINGS`.
     """
 
     model_path: Path
@@ -166,13 +170,19 @@ class ServerSpec:
     parallel: int = 1
     threads: int = field(default_factory=default_threads)
     context_tokens: int = LOCAL_CONTEXT_TOKENS
-    chat_format: str = CHAT_FORMAT
+    decoding: str = DEFAULT_DECODING
 
 
 class LocalServer:
     """``with LocalServer(spec) as server:`` serves ``spec.model_path`` at ``server.base_url``."""
 
     def __init__(self, spec: ServerSpec, *, log_path: Path | None = None) -> None:
+        if spec.decoding not in DECODINGS:
+            raise LLMConfigError.about(
+                "{opt_llm_decoding} must be one of {choices}, got '{got}'",
+                choices=", ".join(DECODINGS),
+                got=spec.decoding,
+            )
         if spec.parallel < 1 or spec.threads < 1:
             raise LLMConfigError.about(
                 "{opt_parallel} and threads must be >= 1, got {parallel} and {threads}",
@@ -211,7 +221,7 @@ class LocalServer:
             str(s.context_tokens),
             *(item for pair in FAST_SETTINGS.items() for item in pair),
             "--chat_format",
-            s.chat_format,
+            DECODINGS[s.decoding],
             # A new request must not cut off one in flight (concurrent episodes).
             "--interrupt_requests",
             "False" if s.parallel > 1 else "True",

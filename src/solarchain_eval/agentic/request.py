@@ -9,7 +9,7 @@ Errors name the fields (``llm_cache_mode``); the command line shows them as flag
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
@@ -91,6 +91,12 @@ class GovernanceRequest:
         "With --llm-backend local: CPU threads of the model server (default: the CPUs available, at most 2; the "
         "same replies either way). Use 1 on a machine busy with other work (docs/llm.md#speed).",
     )
+    llm_decoding: str | None = _option(
+        None,
+        "With --llm-backend local: jump-forward (default: the schema's fixed text is added in batches, the model "
+        "runs only inside values) or grammar (llama-cpp-python samples every token under its JSON grammar; slower, "
+        "other answers). Part of the cache key (docs/llm.md#speed).",
+    )
     llm_cache: Path | None = _option(None, "Directory of the record/replay response cache.")
     llm_cache_mode: str | None = _option(
         None,
@@ -152,6 +158,15 @@ class GovernanceRequest:
                 raise GovernanceRequestError.about("{opt_llm_threads} must be >= 1, got {got}", got=self.llm_threads)
             if self.llm_backend != "local":
                 raise GovernanceRequestError.about("{opt_llm_threads} is for {opt_llm_backend} local")
+        if self.llm_decoding is not None:
+            if self.llm_decoding not in local_server.DECODINGS:
+                raise GovernanceRequestError.about(
+                    "{opt_llm_decoding} must be one of {choices}, got '{got}'",
+                    choices=", ".join(local_server.DECODINGS),
+                    got=self.llm_decoding,
+                )
+            if self.llm_backend != "local":
+                raise GovernanceRequestError.about("{opt_llm_decoding} is for {opt_llm_backend} local")
         llm = None
         if "llm" in (planner, auditor):
             settings = self._local_settings() if self.llm_backend == "local" else self._remote_settings()
@@ -191,7 +206,7 @@ class GovernanceRequest:
         name, _ = local_server.resolve_model(self.llm_model)
         port = local_server.free_port()
         tokens = self.llm_max_output_tokens
-        return resolve_llm_settings(
+        settings = resolve_llm_settings(
             api=api,
             model=name,
             base_url=f"http://127.0.0.1:{port}/v1",
@@ -202,6 +217,7 @@ class GovernanceRequest:
             environ={"SOLARCHAIN_LLM_API_KEY": "none"},  # the local server takes no key
             seed=local_server.LOCAL_SEED,
         )
+        return replace(settings, decoding=self.llm_decoding or local_server.DEFAULT_DECODING)
 
     def server_spec(self, options: AgenticOptions | None, *, parallel: int = 1) -> local_server.ServerSpec | None:
         """The local model server this request needs (None: remote backend, no LLM component, or a
@@ -216,7 +232,12 @@ class GovernanceRequest:
         port = int(str(settings.base_url).rsplit(":", 1)[1].split("/", 1)[0])
         threads = local_server.default_threads() if self.llm_threads is None else self.llm_threads
         return local_server.ServerSpec(
-            model_path=path, model_name=settings.model, port=port, parallel=parallel, threads=threads
+            model_path=path,
+            model_name=settings.model,
+            port=port,
+            parallel=parallel,
+            threads=threads,
+            decoding=settings.decoding or local_server.DEFAULT_DECODING,
         )
 
 

@@ -59,6 +59,7 @@ LLM_FIELDS = (
     "llm_max_retries",
     "llm_max_output_tokens",
     "llm_threads",
+    "llm_decoding",
     "llm_cache",
     "llm_cache_mode",
 )

@@ -20,7 +20,9 @@ llm_app = typer.Typer(
 app.add_typer(llm_app, name="llm")
 
 
-def _spec(model: str | None, port: int, parallel: int, threads: int | None) -> local_server.ServerSpec:
+def _spec(model: str | None, port: int, parallel: int, threads: int | None, decoding: str) -> local_server.ServerSpec:
+    if decoding not in local_server.DECODINGS:
+        raise CliError(f"--decoding must be one of {', '.join(local_server.DECODINGS)}, got '{decoding}'")
     name, path = local_server.resolve_model(model)
     if path is None:
         path = local_server.default_model_path()  # raises with the install hint
@@ -30,6 +32,7 @@ def _spec(model: str | None, port: int, parallel: int, threads: int | None) -> l
         port=port,
         parallel=parallel,
         threads=local_server.default_threads() if threads is None else threads,
+        decoding=decoding,
     )
 
 
@@ -48,13 +51,20 @@ def serve(
         help="CPU threads of the model (default: the CPUs available, at most 2); 1 on a machine busy with other "
         "work (docs/llm.md#speed).",
     ),
+    decoding: str = typer.Option(
+        local_server.DEFAULT_DECODING,
+        "--decoding",
+        help="jump-forward: temperature-0 requests with a json_object schema get the schema's fixed text in "
+        "batches and the model runs only inside values; every other request, and all of them with grammar, "
+        "are sampled token by token under llama-cpp-python's grammar (docs/llm.md#speed).",
+    ),
 ) -> None:
     """Serve a GGUF model on 127.0.0.1 until Ctrl-C or SIGTERM.
 
     Waits until the server answers, then prints its base URL and the flags that point
     evaluate/paper at it ([bold]--llm-api chat-json-object[/bold]).
     """
-    spec = _spec(model, port, parallel, threads)
+    spec = _spec(model, port, parallel, threads, decoding)
     err_console.print(f"starting llama-cpp-python's server with {spec.model_path} ...")
     try:
         with local_server.LocalServer(spec) as server:
