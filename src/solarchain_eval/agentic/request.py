@@ -238,6 +238,7 @@ class GovernanceRequest:
             parallel=parallel,
             threads=threads,
             decoding=settings.decoding or local_server.DEFAULT_DECODING,
+            requantize=local_server.file_type_for(self.llm_model),
         )
 
 

@@ -33,6 +33,7 @@ def _spec(model: str | None, port: int, parallel: int, threads: int | None, deco
         parallel=parallel,
         threads=local_server.default_threads() if threads is None else threads,
         decoding=decoding,
+        requantize=local_server.file_type_for(model),
     )
 
 
@@ -40,7 +41,9 @@ def _spec(model: str | None, port: int, parallel: int, threads: int | None, deco
 @reports_errors
 def serve(
     model: str | None = typer.Option(
-        None, "--model", help="A GGUF file (default: the bundled SmolLM2-135M-Instruct Q4_1)."
+        None,
+        "--model",
+        help="A GGUF file, served as it is (default: the bundled SmolLM2-135M-Instruct, converted to Q4_0).",
     ),
     port: int = typer.Option(0, "--port", min=0, max=65535, help="Port on 127.0.0.1 (0: a free one)."),
     parallel: int = typer.Option(1, "--parallel", min=1, help="Requests in flight without interrupting each other."),
