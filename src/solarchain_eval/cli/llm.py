@@ -75,7 +75,8 @@ def serve(
             err_console.print(
                 f"model '{spec.model_name}' ready; use --llm-base-url {server.base_url} --llm-api "
                 f"{local_server.LOCAL_API} "
-                f"--llm-model {spec.model_name} (any API key). Ctrl-C stops it.",
+                f"--llm-model {spec.model_name} --llm-temperature 0 (any API key; other temperatures are sampled "
+                "under the grammar, not jump-forward decoded). Ctrl-C stops it.",
                 highlight=False,
             )
             while server.process is not None and server.process.poll() is None:
