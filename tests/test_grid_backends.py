@@ -76,3 +76,24 @@ def test_the_wall_time_estimate_charges_a_seed_group_once():
     per_model = 5.0 + 300_000 / 100.0
     assert jax["train_sac_cpu_s"] == 2 * per_model  # two groups (main, no_physics) of three seeds
     assert sb3["train_sac_cpu_s"] == 6 * per_model
+
+
+def test_bench_train_on_a_subset_of_algorithms_prints_its_figures_without_an_estimate(monkeypatch):
+    # --algos sac measures SAC and says why there is no preset estimate, instead of failing
+    # after the measurement (the estimate needs all three algorithms).
+    from typer.testing import CliRunner
+
+    from solarchain_eval import bench_train
+    from solarchain_eval.bench import Throughput
+    from solarchain_eval.cli import app
+
+    monkeypatch.setattr(bench_train, "solarchain_env", lambda algo, data_dir: None)
+    monkeypatch.setattr(
+        bench_train, "training_steps_per_s", lambda *a, **k: Throughput("SAC training", "steps/s", (123.0,))
+    )
+    monkeypatch.setattr(
+        bench_train, "measured_unit_times", lambda data_dir, rates: bench_train.UnitTimes(rates, 1.0, {}, "test")
+    )
+    result = CliRunner().invoke(app, ["bench-train", "--algos", "sac", "--no-ceiling", "--repeats", "1"])
+    assert result.exit_code == 0, result.output
+    assert "123" in result.output and "no paper estimate" in result.output and "missing ppo, dqn" in result.output

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import statistics
 from pathlib import Path
+from typing import Any
 
 import typer
 from rich.table import Table
@@ -88,9 +89,24 @@ def bench_train(
         err_console.print("timing the evaluation units...")
         times = measure.measured_unit_times(data_dir, rates)
     missing = [a for a in ("ppo", "sac", "dqn") if a not in times.steps_per_s]
-    if missing:
+    if missing and from_root is not None:
         raise CliError(f"the estimate needs all three algorithms; missing {', '.join(missing)}")
-    estimate = measure.estimate_paper_wall_time(times, workers)
+    if missing:  # --algos measured a subset: its figures stand, the preset cannot be estimated
+        console.print(f"no paper estimate: it needs all three algorithms (missing {', '.join(missing)})")
+    else:
+        _print_estimate(times, workers)
+    if backend == "jax" and from_root is None:
+        from .bench_train_jax import bench_jax
+
+        sb3_cpu = {a: statistics.median(r) for a, r in cpu_rates.items()}
+        bench_jax(names, data_dir, repeats, times, sb3_cpu, workers, jax_seeds)
+
+
+def _print_estimate(times: Any, workers: int) -> None:
+    """The paper preset's estimated wall time from ``times`` (a ``bench_train.UnitTimes``)."""
+    from ..bench_train import estimate_paper_wall_time
+
+    estimate = estimate_paper_wall_time(times, workers)
     console.print(f"paper preset on {workers} worker(s), from {times.source}:")
     console.print(
         "  steps/s used: "
@@ -102,8 +118,3 @@ def bench_train(
         f"  estimated wall time {estimate['wall_s'] / 3600:.2f} h (target <= {PAPER_TARGET_H} h); total CPU "
         f"{estimate['cpu_s'] / 3600:.2f} h, of which SAC training {estimate['train_sac_cpu_s'] / 3600:.2f} h"
     )
-    if backend == "jax" and from_root is None:
-        from .bench_train_jax import bench_jax
-
-        sb3_cpu = {a: statistics.median(r) for a, r in cpu_rates.items()}
-        bench_jax(names, data_dir, repeats, times, sb3_cpu, workers, jax_seeds)
