@@ -42,12 +42,15 @@ def bench_jax(
     for column in (*columns, "compile s"):
         table.add_column(column, justify="left" if column == "algorithm" else "right")
     rates, cpu_based, evals, cpu_ratios, compiles = {}, {}, {}, {}, {}
+    buffer_steps = GridSpec.from_preset("paper").timesteps  # the preset's replay buffer, not the short run's
     with tempfile.TemporaryDirectory() as tmp:
         for algo in names:
             steps = DEFAULT_STEPS[algo]
             err_console.print(f"measuring {algo.upper()} with JAX (compile, then {repeats} × {steps:,} steps)...")
             model_dir = Path(tmp) / algo
-            speed = jax_training_steps_per_s(algo, data_dir, steps, repeats, seeds=seeds, model_dir=model_dir)
+            speed = jax_training_steps_per_s(
+                algo, data_dir, steps, repeats, seeds=seeds, model_dir=model_dir, buffer_timesteps=buffer_steps
+            )
             rates[algo] = speed.throughput.median
             compiles[algo] = speed.compile_s
             evals[algo] = jax_eval_unit_s(algo, model_dir, data_dir, sb3_times.episodes)
@@ -135,13 +138,16 @@ def _seed_group_rates(
     from ..experiments.grid import GridSpec
     from ..jax.bench_train import DEFAULT_STEPS, jax_training_steps_per_s
 
-    group = len(GridSpec.from_preset("paper").seeds)
+    paper = GridSpec.from_preset("paper")
+    group = len(paper.seeds)
     if seeds == group:
         return measured
     wall, per_cpu, compile_s = {}, {}, {}
     for algo in names:
         err_console.print(f"measuring {algo.upper()} with JAX, {group} seeds vmapped (the grid's seed groups)...")
-        speed = jax_training_steps_per_s(algo, data_dir, DEFAULT_STEPS[algo], repeats, seeds=group)
+        speed = jax_training_steps_per_s(
+            algo, data_dir, DEFAULT_STEPS[algo], repeats, seeds=group, buffer_timesteps=paper.timesteps
+        )
         wall[algo], per_cpu[algo] = speed.throughput.median, speed.steps_per_cpu_s / group
         compile_s[algo] = speed.compile_s
         console.print(

@@ -26,6 +26,9 @@ TIME_LIMIT = {
 #: SB3's SAC and DQN networks keep torch's default ``nn.Linear`` initialisation.
 TORCH_INIT = "torch nn.Linear default: kernels and biases uniform in +-1/sqrt(fan_in)"
 
+#: SAC's and DQN's minibatches (:mod:`.replay`; kept here so that reading it needs no rejax).
+REPLAY_SAMPLING = "uniform with replacement among the stored transitions (SB3's ReplayBuffer.sample)"
+
 #: Where this backend changes rejax to follow SB3 (recorded in each model's identity).
 SB3_ALIGNMENT = {
     "ppo": {
@@ -35,8 +38,16 @@ SB3_ALIGNMENT = {
         "init": "orthogonal: hidden gain sqrt(2), action mean 0.01, value 1; zero biases",
         "time_limit": TIME_LIMIT["ppo"],
     },
-    "sac": {"gradient_clip": "global norm", "adam_eps": 1e-8, "init": TORCH_INIT, "time_limit": TIME_LIMIT["sac"]},
-    "dqn": {"gradient_clip": "global norm", "adam_eps": 1e-8, "init": TORCH_INIT, "time_limit": TIME_LIMIT["dqn"]},
+    **{
+        algo: {
+            "gradient_clip": "global norm",
+            "adam_eps": 1e-8,
+            "init": TORCH_INIT,
+            "time_limit": TIME_LIMIT[algo],
+            "replay_sampling": REPLAY_SAMPLING,
+        }
+        for algo in ("sac", "dqn")
+    },
 }
 
 
@@ -60,6 +71,8 @@ def sb3_variant(algo: str) -> type:
       (SB3's ``collect_rollouts``) and GAE stops there as before (:func:`_bootstrapped_rollout`);
       SAC and DQN store the terminal observation as the transition's next observation with
       done False (SB3's ``handle_timeout_termination``; :func:`_step_for_buffer`).
+    - The replay minibatches (SAC, DQN): SB3 draws them uniformly with replacement; rejax
+      without replacement, at a cost that grows with the buffer (:mod:`.replay`).
     """
     import jax.numpy as jnp
     import optax
@@ -96,6 +109,13 @@ def sb3_variant(algo: str) -> type:
             collect_trajectories = _bootstrapped_rollout
 
         else:
+
+            @register_init
+            def initialize_replay_buffer(self, rng):
+                # the same name as rejax's, so it replaces it and the other inits' keys stay as they were
+                from .replay import SB3ReplayBuffer
+
+                return {"replay_buffer": SB3ReplayBuffer.empty(self.buffer_size, self.obs_space, self.action_space)}
 
             @property
             def vmap_step(self):

@@ -3,7 +3,9 @@
 A training program is compiled once per algorithm (the compile time is reported on its own),
 then run ``repeats`` times with fresh seeds' keys; each run trains ``steps`` env steps per seed
 from scratch (so SAC's and DQN's first 100 steps, which do no update, are included: 5 % of
-SAC's 2,000 steps). Wall time and the process's CPU time are both recorded: XLA's CPU backend
+SAC's 2,000 steps). SAC's and DQN's replay buffer is sized for ``buffer_timesteps`` (the
+paper's 300,000 in ``bench-train``), not for the short run: the buffer's size is part of the
+cost of a step wherever sampling touches it. Wall time and the process's CPU time are both recorded: XLA's CPU backend
 may use more than one thread, SB3 runs with one torch thread.
 """
 
@@ -50,6 +52,7 @@ def jax_training_steps_per_s(
     seeds: int = 1,
     config: BenchmarkConfig | None = None,
     model_dir: Path | None = None,
+    buffer_timesteps: int | None = None,
 ) -> JaxTrainingSpeed:
     """Steady rejax training speed of ``algo`` in env steps per second per model.
 
@@ -60,12 +63,15 @@ def jax_training_steps_per_s(
     model_dir : path, optional
         Write the last run's first model there (``jax_model.msgpack`` + ``train_config.json``),
         e.g. to time its evaluation.
+    buffer_timesteps : int, optional
+        Size SAC's and DQN's replay buffer for a training of this many steps (default: ``steps``).
     """
     cfg = config or BenchmarkConfig()
     params = make_env_params(data_dir, config=cfg, action_mode=ACTION_MODES[algo])
     batch = tuple(range(seeds))
-    compiled, compile_s = compile_training(algo, batch, steps, params, cfg)
-    _, cached_compile_s = compile_training(algo, batch, steps, params, cfg)  # what a later train unit pays
+    compiled, compile_s = compile_training(algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps)
+    # what a later train unit pays:
+    _, cached_compile_s = compile_training(algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps)
     samples, cpu_ratios, cpu_rates, states = [], [], [], None
     for repeat in range(repeats):
         keys = seed_keys(tuple(1000 * (repeat + 1) + s for s in batch))
@@ -79,7 +85,8 @@ def jax_training_steps_per_s(
     if model_dir is not None and states is not None:
         save_network(Path(model_dir) / JAX_MODEL_FILE, algo, states, 0)
         write_train_config(
-            Path(model_dir), {"identity": {"algo": algo, "backend": "jax"}, "rejax": rejax_config(algo, cfg, steps)}
+            Path(model_dir),
+            {"identity": {"algo": algo, "backend": "jax"}, "rejax": rejax_config(algo, cfg, steps, buffer_timesteps)},
         )
     name = f"{algo.upper()} training (JAX on {jax.devices()[0].platform}, {seeds} seed(s) vmapped, per model)"
     return JaxTrainingSpeed(

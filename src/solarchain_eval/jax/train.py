@@ -37,9 +37,17 @@ from .alignment import SB3_ALIGNMENT, sb3_variant
 from .env import EnvParams, SolarChainJaxEnv, make_env_params
 
 
-def rejax_config(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str, Any]:
-    """rejax keyword arguments mirroring SB3's defaults plus the config's lr, batch and γ."""
+def rejax_config(
+    algo: str, config: BenchmarkConfig, timesteps: int, buffer_timesteps: int | None = None
+) -> dict[str, Any]:
+    """rejax keyword arguments mirroring SB3's defaults plus the config's lr, batch and γ.
+
+    SAC's and DQN's replay buffer holds SB3's 1e6 transitions, or all of a shorter training's;
+    ``buffer_timesteps`` sizes it for a training of that many steps instead (``bench-train``
+    times short trainings with the paper's buffer).
+    """
     t = config.training
+    buffer_size = min(1_000_000, int(buffer_timesteps or timesteps))
     common = {
         "learning_rate": t.learning_rate,
         "gamma": t.gamma,
@@ -70,7 +78,7 @@ def rejax_config(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str
             **common,
             "num_envs": 1,
             "batch_size": t.batch_size,
-            "buffer_size": min(1_000_000, int(timesteps)),
+            "buffer_size": buffer_size,
             "fill_buffer": 100,
             "polyak": 0.995,
             "target_update_freq": 1,
@@ -85,7 +93,7 @@ def rejax_config(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[str
             **common,
             "num_envs": 4,
             "batch_size": t.batch_size,
-            "buffer_size": min(1_000_000, int(timesteps)),
+            "buffer_size": buffer_size,
             "fill_buffer": max(dqn_learning_starts(timesteps), t.batch_size),
             "polyak": 0.0,
             "target_update_freq": 10_000,
@@ -116,6 +124,7 @@ def make_algo(
     config: BenchmarkConfig,
     timesteps: int,
     on_progress: Callable[[int], None] | None = None,
+    buffer_timesteps: int | None = None,
 ) -> Any:
     """The rejax algorithm, reporting the steps done ``progress_chunks`` times through ``on_progress``.
 
@@ -125,7 +134,7 @@ def make_algo(
     """
     import jax.numpy as jnp
 
-    settings = rejax_config(algo, config, timesteps)
+    settings = rejax_config(algo, config, timesteps, buffer_timesteps)
     per_iteration = iteration_steps(algo, settings)
     iterations = -(-int(timesteps) // per_iteration)
     settings["eval_freq"] = iterations // progress_chunks(iterations) * per_iteration
@@ -158,10 +167,11 @@ def compile_training(
     params: EnvParams,
     config: BenchmarkConfig,
     on_progress: Callable[[int], None] | None = None,
+    buffer_timesteps: int | None = None,
 ) -> tuple[Any, float]:
     """``jit(vmap(train))`` over the seeds' keys, compiled; returns (compiled function, compile s)."""
     use_compilation_cache()
-    instance = make_algo(algo, params, config, timesteps, on_progress)
+    instance = make_algo(algo, params, config, timesteps, on_progress, buffer_timesteps)
     keys = seed_keys(seeds)
     start = time.perf_counter()
     with warnings.catch_warnings():
