@@ -97,3 +97,18 @@ def test_bench_train_on_a_subset_of_algorithms_prints_its_figures_without_an_est
     result = CliRunner().invoke(app, ["bench-train", "--algos", "sac", "--no-ceiling", "--repeats", "1"])
     assert result.exit_code == 0, result.output
     assert "123" in result.output and "no paper estimate" in result.output and "missing ppo, dqn" in result.output
+
+
+def test_bench_train_sb3_measurement_leaves_no_sb3_log_directories(tmp_path, monkeypatch):
+    """SB3's default logger set-up makes an empty ``SB3-<time>`` directory in the temp folder
+    on every ``learn()``; the measurement hands it a logger with no outputs instead."""
+    import tempfile
+
+    from solarchain_eval import bench_train
+
+    monkeypatch.delenv("SB3_LOGDIR", raising=False)  # conftest points raw SB3 calls elsewhere
+    monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))
+    monkeypatch.setattr(bench_train, "WARMUP_STEPS", {"dqn": 8})
+    speed = bench_train.training_steps_per_s("dqn", bench_train.TrivialEnv("discrete"), 16, 2)
+    assert len(speed.samples) == 2 and all(s > 0 for s in speed.samples)
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith("SB3-")] == []

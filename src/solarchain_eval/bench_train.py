@@ -31,7 +31,14 @@ from .bench import Throughput
 from .experiments.grid import GridSpec, Unit, plan_units
 from .experiments.layout import PAPER_METADATA_FILE, UNITS_DIR
 from .market.observation import OBS_LIMIT, OBSERVATION_SHAPE
-from .training import ACTION_MODES, TRAIN_METADATA_FILE, algorithm_class, hyperparameters, set_torch_threads
+from .training import (
+    ACTION_MODES,
+    TRAIN_METADATA_FILE,
+    algorithm_class,
+    hyperparameters,
+    quiet_logger,
+    set_torch_threads,
+)
 
 #: Timed steps per repeat and warm-up steps (past learning starts / one PPO rollout).
 DEFAULT_STEPS = {"ppo": 6144, "sac": 1000, "dqn": 6000}
@@ -75,6 +82,7 @@ def training_steps_per_s(
     samples = []
     for repeat in range(repeats):
         model = algorithm_class(algo)("MlpPolicy", env, seed=seed + repeat, verbose=0, device="cpu", **params)
+        model.set_logger(quiet_logger())
         model.learn(WARMUP_STEPS[algo])
         before = model.num_timesteps
         start, cpu = time.perf_counter(), time.process_time()

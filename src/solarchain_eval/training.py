@@ -70,6 +70,17 @@ def hyperparameters(algo: str, config: BenchmarkConfig, timesteps: int) -> dict[
     return params
 
 
+def quiet_logger() -> Any:
+    """An SB3 logger with no outputs.
+
+    Without one, SB3's default logger set-up creates an empty ``/tmp/SB3-<time>`` directory on
+    every ``learn()`` (where no TensorBoard folder is given).
+    """
+    from stable_baselines3.common.logger import Logger
+
+    return Logger(folder=None, output_formats=[])
+
+
 def set_torch_threads(threads: int) -> None:
     """Limit torch (and the BLAS libraries it loads later) to ``threads`` threads."""
     for name in ("OMP_NUM_THREADS", "MKL_NUM_THREADS", "OPENBLAS_NUM_THREADS"):
@@ -351,11 +362,7 @@ class _TrainingSession:
             # Record the resume now: a run killed again must still say it was resumed.
             atomic_write_json(out_dir / TRAIN_METADATA_FILE, {"complete": False, "resumed_from": resumed_from})
         if tb_dir is None:
-            # Without TensorBoard, SB3's default logger set-up would create an empty /tmp/SB3-<time>
-            # directory on every learn(); an explicit logger with no outputs avoids that.
-            from stable_baselines3.common.logger import Logger
-
-            model.set_logger(Logger(folder=None, output_formats=[]))
+            model.set_logger(quiet_logger())
         return cls(out_dir, model, env, store, log, checkpoint, wall_before, resumed_from, callbacks=callbacks)
 
     def learn(self, spec: TrainSpec, algo: str, on_progress: Callable[[int], None] | None) -> float:
