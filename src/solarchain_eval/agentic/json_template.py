@@ -5,7 +5,7 @@ character of a compact reply except its values: ``{"decision": "`` is the same i
 reply. :func:`compile_template` turns such a schema into a list of :class:`Literal` texts and
 :class:`Value` slots; :mod:`.jump_forward` appends each literal to the model's context in one batch
 and lets the model choose only the values, one token at a time, each checked by its slot's
-:meth:`Value.accepts`. The replies have the layout of ``json.dumps`` (", " and ": " separators).
+:meth:`Value.accepts`. The replies are compact JSON ("," and ":" separators, no spaces).
 
 Supported: objects (nested or by ``$ref`` into ``$defs``), strings (with ``enum``, ``maxLength``
 and a ``pattern`` of the form ``^[class]{0,N}$``), numbers, integers, booleans and ``enum``/``const``
@@ -28,18 +28,25 @@ MAX_INTEGER_DIGITS = 16
 MAX_FRACTION_DIGITS = 16
 MAX_EXPONENT_DIGITS = 2
 
-_INT = rf"-?(?:0|[1-9][0-9]{{0,{MAX_INTEGER_DIGITS - 1}}})"
+_DIGITS = rf"(?:0|[1-9][0-9]{{0,{MAX_INTEGER_DIGITS - 1}}})"
+_INT = rf"-?{_DIGITS}"
 _FRACTION = rf"\.[0-9]{{1,{MAX_FRACTION_DIGITS}}}"
 _EXPONENT = rf"[eE][-+]?[0-9]{{1,{MAX_EXPONENT_DIGITS}}}"
-_INTEGER_FULL = re.compile(rf"{_INT}\Z")
-_NUMBER_FULL = re.compile(rf"{_INT}(?:{_FRACTION})?(?:{_EXPONENT})?\Z")
-#: Every prefix of a JSON number, as three alternatives: in the integer part, the fraction, the exponent.
-_INTEGER_PREFIX = re.compile(rf"-?(?:0|[1-9][0-9]{{0,{MAX_INTEGER_DIGITS - 1}}})?\Z")
-_NUMBER_PREFIX = re.compile(
-    rf"-?(?:0|[1-9][0-9]{{0,{MAX_INTEGER_DIGITS - 1}}})?\Z"
-    rf"|{_INT}\.[0-9]{{0,{MAX_FRACTION_DIGITS}}}\Z"
-    rf"|{_INT}(?:{_FRACTION})?[eE][-+]?[0-9]{{0,{MAX_EXPONENT_DIGITS}}}\Z"
-)
+#: Every prefix of an integer (the sign alone, or part of its digits).
+_INT_PREFIX = rf"-?{_DIGITS}?\Z"
+#: For ``number`` and ``integer`` slots: (every prefix of a value, a whole value). A number's
+#: prefixes are three alternatives: in the integer part, the fraction, the exponent.
+_NUMERIC = {
+    "integer": (re.compile(_INT_PREFIX), re.compile(rf"{_INT}\Z")),
+    "number": (
+        re.compile(
+            rf"{_INT_PREFIX}"
+            rf"|{_INT}\.[0-9]{{0,{MAX_FRACTION_DIGITS}}}\Z"
+            rf"|{_INT}(?:{_FRACTION})?[eE][-+]?[0-9]{{0,{MAX_EXPONENT_DIGITS}}}\Z"
+        ),
+        re.compile(rf"{_INT}(?:{_FRACTION})?(?:{_EXPONENT})?\Z"),
+    ),
+}
 #: The one ``pattern`` form understood: a character class repeated 0..N times.
 _CLASS_PATTERN = re.compile(r"\^(\[[^\]\\]*(?:\\.[^\]\\]*)*\])\{0,(\d+)\}\$\Z")
 
@@ -85,10 +92,8 @@ class Value:
 
     def accepts(self, text: str) -> bool:
         """Whether ``text`` can begin (or be) a value of this slot."""
-        if self.kind == "number":
-            return _NUMBER_PREFIX.match(text) is not None
-        if self.kind == "integer":
-            return _INTEGER_PREFIX.match(text) is not None
+        if self.kind in _NUMERIC:
+            return _NUMERIC[self.kind][0].match(text) is not None
         if self.kind == "choice":
             return any(option.startswith(text) for option in self.options)
         if self.max_chars is not None and len(text) > self.max_chars:
@@ -99,10 +104,8 @@ class Value:
 
     def complete(self, text: str) -> bool:
         """Whether ``text`` is a whole value of this slot."""
-        if self.kind == "number":
-            return _NUMBER_FULL.match(text) is not None
-        if self.kind == "integer":
-            return _INTEGER_FULL.match(text) is not None
+        if self.kind in _NUMERIC:
+            return _NUMERIC[self.kind][1].match(text) is not None
         if self.kind == "choice":
             return text in self.options
         return self.accepts(text)

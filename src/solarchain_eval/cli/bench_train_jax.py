@@ -5,6 +5,7 @@ from __future__ import annotations
 import tempfile
 from dataclasses import replace
 from pathlib import Path
+from typing import Any
 
 from rich.table import Table
 
@@ -26,6 +27,7 @@ def bench_jax(
     from .. import bench_train as measure
     from ..experiments.grid import GridSpec
 
+    paper = GridSpec.from_preset("paper", backend="jax")
     pinned = _pin_before_jax_starts()
     try:
         from ..jax.bench_train import DEFAULT_STEPS, describe_flags, jax_eval_unit_s, jax_training_steps_per_s
@@ -42,14 +44,13 @@ def bench_jax(
     for column in (*columns, "compile s"):
         table.add_column(column, justify="left" if column == "algorithm" else "right")
     rates, cpu_based, evals, cpu_ratios, compiles = {}, {}, {}, {}, {}
-    buffer_steps = GridSpec.from_preset("paper").timesteps  # the preset's replay buffer, not the short run's
     with tempfile.TemporaryDirectory() as tmp:
         for algo in names:
             steps = DEFAULT_STEPS[algo]
             err_console.print(f"measuring {algo.upper()} with JAX (compile, then {repeats} × {steps:,} steps)...")
             model_dir = Path(tmp) / algo
             speed = jax_training_steps_per_s(
-                algo, data_dir, steps, repeats, seeds=seeds, model_dir=model_dir, buffer_timesteps=buffer_steps
+                algo, data_dir, steps, repeats, seeds=seeds, model_dir=model_dir, buffer_timesteps=paper.timesteps
             )
             rates[algo] = speed.throughput.median
             compiles[algo] = speed.compile_s
@@ -82,9 +83,8 @@ def bench_jax(
         console.print(f"no JAX paper estimate: it needs all three algorithms (missing {', '.join(missing)})")
         return
     group_rates, group_cpu, group_compile = _seed_group_rates(
-        names, data_dir, repeats, seeds, (rates, cpu_based, compiles)
+        names, data_dir, repeats, seeds, (rates, cpu_based, compiles), paper
     )
-    paper = GridSpec.from_preset("paper", backend="jax")
     for label, steps_per_s in (("wall-clock", group_rates), ("per-CPU-second", group_cpu)):
         times = replace(
             sb3_times,
@@ -128,17 +128,16 @@ def _pin_before_jax_starts() -> int | None:
 
 
 def _seed_group_rates(
-    names: list[str], data_dir: Path, repeats: int, seeds: int, measured: tuple[dict, dict, dict]
+    names: list[str], data_dir: Path, repeats: int, seeds: int, measured: tuple[dict, dict, dict], paper: Any
 ) -> tuple[dict[str, float], dict[str, float], dict[str, float]]:
-    """Per-model steps/s (wall, per CPU second) and compile seconds at the paper grid's seed groups.
+    """Per-model steps/s (wall, per CPU second) and compile seconds at the seed groups of the
+    grid ``paper`` (a ``GridSpec``).
 
     The JAX grid trains an algorithm's seeds in one vmap (docs/jax.md), so the estimate needs the
     rate at that group size; measured here unless ``--jax-seeds`` already was that size.
     """
-    from ..experiments.grid import GridSpec
     from ..jax.bench_train import DEFAULT_STEPS, jax_training_steps_per_s
 
-    paper = GridSpec.from_preset("paper")
     group = len(paper.seeds)
     if seeds == group:
         return measured

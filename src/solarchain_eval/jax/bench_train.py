@@ -5,8 +5,8 @@ then run ``repeats`` times with fresh seeds' keys; each run trains ``steps`` env
 from scratch (so SAC's and DQN's first 100 steps, which do no update, are included: 5 % of
 SAC's 2,000 steps). SAC's and DQN's replay buffer is sized for ``buffer_timesteps`` (the
 paper's 300,000 in ``bench-train``), not for the short run: the buffer's size is part of the
-cost of a step wherever sampling touches it. Wall time and the process's CPU time are both recorded: XLA's CPU backend
-may use more than one thread, SB3 runs with one torch thread.
+cost of a step wherever sampling touches it. Wall time and the process's CPU time are both
+recorded: XLA's CPU backend may use more than one thread, SB3 runs with one torch thread.
 """
 
 from __future__ import annotations
@@ -70,8 +70,9 @@ def jax_training_steps_per_s(
     params = make_env_params(data_dir, config=cfg, action_mode=ACTION_MODES[algo])
     batch = tuple(range(seeds))
     compiled, compile_s = compile_training(algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps)
-    # what a later train unit pays:
-    _, cached_compile_s = compile_training(algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps)
+    _, cached_compile_s = compile_training(  # what a later train unit pays
+        algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps
+    )
     samples, cpu_ratios, cpu_rates, states = [], [], [], None
     for repeat in range(repeats):
         keys = seed_keys(tuple(1000 * (repeat + 1) + s for s in batch))
