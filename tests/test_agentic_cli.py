@@ -10,8 +10,8 @@ import pytest
 from typer.testing import CliRunner
 
 from fake_openai import FakeOpenAI, Reply, chat_body, default_responder, schema_name
-from solarchain_eval.agentic import AGENTIC_METRIC_NAMES
 from solarchain_eval.cli import app
+from solarchain_eval.governance import AGENTIC_METRIC_NAMES
 
 KEY = "sk-e2e-SECRET-9f8e7d6c5b4a"
 COMPARED_FILES = ("metrics.csv", "actions.csv", "city_hour_policy.csv", "agentic_logs.jsonl", "summary.json")

@@ -8,7 +8,11 @@ import math
 import pytest
 
 from fake_openai import VALID_AUDIT, VALID_PLAN, FakeOpenAI, Reply, chat_body, ok, responses_body
-from solarchain_eval.agentic import (
+from solarchain_eval.config import MarketConfig
+from solarchain_eval.governance.auditor import LLMAuditor
+from solarchain_eval.governance.planner import EpisodeContext, LLMPlanner
+from solarchain_eval.governance.schemas import AuditorOutput, PlannerOutput
+from solarchain_eval.llm import (
     CallSite,
     LLMCacheMissError,
     LLMConfigError,
@@ -19,10 +23,7 @@ from solarchain_eval.agentic import (
     StructuredLLM,
     resolve_llm_settings,
 )
-from solarchain_eval.agentic.auditor import LLMAuditor
-from solarchain_eval.agentic.planner import EpisodeContext, LLMPlanner
-from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput, response_format
-from solarchain_eval.config import MarketConfig
+from solarchain_eval.llm.response_format import response_format
 from solarchain_eval.market.actions import ActionCodec
 
 KEY = "sk-test-SECRET-0123456789abcdef"
@@ -277,8 +278,8 @@ def test_out_of_range_plan_is_clipped_and_every_clip_logged():
 
 
 def test_out_of_range_audit_action_is_sanitised_and_logged():
-    from solarchain_eval.agentic.auditor import StepContext
-    from solarchain_eval.agentic.schemas import validate_plan
+    from solarchain_eval.governance.auditor import StepContext
+    from solarchain_eval.governance.schemas import validate_plan
 
     plan = validate_plan(PlannerOutput.model_validate(VALID_PLAN), CODEC, 24)[0]
     audit = dict(VALID_AUDIT, final_action={"reward_ratio": 0.7, "liquidity_ratio": 0.9, "burn_rate": -1.0})

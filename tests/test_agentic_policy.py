@@ -1,5 +1,5 @@
 """The policy wrapper: any base policy (discrete too), approve-only and default components,
-forwarded hooks, and the paper-grid entry point ``evaluate_agentic_unit``."""
+forwarded hooks, and an agentic run directory written by the evaluation runner."""
 
 from __future__ import annotations
 
@@ -9,13 +9,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from solarchain_eval.agentic import AgenticOptions, Governance
-from solarchain_eval.agentic.planner import episode_context
 from solarchain_eval.config import BenchmarkConfig
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.experiments.evaluate import evaluate_agentic_unit
-from solarchain_eval.experiments.rollout import run_policy
-from solarchain_eval.policies.baselines import make_baseline
+from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.evaluation.rollout import run_policy
+from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
+from solarchain_eval.governance import AgenticOptions, Governance
+from solarchain_eval.governance.planner import episode_context
+from solarchain_eval.market.baselines import make_baseline
 
 
 class FixedIndexPolicy:
@@ -109,11 +109,18 @@ def test_episode_context_statistics_come_from_the_episode_hours(published_dir):
     assert context.mean_static_slippage == np.mean(t.static_slippage[hours])
 
 
-def test_evaluate_agentic_unit_writes_a_complete_run_dir(tiny_dataset, tmp_path):
+def test_an_agentic_run_writes_a_complete_run_dir(tiny_dataset, tmp_path):
     policy = FixedIndexPolicy(62, name="ppo")
-    outcome = evaluate_agentic_unit(
-        policy, setting="llm_no_physics", run_seed=11, run_dir=tmp_path / "unit", episodes=2, data_dir=tiny_dataset
+    spec = EvaluationSpec(
+        policies=[policy],
+        run_seeds=[11],
+        episodes=2,
+        data_dir=tiny_dataset,
+        no_physics_penalty=True,
+        agentic=AgenticOptions(),
     )
+    assert spec.setting == "llm_no_physics"
+    outcome = run_evaluation(spec, tmp_path / "unit")
     unit = tmp_path / "unit"
     metrics = pd.read_csv(unit / "metrics.csv")
     assert list(metrics["policy"]) == ["ppo", "ppo"] and set(metrics["setting"]) == {"llm_no_physics"}
@@ -123,8 +130,6 @@ def test_evaluate_agentic_unit_writes_a_complete_run_dir(tiny_dataset, tmp_path)
     meta = json.loads((unit / "run_metadata.json").read_text())
     assert meta["policies"] == ["ppo"] and meta["agentic"]["auditor"] == "rule" and meta["config"]["no_physics_penalty"]
     assert len(outcome.results) == 2
-    with pytest.raises(ValueError, match="not an agentic setting"):
-        evaluate_agentic_unit(policy, setting="main", run_seed=1, run_dir=tmp_path / "x", data_dir=tiny_dataset)
 
 
 @pytest.mark.parametrize("name", ["static", "myopic"])

@@ -12,15 +12,15 @@ from __future__ import annotations
 
 import numpy as np
 
-from solarchain_eval.agentic import AgenticOptions, Governance, GovernedPolicy
-from solarchain_eval.agentic.auditor import RuleAuditor
-from solarchain_eval.agentic.planner import PlanOutcome
-from solarchain_eval.agentic.schemas import ActionBounds, AuditPolicy, Bounds, PlannerOutput, validate_plan
 from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.data.table import load_table
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.experiments.rollout import run_policy
-from solarchain_eval.policies.baselines import make_baseline
+from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.evaluation.rollout import run_policy
+from solarchain_eval.governance import AgenticOptions, Governance, GovernedPolicy
+from solarchain_eval.governance.auditor import RuleAuditor
+from solarchain_eval.governance.planner import PlanOutcome
+from solarchain_eval.governance.schemas import ActionBounds, AuditPolicy, Bounds, PlannerOutput, validate_plan
+from solarchain_eval.market.baselines import make_baseline
 
 F32 = np.float32
 LO = np.array([0.05, 0.20, 0.0])

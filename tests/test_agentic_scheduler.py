@@ -7,7 +7,8 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from solarchain_eval.agentic.scheduler import (
+from solarchain_eval.config import MarketConfig
+from solarchain_eval.governance.scheduler import (
     SKIP_BUDGET,
     SKIP_COOLDOWN,
     AuditScheduler,
@@ -17,8 +18,7 @@ from solarchain_eval.agentic.scheduler import (
     kappa,
     soft_trigger,
 )
-from solarchain_eval.agentic.schemas import Plan
-from solarchain_eval.config import MarketConfig
+from solarchain_eval.governance.schemas import Plan
 from solarchain_eval.market.actions import ActionCodec
 
 CODEC = ActionCodec.from_config(MarketConfig())

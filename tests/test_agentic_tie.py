@@ -13,14 +13,14 @@ import numpy as np
 from pydantic import SecretStr
 
 from fake_openai import VALID_PLAN, FakeOpenAI, Seen, ok
-from solarchain_eval.agentic import AgenticOptions, Governance
-from solarchain_eval.agentic.build import LLMOptions
-from solarchain_eval.agentic.llm_client import LLMSettings
 from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.data.table import load_table
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.experiments.rollout import run_policy
-from solarchain_eval.policies.baselines import make_baseline
+from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.evaluation.rollout import run_policy
+from solarchain_eval.governance import AgenticOptions, Governance
+from solarchain_eval.governance.factory import LLMOptions
+from solarchain_eval.llm.client import LLMSettings
+from solarchain_eval.market.baselines import make_baseline
 
 F32 = np.float32
 TIE_PLAN = {

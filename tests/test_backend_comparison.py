@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from solarchain_eval.report.backends import compare_runs
+from solarchain_eval.report.compare import compare_runs
 
 
 def _metrics(reward: np.ndarray, policy: str = "ppo") -> pd.DataFrame:

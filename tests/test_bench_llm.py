@@ -6,9 +6,9 @@ import pytest
 from typer.testing import CliRunner
 
 from fake_openai import FakeOpenAI, default_responder, ok, schema_name, user_context
-from solarchain_eval.agentic import StructuredLLM, resolve_llm_settings
-from solarchain_eval.agentic.bench import run_llm_bench
 from solarchain_eval.cli import app
+from solarchain_eval.llm import StructuredLLM, resolve_llm_settings
+from solarchain_eval.perf.llm_bench import run_llm_bench
 
 
 @pytest.fixture

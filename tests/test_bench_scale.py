@@ -7,9 +7,9 @@ import json
 import pytest
 from typer.testing import CliRunner
 
-from solarchain_eval.bench_scale import measure_scale, parse_scales
 from solarchain_eval.cli import app
 from solarchain_eval.data.cities import check_unique_prefixes, synthetic_cities
+from solarchain_eval.perf.scale_bench import measure_scale, parse_scales
 
 
 def test_synthetic_cities_are_stable_and_have_unique_prefixes():

@@ -10,9 +10,9 @@ import pytest
 from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
-from solarchain_eval.experiments.rollout import STEP_FIELDS
-from solarchain_eval.io import atomic_write_csv, atomic_write_text
-from solarchain_eval.metrics import METRIC_NAMES
+from solarchain_eval.common.atomic_files import atomic_write_csv, atomic_write_text
+from solarchain_eval.evaluation.metrics import METRIC_NAMES
+from solarchain_eval.evaluation.rollout import STEP_FIELDS
 
 runner = CliRunner()
 

@@ -7,7 +7,7 @@ import pandas as pd
 from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
-from solarchain_eval.report.backends import compare_runs
+from solarchain_eval.report.compare import compare_runs
 
 
 def _run_dir(path, rewards, setting="main", policy="ppo", start_hours=(0, 24, 48, 72)):

@@ -58,10 +58,14 @@ evaluation:
 def test_the_papers_yaml_loads_unchanged(tmp_path):
     path = tmp_path / "month_2026_04.yaml"
     path.write_text(PAPER_YAML)
-    config = load_config(path)
-    assert config.data_dir == "data/datasets_2026_04_month" and config.figures_dir == "figures"
-    # Every value equals the documented default (docs/environment.md#arguments) except the paths.
-    assert config.model_dump(exclude={"data_dir"}) == BenchmarkConfig().model_dump(exclude={"data_dir"})
+    with pytest.warns(UserWarning, match=r"'figures_dir' is not used"):
+        config = load_config(path)
+    assert config.data_dir == "data/datasets_2026_04_month"
+    # Every value equals the documented default (docs/environment.md#arguments) except the data path
+    # and the number of evaluation episodes (the release's file says 5; the paper's protocol is 30).
+    assert config.evaluation.episodes == 5 and BenchmarkConfig().evaluation.episodes == 30
+    exclude = {"data_dir": True, "evaluation": {"episodes"}}
+    assert config.model_dump(exclude=exclude) == BenchmarkConfig().model_dump(exclude=exclude)
     assert config.training.learning_rate == 3e-4 and config.evaluation.policies == ["static", "random", "myopic"]
 
 

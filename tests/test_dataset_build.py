@@ -7,12 +7,12 @@ import json
 import pandas as pd
 import pytest
 
+from solarchain_eval.common.atomic_files import sha256_file
 from solarchain_eval.data.build import DATASET_FILES, MANIFEST_FILE, build_dataset
 from solarchain_eval.data.cities import PAPER_CITIES, City
 from solarchain_eval.data.published import PAPER_DATASET_SHA256
 from solarchain_eval.data.synthetic import synthesize_weather
 from solarchain_eval.data.weather import WeatherError, read_weather_cache
-from solarchain_eval.io import sha256_file
 
 
 def _build(weather, out, cities=PAPER_CITIES, **kw):

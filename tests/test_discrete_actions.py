@@ -5,8 +5,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.vector import SolarChainVectorEnv
+from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.envs.vector import SolarChainVectorEnv
 
 ACCEPTED = [7, np.int64(7), np.int32(7), np.uint8(7), np.array(7), np.array(7, dtype=np.int16)]
 REFUSED = [

@@ -64,7 +64,7 @@ def test_no_reference_to_a_document_outside_the_repository():
 
 
 def test_environment_card_has_gymnasium_headings_in_page_and_docstring():
-    from solarchain_eval.env import SolarChainEnv
+    from solarchain_eval.envs.env import SolarChainEnv
 
     headings = [
         "Description",

@@ -8,9 +8,9 @@ import pytest
 from gymnasium.utils.env_checker import check_env
 
 import solarchain_eval  # noqa: F401  (registers the env)
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.experiments.rollout import STEP_FIELDS
-from solarchain_eval.vector import SolarChainVectorEnv
+from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.envs.vector import SolarChainVectorEnv
+from solarchain_eval.evaluation.rollout import STEP_FIELDS
 
 F32 = np.float32
 

@@ -10,13 +10,13 @@ import pytest
 from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
+from solarchain_eval.common.atomic_files import sha256_file
 from solarchain_eval.data.build import DATASET_FILES, MANIFEST_FILE, build_dataset
 from solarchain_eval.data.cities import City
 from solarchain_eval.data.fdia import FdiaError, FdiaScenario, parse_severity
 from solarchain_eval.data.published import PAPER_DATASET_SHA256
 from solarchain_eval.data.synthetic import synthesize_weather
 from solarchain_eval.data.table import load_table
-from solarchain_eval.io import sha256_file
 
 CITIES = (City("Wuhan", 30.5928, 114.3055), City("Xian", 34.3416, 108.9398), City("Kunming", 25.0389, 102.7183))
 START, END, NODES = "2026-06-01", "2026-06-08", 5  # 3 cities x 5 nodes x 168 hours = 2,520 records

@@ -9,18 +9,18 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from solarchain_eval.agentic import AgenticOptions, Governance
-from solarchain_eval.agentic.auditor import RuleAuditor, rule_revision
-from solarchain_eval.agentic.calibrated import calibrated_thresholds
-from solarchain_eval.agentic.controls import OracleAuditor, SchedulerControls
-from solarchain_eval.agentic.counterfactual import CounterfactualEvaluator, step_cost
-from solarchain_eval.agentic.planner import episode_context
 from solarchain_eval.config import BenchmarkConfig
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.experiments.evaluate import EvaluationSpec, run_evaluation
-from solarchain_eval.experiments.records import diagnostics_frame
-from solarchain_eval.experiments.rollout import run_policy
-from solarchain_eval.policies.baselines import make_baseline
+from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.evaluation.records import diagnostics_frame
+from solarchain_eval.evaluation.rollout import run_policy
+from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
+from solarchain_eval.governance import AgenticOptions, Governance
+from solarchain_eval.governance.auditor import RuleAuditor, rule_revision
+from solarchain_eval.governance.calibrated import calibrated_thresholds
+from solarchain_eval.governance.controls import OracleAuditor, SchedulerControls
+from solarchain_eval.governance.counterfactual import CounterfactualEvaluator, step_cost
+from solarchain_eval.governance.planner import episode_context
+from solarchain_eval.market.baselines import make_baseline
 
 OUTCOME_COLUMNS = {
     "violation_rate": "physics_violation_rate",
@@ -245,7 +245,7 @@ def test_evaluator_memoises_and_matches_the_env(tiny_dataset):
 
 
 def test_diagnostics_csv_is_what_pandas_writes(tiny_dataset):
-    from solarchain_eval.experiments.records import diagnostics_csv
+    from solarchain_eval.evaluation.records import diagnostics_csv
 
     _, results = governed(tiny_dataset, AgenticOptions(planner="calibrated-rule", diagnostics=True), episodes=2)
     assert diagnostics_csv(results) == diagnostics_frame(results).to_csv(index=False)

@@ -15,14 +15,13 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from solarchain_eval.experiments import grid as grid_module
+from solarchain_eval.evaluation.settings import KNOWN_SETTINGS, Setting
 from solarchain_eval.experiments.grid import (
-    GridSetting,
     GridSpec,
-    independent_episode_seeds,
     plan_units,
 )
 from solarchain_eval.experiments.paper import GridError, run_paper
+from solarchain_eval.protocol import independent_episode_seeds
 
 CLI = [sys.executable, "-c", "from solarchain_eval.cli import main; main()"]
 TABLES = ("metrics.csv", "actions.csv", "city_hour_policy.csv")
@@ -70,14 +69,12 @@ def test_plan_of_the_paper_preset_with_its_agentic_settings(monkeypatch):
     assert ppo_eval.depends_on == ("train/ppo-no_physics-20260512",)
     assert all(not u.depends_on for u in evals if u.policy in ("static", "random", "myopic"))
     # a registered setting that reuses the main models plans its units the same way
-    monkeypatch.setitem(grid_module.SETTING_REGISTRY, "extra", GridSetting("extra", False, ("ppo",), "main"))
+    monkeypatch.setitem(KNOWN_SETTINGS, "extra", Setting("extra", False, False, "main", "Extra", "extra", ("ppo",)))
     spec = GridSpec.from_preset("paper", settings=("main", "extra"))
     units = plan_units(spec)
     assert len([u for u in units if u.kind == "train"]) == 9
     extra = [u for u in units if u.setting == "extra"]
     assert len(extra) == 3 and extra[0].depends_on == ("train/ppo-main-20260511",)
-    with pytest.raises(ValueError, match="model_setting"):
-        grid_module.register_setting(GridSetting("odd", False, ("ppo",), "llm"))
 
 
 @pytest.fixture(scope="module")

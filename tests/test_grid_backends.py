@@ -68,7 +68,7 @@ def test_jax_grid_trains_each_algorithm_and_setting_as_one_seed_group(tmp_path):
 
 
 def test_the_wall_time_estimate_charges_a_seed_group_once():
-    from solarchain_eval.bench_train import UnitTimes, estimate_paper_wall_time
+    from solarchain_eval.perf.train_bench import UnitTimes, estimate_paper_wall_time
 
     times = UnitTimes({"ppo": 1000.0, "sac": 100.0, "dqn": 1000.0}, 5.0, {"static": 1.0}, "test")
     jax = estimate_paper_wall_time(times, 2, GridSpec.from_preset("paper", backend="jax"))
@@ -83,9 +83,9 @@ def test_bench_train_on_a_subset_of_algorithms_prints_its_figures_without_an_est
     # after the measurement (the estimate needs all three algorithms).
     from typer.testing import CliRunner
 
-    from solarchain_eval import bench_train
-    from solarchain_eval.bench import Throughput
     from solarchain_eval.cli import app
+    from solarchain_eval.perf import train_bench as bench_train
+    from solarchain_eval.perf.env_bench import Throughput
 
     monkeypatch.setattr(bench_train, "solarchain_env", lambda algo, data_dir: None)
     monkeypatch.setattr(
@@ -104,7 +104,7 @@ def test_bench_train_sb3_measurement_leaves_no_sb3_log_directories(tmp_path, mon
     on every ``learn()``; the measurement hands it a logger with no outputs instead."""
     import tempfile
 
-    from solarchain_eval import bench_train
+    from solarchain_eval.perf import train_bench as bench_train
 
     monkeypatch.delenv("SB3_LOGDIR", raising=False)  # conftest points raw SB3 calls elsewhere
     monkeypatch.setattr(tempfile, "tempdir", str(tmp_path))

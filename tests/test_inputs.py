@@ -15,10 +15,10 @@ import pytest
 from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
+from solarchain_eval.common.atomic_files import atomic_write_json
 from solarchain_eval.config import BenchmarkConfig, ConfigError, load_config
 from solarchain_eval.data.load import DatasetError, load_raw_dataset
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.io import atomic_write_json
+from solarchain_eval.envs.env import SolarChainEnv
 
 GEN, NODES, MARKET, TRADES = (
     "spatiotemporal_generation.csv",

@@ -1,6 +1,6 @@
 """The JAX throughput benchmark computes what a plain loop over the env computes.
 
-``bench --backend jax`` times :func:`~solarchain_eval.jax.bench.shard_rollout`: episodes of
+``bench --backend jax`` times :func:`~solarchain_eval.perf.jax_env_bench.shard_rollout`: episodes of
 vmapped resets and steps, the envs split over devices. Its result (the sum of every reward and
 observation) is checked against one env at a time stepped from Python with the same keys and
 actions, and the split over two CPU host devices (a subprocess: the device count is fixed when
@@ -43,7 +43,7 @@ def test_rollout_equals_a_loop_over_single_envs(tiny_dataset: Path) -> None:
     import jax
 
     from solarchain_eval.jax import SolarChainJaxEnv, make_env_params
-    from solarchain_eval.jax.bench import make_rollout
+    from solarchain_eval.perf.jax_env_bench import make_rollout
 
     params = make_env_params(tiny_dataset)
     env = SolarChainJaxEnv(params)
@@ -62,7 +62,7 @@ SHARDED = """
 import json, sys
 import jax, numpy as np
 from solarchain_eval.jax import SolarChainJaxEnv, make_env_params
-from solarchain_eval.jax.bench import make_rollout, shard_rollout
+from solarchain_eval.perf.jax_env_bench import make_rollout, shard_rollout
 params = make_env_params(sys.argv[1]); env = SolarChainJaxEnv(params)
 devices = jax.devices()
 actions = np.random.default_rng(3).random((8, 8, 3), dtype=np.float32)

@@ -45,7 +45,7 @@ def trajectory_errors(data_dir: Path, mode: str, no_physics: bool, episodes: int
     import jax
 
     from solarchain_eval.data.table import load_table
-    from solarchain_eval.env import SolarChainEnv
+    from solarchain_eval.envs.env import SolarChainEnv
     from solarchain_eval.jax import SolarChainJaxEnv, make_env_params
     from solarchain_eval.market.dynamics import RewardWeights
 

@@ -39,8 +39,8 @@ def test_componentwise_decode_equals_the_numpy_batch_decode(tiny_dataset) -> Non
     import jax
 
     from solarchain_eval.config import BenchmarkConfig
+    from solarchain_eval.envs.jax_env import decode_action
     from solarchain_eval.jax import make_env_params
-    from solarchain_eval.jax.env import decode_action
     from solarchain_eval.market.actions import ActionCodec
 
     params = make_env_params(tiny_dataset)
@@ -65,8 +65,8 @@ def test_componentwise_decode_equals_the_numpy_batch_decode(tiny_dataset) -> Non
 def test_componentwise_discrete_decode_reads_the_grid_row(tiny_dataset) -> None:
     import jax
 
+    from solarchain_eval.envs.jax_env import decode_action
     from solarchain_eval.jax import make_env_params
-    from solarchain_eval.jax.env import decode_action
 
     params = make_env_params(tiny_dataset, action_mode="discrete")
     table = np.asarray(params.discrete_actions)
@@ -80,7 +80,7 @@ def test_overwrite_columns_equals_chained_at_set(indices: tuple[int, ...]) -> No
     import jax
     import jax.numpy as jnp
 
-    from solarchain_eval.jax.env import overwrite_columns
+    from solarchain_eval.envs.jax_env import overwrite_columns
 
     rng = np.random.default_rng(len(indices) + sum(indices))
     rows = jnp.asarray(rng.normal(size=(64, 12)).astype(np.float32))

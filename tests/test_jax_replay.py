@@ -14,7 +14,7 @@ import jax.numpy as jnp  # noqa: E402
 from gymnax.environments import spaces  # noqa: E402
 from rejax.buffers import Minibatch  # noqa: E402
 
-from solarchain_eval.jax.replay import SB3ReplayBuffer  # noqa: E402
+from solarchain_eval.training.jax_replay import SB3ReplayBuffer  # noqa: E402
 
 SIZE = 1000
 
@@ -84,9 +84,9 @@ def test_sampling_work_does_not_grow_with_the_buffer():
 @pytest.mark.parametrize("algo", ["sac", "dqn"])
 def test_sac_and_dqn_train_states_hold_the_sb3_buffer(tiny_dataset, algo):
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.jax.alignment import REPLAY_SAMPLING, SB3_ALIGNMENT
-    from solarchain_eval.jax.env import make_env_params
-    from solarchain_eval.jax.train import make_algo, rejax_config
+    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.training.jax_alignment import REPLAY_SAMPLING, SB3_ALIGNMENT
+    from solarchain_eval.training.jax_trainer import make_algo, rejax_config
 
     params = make_env_params(tiny_dataset, action_mode="discrete" if algo == "dqn" else "continuous")
     instance = make_algo(algo, params, BenchmarkConfig(), 500, buffer_timesteps=300_000)

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from solarchain_eval.io import sha256_file
+from solarchain_eval.common.atomic_files import sha256_file
 
 pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
 pytest.importorskip("rejax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
@@ -32,7 +32,7 @@ def _cli(*args: str, timeout: int = 600) -> subprocess.CompletedProcess:
 @pytest.fixture(scope="module")
 def trained(tmp_path_factory, tiny_dataset) -> dict[str, Path]:
     """Tiny JAX models: DQN through the CLI (two seeds), PPO and SAC through the library (one seed)."""
-    from solarchain_eval.jax.train import JaxTrainSpec, seed_dirs, train_jax
+    from solarchain_eval.training.jax_trainer import JaxTrainSpec, seed_dirs, train_jax
 
     root = tmp_path_factory.mktemp("jax-train")
     done = _cli(
@@ -94,8 +94,8 @@ def _direct_actor(algo: str, model_path: Path, data_dir: Path):
     from flax import serialization
 
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.jax.env import make_env_params
-    from solarchain_eval.jax.train import make_algo
+    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.training.jax_trainer import make_algo
 
     mode = "discrete" if algo == "dqn" else "continuous"
     instance = make_algo(algo, make_env_params(data_dir, action_mode=mode), BenchmarkConfig(), 1000)
@@ -117,7 +117,7 @@ def _direct_actor(algo: str, model_path: Path, data_dir: Path):
 
 @pytest.mark.parametrize("algo", ["ppo", "sac", "dqn"])
 def test_evaluate_models_acts_with_the_trained_network(trained, tiny_dataset, tmp_path, algo):
-    from solarchain_eval.env import SolarChainEnv
+    from solarchain_eval.envs.env import SolarChainEnv
 
     runs = []
     for attempt in range(2):
@@ -150,8 +150,8 @@ def test_evaluate_models_acts_with_the_trained_network(trained, tiny_dataset, tm
 def test_both_backends_for_one_name_in_one_directory_is_refused(trained, tmp_path):
     import shutil
 
+    from solarchain_eval.agents.registry import make_policy
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.policies.registry import make_policy
 
     shared = tmp_path / "models"
     shutil.copytree(trained["sac"], shared / "sac")
@@ -220,8 +220,8 @@ def test_progress_chunks_keep_sb3s_step_counts(tiny_dataset, algo, timesteps, ex
     import math
 
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.jax.env import make_env_params
-    from solarchain_eval.jax.train import make_algo
+    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.training.jax_trainer import make_algo
 
     mode = "discrete" if algo == "dqn" else "continuous"
     instance = make_algo(algo, make_env_params(tiny_dataset, action_mode=mode), BenchmarkConfig(), timesteps)
@@ -237,8 +237,8 @@ def test_ppo_starts_from_sb3s_orthogonal_initialisation(tiny_dataset):
     import jax
 
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.jax.env import make_env_params
-    from solarchain_eval.jax.train import make_algo
+    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.training.jax_trainer import make_algo
 
     instance = make_algo("ppo", make_env_params(tiny_dataset), BenchmarkConfig(), 2048)
     state = instance.init_state(jax.random.key(0))
@@ -268,8 +268,8 @@ def test_sac_and_dqn_start_from_torchs_default_initialisation(tiny_dataset, algo
     import jax
 
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.jax.env import make_env_params
-    from solarchain_eval.jax.train import make_algo
+    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.training.jax_trainer import make_algo
 
     params = make_env_params(tiny_dataset, action_mode="discrete" if algo == "dqn" else "continuous")
     state = make_algo(algo, params, BenchmarkConfig(), 1000).init_state(jax.random.key(0))

@@ -16,14 +16,15 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from solarchain_eval.agentic import jump_forward
-from solarchain_eval.agentic.json_template import (
+from solarchain_eval.governance.schemas import AuditorOutput, PlannerOutput
+from solarchain_eval.llm.response_format import response_format
+from solarchain_eval.llm.serving import jump_forward
+from solarchain_eval.llm.serving.json_template import (
     Literal,
     UnsupportedSchema,
     Value,
     compile_template,
 )
-from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput, response_format
 
 AUDITOR_SCHEMA = response_format(AuditorOutput, "chat-json-object")["schema"]
 PLANNER_SCHEMA = response_format(PlannerOutput, "chat-json-object")["schema"]

@@ -11,7 +11,7 @@ from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
 from solarchain_eval.config import BenchmarkConfig
-from solarchain_eval.lagrangian import (
+from solarchain_eval.training.lagrangian import (
     LAGRANGIAN_LOG_COLUMNS,
     LAGRANGIAN_LOG_FILE,
     LagrangianSettings,
@@ -41,8 +41,8 @@ def test_settings_refuse_negative_or_nan_values():
 def test_penalised_reward_subtracts_lambda_times_cost(tiny_dataset):
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from solarchain_eval.env import SolarChainEnv
-    from solarchain_eval.lagrangian_monitor import Multiplier, PenalisedReward
+    from solarchain_eval.envs.env import SolarChainEnv
+    from solarchain_eval.training.lagrangian_callbacks import Multiplier, PenalisedReward
 
     def make():
         return SolarChainEnv(data_dir=tiny_dataset)
@@ -80,8 +80,8 @@ def test_resume_multiplier_keeps_the_rollouts_before_the_checkpoint(tmp_path):
 def test_tiny_training_raises_the_multiplier_while_cost_exceeds_the_limit(tmp_path, tiny_dataset):
     from stable_baselines3 import PPO
 
-    from solarchain_eval.policies.registry import make_policy
-    from solarchain_eval.training import TrainSpec, train
+    from solarchain_eval.agents.registry import make_policy
+    from solarchain_eval.training.sb3_trainer import TrainSpec, train
 
     settings = LagrangianSettings(cost_limit=0.5, multiplier_lr=0.25, initial_multiplier=0.1)
     spec = TrainSpec(

@@ -12,9 +12,9 @@ from typer.testing import CliRunner
 
 from fake_openai import FakeOpenAI, Reply, chat_body, default_responder, schema_name, user_context
 from solarchain_eval.cli import app
-from solarchain_eval.experiments.inflight import plan_tasks
-from solarchain_eval.experiments.rollout import paper_episode_seeds
-from solarchain_eval.policies.baselines import MyopicPolicy, RandomPolicy, StaticPolicy
+from solarchain_eval.evaluation.inflight import plan_tasks
+from solarchain_eval.evaluation.rollout import paper_episode_seeds
+from solarchain_eval.market.baselines import MyopicPolicy, RandomPolicy, StaticPolicy
 
 COMPARED = ("metrics.csv", "actions.csv", "city_hour_policy.csv", "agentic_logs.jsonl", "summary.json")
 

@@ -9,22 +9,12 @@ import re
 import pytest
 
 from fake_openai import VALID_AUDIT, VALID_PLAN, FakeOpenAI, Reply, chat_body, ok
-from solarchain_eval.agentic import (
-    CallSite,
-    LLMSchemaError,
-    StructuredLLM,
-    local_server,
-    resolve_llm_settings,
-)
-from solarchain_eval.agentic.schemas import (
-    SCHEMA_TEXT_CHARS,
-    SCHEMA_TEXT_MAX_CHARS,
-    AuditorOutput,
-    PlannerOutput,
-    response_format,
-)
 from solarchain_eval.cli import agentic as agentic_cli
 from solarchain_eval.cli.common import CliError
+from solarchain_eval.governance.schemas import SCHEMA_TEXT_MAX_CHARS, AuditorOutput, PlannerOutput
+from solarchain_eval.llm import CallSite, LLMSchemaError, StructuredLLM, resolve_llm_settings
+from solarchain_eval.llm.response_format import SCHEMA_TEXT_CHARS, response_format
+from solarchain_eval.llm.serving import local_server
 
 SITE = CallSite("auditor", "sac", 7, 3, 11)
 MESSAGES = [{"role": "system", "content": "s"}, {"role": "user", "content": 'Context (JSON):\n{"step": 11}'}]

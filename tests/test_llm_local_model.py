@@ -21,20 +21,16 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from solarchain_eval.agentic import (
-    CallSite,
-    LLMError,
-    StructuredLLM,
-    local_server,
-    resolve_llm_settings,
-)
-from solarchain_eval.agentic.bench import episode_situation, step_situation
-from solarchain_eval.agentic.json_template import compile_template
-from solarchain_eval.agentic.prompts import auditor_messages, planner_messages
-from solarchain_eval.agentic.schemas import SCHEMA_TEXT_MAX_CHARS, AuditorOutput, PlannerOutput, response_format
 from solarchain_eval.cli import app
 from solarchain_eval.config import MarketConfig
+from solarchain_eval.governance.prompts import auditor_messages, planner_messages
+from solarchain_eval.governance.schemas import SCHEMA_TEXT_MAX_CHARS, AuditorOutput, PlannerOutput
+from solarchain_eval.llm import CallSite, LLMError, StructuredLLM, resolve_llm_settings
+from solarchain_eval.llm.response_format import response_format
+from solarchain_eval.llm.serving import local_server
+from solarchain_eval.llm.serving.json_template import compile_template
 from solarchain_eval.market.actions import ActionCodec
+from solarchain_eval.perf.llm_bench import episode_situation, step_situation
 
 pytestmark = pytest.mark.llm_model
 
@@ -379,7 +375,7 @@ def test_llm_serve_prints_the_url_and_stops_on_a_signal(sig):
 def test_the_default_model_is_served_as_the_same_q4_0_copy_every_time():
     from llama_cpp import Llama
 
-    from solarchain_eval.agentic import model_server
+    from solarchain_eval.llm.serving import model_server
 
     source = _model_or_skip()
     copies, folders = [], []

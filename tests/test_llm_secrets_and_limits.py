@@ -22,15 +22,9 @@ from fake_openai import (
     ok,
     schema_name,
 )
-from solarchain_eval.agentic import (
-    CallSite,
-    LLMSchemaError,
-    LLMTransportError,
-    StructuredLLM,
-    resolve_llm_settings,
-)
-from solarchain_eval.agentic.schemas import AuditorOutput, PlannerOutput
 from solarchain_eval.cli import app
+from solarchain_eval.governance.schemas import AuditorOutput, PlannerOutput
+from solarchain_eval.llm import CallSite, LLMSchemaError, LLMTransportError, StructuredLLM, resolve_llm_settings
 
 KEY = "sk-echo-SECRET-5a4b3c2d1e0f"
 SITE = CallSite("auditor", "ppo", 20260511, 4, 7)
@@ -110,7 +104,7 @@ def test_a_non_strict_cache_entry_is_refused(tmp_path):
         llm.request(MESSAGES, AuditorOutput, SITE)
     (entry,) = (tmp_path / "cache").rglob("*.json")
     entry.write_text(entry.read_text().replace('"latency_s": ', '"latency_s": NaN, "x": '), encoding="utf-8")
-    from solarchain_eval.agentic import LLMError
+    from solarchain_eval.llm import LLMError
 
     settings = resolve_llm_settings(api="chat", model="fake-model", environ={})
     with pytest.raises(LLMError, match="not valid JSON"):

@@ -10,11 +10,11 @@ from pathlib import Path
 
 import pytest
 
-from solarchain_eval.agentic import local_server
-from solarchain_eval.agentic.bench import episode_situation, step_situation
-from solarchain_eval.agentic.prompts import auditor_messages, planner_messages
 from solarchain_eval.config import MarketConfig
+from solarchain_eval.governance.prompts import auditor_messages, planner_messages
+from solarchain_eval.llm.serving import local_server
 from solarchain_eval.market.actions import ActionCodec
+from solarchain_eval.perf.llm_bench import episode_situation, step_situation
 
 
 def _flag(command: list[str], name: str) -> str:
@@ -53,7 +53,7 @@ def test_every_call_shares_the_system_prompt_and_audits_share_the_episode_part()
 
 
 def _request(**values):
-    from solarchain_eval.agentic.request import GovernanceRequest
+    from solarchain_eval.governance.request import GovernanceRequest
 
     return GovernanceRequest(agentic="planner_auditor", planner="llm", auditor="llm", **values)
 
@@ -67,7 +67,7 @@ def test_model_threads_default_to_the_available_cpus_at_most_two(monkeypatch):
 
 
 def test_llm_threads_reach_the_server_and_are_checked(monkeypatch):
-    from solarchain_eval.agentic.request import GovernanceRequestError
+    from solarchain_eval.governance.request import GovernanceRequestError
 
     monkeypatch.setattr(local_server, "resolve_model", lambda model: ("m", Path("m.gguf")))
     request = _request(llm_backend="local", llm_threads=3)
@@ -82,10 +82,10 @@ def test_llm_threads_reach_the_server_and_are_checked(monkeypatch):
 
 
 def test_llm_decoding_reaches_the_server_and_the_cache_key(monkeypatch):
-    from solarchain_eval.agentic.cache import request_key
-    from solarchain_eval.agentic.llm_client import StructuredLLM
-    from solarchain_eval.agentic.request import GovernanceRequestError
-    from solarchain_eval.agentic.schemas import AuditorOutput
+    from solarchain_eval.governance.request import GovernanceRequestError
+    from solarchain_eval.governance.schemas import AuditorOutput
+    from solarchain_eval.llm.cache import request_key
+    from solarchain_eval.llm.client import StructuredLLM
 
     monkeypatch.setattr(local_server, "resolve_model", lambda model: ("m", Path("m.gguf")))
     keys = {}

@@ -11,11 +11,11 @@ from typer.testing import CliRunner
 
 from openmeteo_server import ArchiveServer
 from solarchain_eval.cli import app
+from solarchain_eval.common.atomic_files import sha256_file
 from solarchain_eval.data.cities import PAPER_CITIES
 from solarchain_eval.data.open_meteo import fetch_city, fetch_weather, parse_archive_response
 from solarchain_eval.data.published import PAPER_DATASET_SHA256
 from solarchain_eval.data.weather import WeatherError
-from solarchain_eval.io import sha256_file
 
 CENTRES = {c.name: (c.latitude, c.longitude) for c in PAPER_CITIES}
 

@@ -7,10 +7,10 @@ from pathlib import Path
 import pytest
 from typer.testing import CliRunner
 
-from solarchain_eval.agentic.request import GovernanceRequest, GovernanceRequestError
 from solarchain_eval.cli import app
-from solarchain_eval.experiments.rundir import RunDirError, check_target
-from solarchain_eval.option_errors import NamesOptions, flag_of
+from solarchain_eval.common.errors import NamesOptions, flag_of
+from solarchain_eval.evaluation.rundir import RunDirError, check_target
+from solarchain_eval.governance.request import GovernanceRequest, GovernanceRequestError
 
 
 def test_field_names_in_the_library_flags_on_the_command_line(tmp_path):

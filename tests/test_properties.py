@@ -9,7 +9,7 @@ from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
 from solarchain_eval.config import MarketConfig
-from solarchain_eval.env import SolarChainEnv
+from solarchain_eval.envs.env import SolarChainEnv
 from solarchain_eval.market import ActionCodec
 
 F32 = np.float32

@@ -16,9 +16,9 @@ import pytest
 
 import solarchain_eval
 from report_fixtures import make_paper_root
-from solarchain_eval.agentic import AgenticOptions
-from solarchain_eval.env import STEP_INFO_KEYS
-from solarchain_eval.experiments.evaluate import EvaluationSpec, run_evaluation
+from solarchain_eval.envs.env import STEP_INFO_KEYS
+from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
+from solarchain_eval.governance import AgenticOptions
 from solarchain_eval.records_schema import (
     AGENTIC_COLUMNS,
     AGENTIC_METRIC_NAMES,

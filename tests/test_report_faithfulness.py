@@ -11,7 +11,7 @@ from pathlib import Path
 
 import pytest
 
-from solarchain_eval.experiments.evaluate import EvaluationSpec, run_evaluation
+from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
 from solarchain_eval.report import ReportOptions, build_report
 
 # tab:main-performance, the paper's Static/Random/Myopic rows (Markdown rendering of the LaTeX).

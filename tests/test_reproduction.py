@@ -9,11 +9,11 @@ import pandas as pd
 import pytest
 
 from conftest import shared_data_dir
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.experiments.rollout import run_policy
-from solarchain_eval.io import read_csv_exact
-from solarchain_eval.metrics import METRIC_NAMES
-from solarchain_eval.policies import make_baseline
+from solarchain_eval.agents import make_baseline
+from solarchain_eval.common.atomic_files import read_csv_exact
+from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.evaluation.metrics import METRIC_NAMES
+from solarchain_eval.evaluation.rollout import run_policy
 
 SEEDS = (20260511, 20260512, 20260513)
 

@@ -14,7 +14,7 @@ import pytest
 from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
-from solarchain_eval.experiments.rundir import (
+from solarchain_eval.evaluation.rundir import (
     KILL_AT_ENV,
     KILL_POINTS,
     RunDirError,
@@ -133,7 +133,7 @@ def test_a_live_lock_refuses_a_second_writer_and_a_dead_ones_is_cleared(tiny_dat
         [
             sys.executable,
             "-c",
-            "import sys, time\nfrom solarchain_eval.experiments.rundir import RunDirWriter\n"
+            "import sys, time\nfrom solarchain_eval.evaluation.rundir import RunDirWriter\n"
             "w = RunDirWriter(sys.argv[1]).__enter__()\nprint('locked', flush=True)\ntime.sleep(60)",
             str(out),
         ],
@@ -250,7 +250,7 @@ def test_report_shows_no_credentials_of_an_old_verbatim_command(finished, tmp_pa
 
 
 def test_command_lines_are_redacted_and_redaction_is_idempotent(monkeypatch):
-    from solarchain_eval.redaction import redact_command
+    from solarchain_eval.common.redaction import redact_command
 
     monkeypatch.setenv("OPENAI_API_KEY", "sk-env-key-123")
     argv = [

@@ -5,13 +5,15 @@ from __future__ import annotations
 import math
 
 import pandas as pd
+import pytest
 
-from solarchain_eval.experiments.evaluate import EvaluationSpec
-from solarchain_eval.experiments.grid import SETTING_REGISTRY, GridSetting, register_setting
-from solarchain_eval.experiments.records import summarize
-from solarchain_eval.experiments.settings import (
+from solarchain_eval.evaluation.records import summarize
+from solarchain_eval.evaluation.runner import EvaluationSpec
+from solarchain_eval.evaluation.settings import (
     KNOWN_SETTINGS,
     SETTINGS,
+    Setting,
+    register_setting,
     setting_has_physics_penalty,
     setting_is_agentic,
     setting_name,
@@ -26,29 +28,25 @@ def test_every_view_of_a_setting_agrees():
         assert setting_name(agentic=s.agentic, no_physics_penalty=s.no_physics_penalty) == name
         assert setting_has_physics_penalty(name) is not s.no_physics_penalty
         assert setting_is_agentic(name) is s.agentic
-        grid = SETTING_REGISTRY[name]
-        assert (grid.no_physics_penalty, grid.agentic, grid.model_setting) == (
-            s.no_physics_penalty,
-            s.agentic,
-            s.model_setting,
-        )
+        assert s.policies, f"{name} evaluates no policy by default"
         assert GOVERNANCE_LABELS[name] == s.governance_label and setting_label(name) == s.label
         agentic = object() if s.agentic else None
         spec = EvaluationSpec(policies=[], no_physics_penalty=s.no_physics_penalty, agentic=agentic)
         assert spec.setting == name
 
 
-def test_a_grid_setting_registers_its_definition(monkeypatch):
-    from solarchain_eval.experiments import grid, settings
+def test_a_registered_setting_is_seen_by_rollouts_and_the_grid(monkeypatch):
+    from solarchain_eval.experiments.grid import GridSpec, plan_units
 
-    known = dict(KNOWN_SETTINGS)
-    monkeypatch.setattr(settings, "KNOWN_SETTINGS", known)
-    monkeypatch.setattr(grid, "KNOWN_SETTINGS", known)
-    monkeypatch.setattr(grid, "SETTING_REGISTRY", dict(SETTING_REGISTRY))
-    register_setting(GridSetting("stress", True, ("ppo",), "main"))
-    assert grid.SETTING_REGISTRY["stress"].no_physics_penalty
-    assert known["stress"].no_physics_penalty and not setting_has_physics_penalty("stress")  # the rollouts' view
-    assert "stress" not in KNOWN_SETTINGS
+    monkeypatch.setitem(KNOWN_SETTINGS, "stress", KNOWN_SETTINGS["main"])  # removed again after the test
+    register_setting(Setting("stress", True, False, "main", "Stress", "RL stress", ("ppo",)))
+    assert not setting_has_physics_penalty("stress")  # the rollouts' view
+    units = plan_units(GridSpec.from_preset("paper", settings=("stress",)))
+    assert [u.name for u in units if u.kind == "eval"] == [
+        f"eval/ppo-stress-{s}" for s in (20260511, 20260512, 20260513)
+    ]
+    with pytest.raises(ValueError, match="model_setting"):
+        register_setting(Setting("odd", False, False, "llm", "Odd", "odd"))
 
 
 def test_single_episode_std_is_undefined_in_records_and_report():

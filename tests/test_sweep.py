@@ -195,7 +195,7 @@ def test_a_sweep_trains_and_evaluates_learned_policies_inside_each_point(tmp_pat
     trains = sorted(p.name for p in (point / "units" / "train").iterdir())
     assert trains == ["ppo-lag-no_physics-7", "ppo-main-7", "ppo-no_physics-7"]
     # Each eval unit used the model of its own point's train unit.
-    from solarchain_eval.io import sha256_file
+    from solarchain_eval.common.atomic_files import sha256_file
 
     for unit, model in (("ppo-main-7", "ppo-main-7"), ("ppo-lag-no_physics-7", "ppo-lag-no_physics-7")):
         recorded = json.loads((point / "units" / "eval" / unit / "unit.json").read_text())["model_sha256"]

@@ -15,11 +15,11 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from solarchain_eval.agents.registry import make_policy
+from solarchain_eval.agents.sb3 import model_candidates, resolve_model_path
 from solarchain_eval.config import BenchmarkConfig
-from solarchain_eval.env import SolarChainEnv
-from solarchain_eval.policies.registry import make_policy
-from solarchain_eval.policies.sb3 import model_candidates, resolve_model_path
-from solarchain_eval.training import (
+from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.training.sb3_trainer import (
     TRAIN_LOG_FILE,
     TRAIN_METADATA_FILE,
     TrainingError,
@@ -129,7 +129,7 @@ def test_a_finished_training_is_not_redone_and_a_different_one_is_refused(traine
 def test_replay_buffer_checkpoint_round_trip(tiny_dataset, tmp_path):
     from stable_baselines3 import SAC
 
-    from solarchain_eval.training_monitor import load_replay_buffer, save_replay_buffer
+    from solarchain_eval.training.callbacks import load_replay_buffer, save_replay_buffer
 
     env = SolarChainEnv(data_dir=tiny_dataset)
     model = SAC("MlpPolicy", env, seed=1, learning_starts=200, device="cpu")

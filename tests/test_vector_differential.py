@@ -18,11 +18,12 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from hypothesis.extra.numpy import arrays
 
-from solarchain_eval import episodes, vector
 from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.data.table import load_table
-from solarchain_eval.env import STEP_INFO_KEYS, SolarChainEnv
-from solarchain_eval.vector import SolarChainVectorEnv
+from solarchain_eval.envs import rng_stream as episodes
+from solarchain_eval.envs import vector
+from solarchain_eval.envs.env import STEP_INFO_KEYS, SolarChainEnv
+from solarchain_eval.envs.vector import SolarChainVectorEnv
 
 F32 = np.float32
 # The tiny dataset has 96 hours: 96-step episodes have a single start (hour 0) and use every hour;

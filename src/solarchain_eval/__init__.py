@@ -12,7 +12,7 @@ from __future__ import annotations
 
 __version__ = "0.1.0"
 
-from .registration import register_envs
+from .envs.registration import register_envs
 
 register_envs()
 

@@ -7,11 +7,14 @@ instead of a silently ignored setting. Defaults are those of docs/environment.md
 
 from __future__ import annotations
 
+import warnings
 from pathlib import Path
 from typing import Any, Literal
 
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+
+from .protocol import PAPER_EPISODES, PAPER_SEED
 
 
 class ConfigError(ValueError):
@@ -84,18 +87,19 @@ class TrainingConfig(_Section):
 
 
 class EvaluationConfig(_Section):
-    episodes: int = Field(5, ge=1, le=10**6)
-    policies: list[str] = Field(default_factory=lambda: ["static", "random", "myopic"])
+    """Defaults of ``evaluate``'s ``--episodes`` and ``--policies`` (the options win when given)."""
+
+    episodes: int = Field(PAPER_EPISODES, ge=1, le=10**6, description="Episodes per run seed.")
+    policies: list[str] = Field(default_factory=lambda: ["static", "random", "myopic"], min_length=1)
 
 
 class BenchmarkConfig(_Section):
     """Top-level configuration in the layout of the paper's ``configs/*.yaml``."""
 
-    seed: int = Field(20260511, ge=0, le=MAX_SEED)
+    seed: int = Field(PAPER_SEED, ge=0, le=MAX_SEED)
     episode_steps: int = Field(24, ge=1, le=10**6, description="Steps per episode; at most the dataset's hours.")
     data_dir: str | None = Field(None, description="Dataset directory; None selects the embedded default dataset.")
     output_dir: str = "outputs/runs"
-    figures_dir: str = "figures"
     action_mode: Literal["continuous", "discrete"] = "continuous"
     discrete_levels: int = Field(5, ge=2, le=MAX_DISCRETE_LEVELS)
     no_physics_penalty: bool = False
@@ -123,7 +127,19 @@ def _format_validation_error(path: Path | str, error: ValidationError) -> str:
     return f"invalid configuration in {path}: " + "; ".join(problems)
 
 
+#: Keys of the original release's YAML that SolarChain-Eval has no use for: accepted, dropped with a
+#: warning that says why (so the paper's configs load unchanged, and nothing is silently ignored).
+RETIRED_KEYS = {
+    "figures_dir": "the report writes its figures under <run or root>/report/figures (report --out moves it)",
+}
+
+
 def config_from_mapping(payload: dict[str, Any], source: str = "<mapping>") -> BenchmarkConfig:
+    payload = dict(payload)
+    for key, reason in RETIRED_KEYS.items():
+        if key in payload:
+            del payload[key]
+            warnings.warn(f"{source}: '{key}' is not used ({reason}); ignoring it", UserWarning, stacklevel=2)
     try:
         return BenchmarkConfig.model_validate(payload)
     except ValidationError as error:

@@ -1,7 +1,7 @@
 """The per-episode record schema: every ``metrics.csv`` column, with its unit and meaning, once.
 
-The producers (:mod:`solarchain_eval.metrics`, :mod:`solarchain_eval.agentic.metrics`,
-:mod:`solarchain_eval.experiments.records`), the report (:mod:`solarchain_eval.report.loading`
+The producers (:mod:`solarchain_eval.evaluation.metrics`, :mod:`solarchain_eval.governance.metrics`,
+:mod:`solarchain_eval.evaluation.records`), the report (:mod:`solarchain_eval.report.loading`
 and its tables) and the test fixtures take their column names from here, and
 ``tests/test_records_schema.py`` fails when one of them emits or reads a column this module
 does not define. docs/metrics.md describes the same columns in prose.

@@ -1,6 +1,6 @@
 """Command-line options of the Planner/Auditor layer, shared by the commands that evaluate.
 
-The options are the fields of :class:`~solarchain_eval.agentic.request.GovernanceRequest`:
+The options are the fields of :class:`~solarchain_eval.governance.request.GovernanceRequest`:
 :func:`governance_options` gives a command one option per field, in place of its
 ``governance: GovernanceRequest`` parameter, and passes the request built from them. Adding an
 option is one field of that class; no command changes.
@@ -19,9 +19,11 @@ from typing import Any
 import typer
 from rich.table import Table
 
-from ..agentic import AgenticOptions, LLMError, local_server
-from ..agentic.request import AGENTIC_MODES, GovernanceRequest, GovernanceRequestError
-from ..option_errors import flag_of
+from ..common.errors import flag_of
+from ..governance import AgenticOptions
+from ..governance.request import AGENTIC_MODES, GovernanceRequest, GovernanceRequestError
+from ..llm import LLMError
+from ..llm.serving import local_server
 from .common import CliError, register_user_error
 
 # An LLM failure fails the run with its one-line message (policy, episode, step).

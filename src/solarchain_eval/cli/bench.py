@@ -48,8 +48,8 @@ def bench(
     files. Each figure is repeated; median and best are shown (shared machines are noisy).
     Targets on a 2-core machine: (a) >= 50,000 steps/s, (b) >= 3,000,000 env-steps/s, (c) < 10 s.
     """
-    from .. import bench as measure
     from ..data.default import resolve_data_dir
+    from ..perf import env_bench as measure
 
     if backend not in ("numpy", "jax"):
         raise typer.BadParameter(f"--backend must be numpy or jax, not {backend!r}")
@@ -106,7 +106,7 @@ def host_device_count(devices: int | None) -> int:
     import os
     import sys
 
-    from ..cpus import available_cpus
+    from ..common.cpus import available_cpus
 
     count = devices or len(available_cpus())
     flags = os.environ.get("XLA_FLAGS", "")
@@ -117,10 +117,10 @@ def host_device_count(devices: int | None) -> int:
 
 def _bench_jax(data_dir: Path, num_envs: int, calls: int, episodes: int, repeats: int, devices: int | None) -> None:
     """The numpy vector env and the JAX env at the same number of envs, and their ratio."""
-    from .. import bench as measure
+    from ..perf import env_bench as measure
 
     host_device_count(devices)
-    from ..jax.bench import jax_env_steps_per_s
+    from ..perf.jax_env_bench import jax_env_steps_per_s
 
     err_console.print(f"measuring the numpy vector env ({num_envs} envs)...")
     numpy_result = measure.vector_env_steps_per_s(data_dir, num_envs, calls, repeats)

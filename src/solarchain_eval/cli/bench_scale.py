@@ -37,7 +37,7 @@ def bench_scale(
     should not depend on the node count (the env reads the hourly table, which aggregates the
     nodes). The 5,000-node build writes 3.6 million generation rows and takes minutes.
     """
-    from ..bench_scale import measure_scale, parse_scales
+    from ..perf.scale_bench import measure_scale, parse_scales
 
     try:
         pairs = parse_scales(scales)
@@ -65,6 +65,6 @@ def bench_scale(
         )  # fmt: skip
     console.print(table)
     if json_out is not None:
-        from ..io import atomic_write_text
+        from ..common.atomic_files import atomic_write_text
 
         atomic_write_text(json_out, json.dumps([r.as_dict() for r in results], indent=2) + "\n")

@@ -47,10 +47,10 @@ def bench_train(
     """
     if backend not in ("sb3", "jax"):
         raise CliError(f"unknown backend '{backend}' (choose from sb3, jax)")
-    from .. import bench_train as measure
-    from ..bench import Throughput
     from ..data.default import resolve_data_dir
-    from ..training import check_algo
+    from ..perf import train_bench as measure
+    from ..perf.env_bench import Throughput
+    from ..training.sb3_trainer import check_algo
 
     if from_root is not None:
         try:
@@ -104,7 +104,7 @@ def bench_train(
 
 def _print_estimate(times: Any, workers: int) -> None:
     """The paper preset's estimated wall time from ``times`` (a ``bench_train.UnitTimes``)."""
-    from ..bench_train import estimate_paper_wall_time
+    from ..perf.train_bench import estimate_paper_wall_time
 
     estimate = estimate_paper_wall_time(times, workers)
     console.print(f"paper preset on {workers} worker(s), from {times.source}:")

@@ -24,13 +24,13 @@ def bench_jax(
     Two ratios are printed: of wall-clock steps/s, and of steps per CPU second (XLA may use a
     second thread; on a loaded machine the CPU-second figure is the steadier one).
     """
-    from .. import bench_train as measure
     from ..experiments.grid import GridSpec
+    from ..perf import train_bench as measure
 
     paper = GridSpec.from_preset("paper", backend="jax")
     pinned = _pin_before_jax_starts()
     try:
-        from ..jax.bench_train import DEFAULT_STEPS, describe_flags, jax_eval_unit_s, jax_training_steps_per_s
+        from ..perf.jax_train_bench import DEFAULT_STEPS, describe_flags, jax_eval_unit_s, jax_training_steps_per_s
     except ImportError as error:
         raise CliError(str(error)) from None
     flags = describe_flags()
@@ -118,7 +118,7 @@ def _pin_before_jax_starts() -> int | None:
     """
     import sys
 
-    from ..cpus import available_cpus, can_pin, pin_to_cpu
+    from ..common.cpus import available_cpus, can_pin, pin_to_cpu
 
     cpus = available_cpus()
     if "jax" in sys.modules or not can_pin() or len(cpus) < 2:
@@ -136,7 +136,7 @@ def _seed_group_rates(
     The JAX grid trains an algorithm's seeds in one vmap (docs/jax.md), so the estimate needs the
     rate at that group size; measured here unless ``--jax-seeds`` already was that size.
     """
-    from ..jax.bench_train import DEFAULT_STEPS, jax_training_steps_per_s
+    from ..perf.jax_train_bench import DEFAULT_STEPS, jax_training_steps_per_s
 
     group = len(paper.seeds)
     if seeds == group:

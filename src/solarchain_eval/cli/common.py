@@ -15,10 +15,10 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
+from ..common.errors import NamesOptions, flag_of
 from ..config import ConfigError, check_seeds
 from ..data.errors import DatasetError
 from ..data.weather import WeatherError
-from ..option_errors import NamesOptions, flag_of
 from .help import get_current_context
 
 # Every text printed comes from users, files or servers somewhere (paths, city names, server
@@ -171,6 +171,6 @@ def show_files(files: dict[str, Path], heading: str = "files") -> None:
 
 def invoked_command() -> list[str]:
     """The command line as it may be recorded: credentials redacted (see docs/output_safety.md)."""
-    from ..redaction import redact_command
+    from ..common.redaction import redact_command
 
     return redact_command(["solarchain-eval", *sys.argv[1:]])

@@ -17,8 +17,8 @@ def _load(spec: str, option: str):
     """metrics.csv rows of every run dir / paper root listed in ``spec`` (comma-separated)."""
     import pandas as pd
 
+    from ..evaluation.records import METRICS_FILE
     from ..experiments.layout import read_run_table
-    from ..experiments.records import METRICS_FILE
 
     frames = []
     for part in [p for p in spec.split(",") if p.strip()]:
@@ -57,8 +57,8 @@ def compare(
     the same run seeds and episodes for every policy and setting they share. A * marks an
     interval that excludes 0. See docs/jax.md#same-science-both-backends-at-a-reduced-budget.
     """
-    from ..io import atomic_write_csv
-    from ..report.backends import compare_runs
+    from ..common.atomic_files import atomic_write_csv
+    from ..report.compare import compare_runs
     from ..report.statistics import DEFAULT_SEED
 
     base_rows, other_rows = _load(base, "BASE"), _load(other, "OTHER")

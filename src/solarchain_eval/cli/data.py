@@ -8,6 +8,7 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
+from ..common.atomic_files import sha256_file
 from ..data.cities import (
     DEFAULT_END,
     DEFAULT_NODES_PER_CITY,
@@ -23,7 +24,6 @@ from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.published import matches_published
 from ..data.sources import Weather, WeatherSource, choose_weather
 from ..data.weather import WeatherError
-from ..io import sha256_file
 from . import app
 from .common import CliError, cli_error, console, progress_bar, register_user_error, reports_errors, say
 from .help import HelpGroup

@@ -7,14 +7,15 @@ from pathlib import Path
 
 import typer
 
-from ..agentic.request import GovernanceRequest
+from ..agents.registry import known_policies, parse_policy_list
+from ..agents.sb3 import parse_models
 from ..config import BenchmarkConfig, load_config
 from ..data.default import default_dataset_dir
-from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, make_policies, run_evaluation
-from ..experiments.records import metrics_frame, summarize
-from ..experiments.rundir import RunDirError, check_target
-from ..policies.registry import known_policies, parse_policy_list
-from ..policies.sb3 import parse_models
+from ..evaluation.records import metrics_frame, summarize
+from ..evaluation.rundir import RunDirError, check_target
+from ..evaluation.runner import EvaluationSpec, make_policies, run_evaluation
+from ..governance.request import GovernanceRequest
+from ..protocol import PAPER_EPISODES, PAPER_SEEDS
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
@@ -79,11 +80,15 @@ def evaluate(
     data: Path | None = typer.Option(
         None, "--data", help="Dataset directory (default: the config's data_dir, else the embedded default dataset)."
     ),
-    policies: str = typer.Option(
-        "static,random,myopic", help=f"Comma-separated policies ({', '.join(known_policies())})."
+    policies: str | None = typer.Option(
+        None,
+        help=f"Comma-separated policies ({', '.join(known_policies())}); "
+        "default: the config's evaluation.policies (static,random,myopic).",
     ),
     seeds: str = typer.Option(_SEEDS, help="Comma-separated run seeds; episode e of seed s is reset with s + e."),
-    episodes: int = typer.Option(PAPER_EPISODES, min=1, help="Episodes per run seed."),
+    episodes: int | None = typer.Option(
+        None, min=1, help=f"Episodes per run seed (default: the config's evaluation.episodes, {PAPER_EPISODES})."
+    ),
     out: Path | None = typer.Option(None, "--out", help="Run directory (default: <output_dir>/<time>_evaluate)."),
     no_physics_penalty: bool = typer.Option(
         False, "--no-physics-penalty", help="The ablation: drop λp (V + A) from the reward; V and A are still recorded."
@@ -115,7 +120,7 @@ def evaluate(
     if out is not None:
         check_target(out, overwrite=overwrite)  # before any work (checked again under the lock)
     try:
-        names = parse_policy_list(policies)
+        names = parse_policy_list(policies) if policies is not None else list(cfg.evaluation.policies)
     except ValueError as error:
         raise cli_error(error) from None
     options = agentic_cli.resolve(governance)
@@ -124,7 +129,7 @@ def evaluate(
     spec = EvaluationSpec(
         policies=names,
         run_seeds=parse_seeds(seeds),
-        episodes=episodes,
+        episodes=episodes if episodes is not None else cfg.evaluation.episodes,
         data_dir=data,
         no_physics_penalty=no_physics_penalty,
         config=cfg,

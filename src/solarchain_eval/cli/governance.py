@@ -11,24 +11,20 @@ import pandas as pd
 import typer
 from rich.table import Table
 
-from ..agentic.calibrated import DEFAULT_TARGET_AUDIT_RATE
-from ..agentic.controls import DEFAULT_ORACLE_REWARD_LOSS, TRIGGER_SETS, SchedulerControls
-from ..agentic.counterfactual import DEFAULT_UNSAFE_THRESHOLD
-from ..agentic.errors import LLMConfigError
-from ..agentic.request import GovernanceRequest
+from ..agents.registry import known_policies, parse_policy_list
+from ..agents.sb3 import parse_models
+from ..common.atomic_files import atomic_write_json, sha256_file
 from ..config import BenchmarkConfig, load_config
-from ..experiments.evaluate import PAPER_EPISODES, PAPER_SEEDS
-from ..experiments.governance import (
-    GOVERNANCE_SETTINGS,
-    Combination,
-    GovernanceSpec,
-    leaderboard_frames,
-    run_governance,
-)
-from ..experiments.rundir import RunDirWriter, check_target
-from ..io import atomic_write_csv, atomic_write_json, atomic_write_text, sha256_file
-from ..policies.registry import known_policies, parse_policy_list
-from ..policies.sb3 import parse_models
+from ..evaluation.rundir import RunDirWriter, check_target
+from ..evaluation.settings import AGENTIC_SETTINGS
+from ..experiments.governance import Combination, GovernanceSpec, run_governance
+from ..governance.calibrated import DEFAULT_TARGET_AUDIT_RATE
+from ..governance.controls import DEFAULT_ORACLE_REWARD_LOSS, TRIGGER_SETS, SchedulerControls
+from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ..governance.request import GovernanceRequest
+from ..llm.errors import LLMConfigError
+from ..protocol import PAPER_EPISODES, PAPER_SEEDS
+from ..report.governance_leaderboard import governance_leaderboard, write_governance_leaderboard
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
@@ -45,8 +41,6 @@ from .common import (
 )
 from .evaluate import OVERWRITE
 
-LEADERBOARD = "leaderboard"
-BY_POLICY = "leaderboard_by_policy"
 METADATA = "governance_metadata.json"
 #: The Planner/Auditor options this command offers as they are: the LLM endpoint and its cache
 #: (planners, auditors and the model come from --planner/--auditors; diagnostics are always on).
@@ -131,44 +125,6 @@ def _leaderboard_table(frame: pd.DataFrame, title: str) -> Table:
     return table
 
 
-def _write_outputs(staging: Path, runs, threshold: float, resamples: int) -> tuple[dict[str, Path], pd.DataFrame]:
-    """Ranked tables (CSV, Markdown) and figures of the leaderboard into ``staging``; the files
-    and the ranked leaderboard frame."""
-    from ..report.figures.governance import precision_recall_figure, revision_scatter_figure
-    from ..report.figures.style import FigureFile
-    from ..report.governance import audit_quality, step_frame
-    from ..report.tables.governance import quality_table, rank
-    from ..report.tables.model import to_markdown
-
-    diagnostics, usage = leaderboard_frames(runs)
-    pooled = audit_quality(
-        diagnostics, threshold=threshold, group_by=("planner", "auditor", "setting"), n_resamples=resamples
-    )
-    pooled = rank(pooled.merge(usage, on=["planner", "auditor", "setting"], how="left"))
-    detail = rank(audit_quality(diagnostics, threshold=threshold, n_resamples=resamples))
-    files: dict[str, Path] = {}
-    for key, frame, title, usage_columns in (
-        (LEADERBOARD, pooled, "Governance leaderboard", True),
-        (BY_POLICY, detail, "Governance leaderboard per policy", False),
-    ):
-        table = quality_table(frame, key=key, title=title, usage=usage_columns, threshold=threshold)
-        files[f"{key}.csv"] = atomic_write_csv(staging / f"{key}.csv", frame)
-        files[f"{key}.md"] = atomic_write_text(staging / f"{key}.md", to_markdown(table))
-    figures = staging / "figures"
-    made = [
-        precision_recall_figure(
-            audit_quality(diagnostics, threshold=threshold, group_by=("planner", "auditor"), n_resamples=resamples),
-            figures,
-        ),
-        revision_scatter_figure(step_frame(diagnostics, threshold), diagnostics, figures),
-    ]
-    for figure in made:
-        if isinstance(figure, FigureFile):  # the revision scatter is skipped when nothing was revised
-            files[f"figures/{figure.png.name}"] = figure.png
-            files[f"figures/{figure.svg.name}"] = figure.svg
-    return files, pooled
-
-
 @app.command("governance")
 @reports_errors
 @agentic_cli.governance_options(only=LLM_FIELDS)
@@ -194,7 +150,7 @@ def governance(
     ),
     seeds: str = typer.Option(",".join(str(s) for s in PAPER_SEEDS), help="Comma-separated run seeds."),
     episodes: int = typer.Option(PAPER_EPISODES, min=1, help="Episodes per run seed."),
-    settings: str = typer.Option("llm", help=f"Comma-separated agentic settings ({', '.join(GOVERNANCE_SETTINGS)})."),
+    settings: str = typer.Option("llm", help=f"Comma-separated agentic settings ({', '.join(AGENTIC_SETTINGS)})."),
     unsafe_threshold: float = typer.Option(
         DEFAULT_UNSAFE_THRESHOLD, min=0.0, help="A step is unsafe when its proposal's avoidable cost exceeds this."
     ),
@@ -234,10 +190,10 @@ def governance(
     except ValueError as error:
         raise cli_error(error) from None
     chosen_settings = _split(settings, "settings")
-    unknown = [s for s in chosen_settings if s not in GOVERNANCE_SETTINGS]
+    unknown = [s for s in chosen_settings if s not in AGENTIC_SETTINGS]
     if unknown:
         raise CliError(
-            f"--settings: unknown setting(s) {', '.join(unknown)} (choose from {', '.join(GOVERNANCE_SETTINGS)})"
+            f"--settings: unknown setting(s) {', '.join(unknown)} (choose from {', '.join(AGENTIC_SETTINGS)})"
         )
     combinations = []
     llm_request: GovernanceRequest | None = None  # the request of the first combination that calls an LLM
@@ -286,7 +242,8 @@ def governance(
                 on_combination=lambda c, s: say(f"{s}: {c.planner_label} planner, {c.auditor_label} auditor"),
                 command=invoked_command(),
             )
-        files, pooled = _write_outputs(writer.staging, runs, unsafe_threshold, resamples)
+        board = governance_leaderboard(runs, threshold=unsafe_threshold, resamples=resamples)
+        files = write_governance_leaderboard(board, writer.staging)
         metadata = {
             "complete": True,
             "command": invoked_command(),
@@ -303,7 +260,7 @@ def governance(
         writer.publish()
     console.print(
         _leaderboard_table(
-            pooled, f"Governance leaderboard ({', '.join(names)}; unsafe: avoidable cost > {unsafe_threshold:g})"
+            board.ranked, f"Governance leaderboard ({', '.join(names)}; unsafe: avoidable cost > {unsafe_threshold:g})"
         )
     )
     show_files({name: out / name for name in [*files, METADATA]}, f"wrote the leaderboard to {out}")
@@ -311,7 +268,7 @@ def governance(
 
 def _check_models(spec: GovernanceSpec, cfg: BenchmarkConfig) -> None:
     """Unknown policies or missing models fail before any work."""
-    from ..policies.registry import make_policy
+    from ..agents.registry import make_policy
 
     try:
         for name in spec.policies:

@@ -7,8 +7,8 @@ import time
 import typer
 from rich.table import Table
 
-from ..agentic import local_server
-from ..agentic.request import GovernanceRequest
+from ..governance.request import GovernanceRequest
+from ..llm.serving import local_server
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
@@ -119,8 +119,8 @@ def bench_llm(
     Targets for the default local model on 2 cores: auditor call <= 1 s median, planner call
     <= 3 s median.
     """
-    from ..agentic import StructuredLLM
-    from ..agentic.bench import run_llm_bench
+    from ..llm import StructuredLLM
+    from ..perf.llm_bench import run_llm_bench
 
     options = agentic_cli.resolve(governance)
     assert options is not None and options.llm is not None
@@ -143,7 +143,7 @@ def bench_llm(
 
 
 def _bench_table(figures, title: str) -> Table:
-    from ..agentic.bench import RISKS
+    from ..perf.llm_bench import RISKS
 
     table = Table(title=title, title_justify="left")
     columns = ("call", "valid/calls", "median s", "p90 s", "server CPU s (median)", "tokens/s", "prompt tokens")

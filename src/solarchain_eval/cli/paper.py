@@ -10,16 +10,17 @@ from typing import Any
 import typer
 from rich.text import Text
 
-from ..agentic.request import GovernanceRequest
-from ..algorithms import OPT_IN_ALGOS
+from ..agents.checkpoints import OPT_IN_ALGOS
+from ..agents.registry import parse_policy_list
 from ..config import BenchmarkConfig, load_config
-from ..experiments.grid import SETTING_REGISTRY, GridSpec, Unit, plan_units
+from ..evaluation.records import SUMMARY_FILE
+from ..evaluation.settings import KNOWN_SETTINGS
+from ..experiments.grid import GridSpec, Unit, plan_units
 from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
-from ..experiments.records import SUMMARY_FILE
 from ..experiments.units import UnitResult
-from ..lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
-from ..policies.registry import parse_policy_list
+from ..governance.request import GovernanceRequest
+from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
@@ -51,11 +52,11 @@ class EpisodeSeeds(StrEnum):
 
 def _settings(text: str | None) -> tuple[str, ...]:
     if not text:
-        return tuple(SETTING_REGISTRY)
+        return tuple(KNOWN_SETTINGS)
     names = tuple(part.strip() for part in text.split(",") if part.strip())
-    unknown = [n for n in names if n not in SETTING_REGISTRY]
+    unknown = [n for n in names if n not in KNOWN_SETTINGS]
     if unknown:
-        raise CliError(f"unknown setting(s) {', '.join(unknown)} (available: {', '.join(SETTING_REGISTRY)})")
+        raise CliError(f"unknown setting(s) {', '.join(unknown)} (available: {', '.join(KNOWN_SETTINGS)})")
     return names
 
 
@@ -67,7 +68,7 @@ def _policies(text: str | None, extra: str | None, settings: tuple[str, ...]) ->
         raise ValueError(f"--extra-policies: {', '.join(unknown)} is not an opt-in policy ({', '.join(OPT_IN_ALGOS)})")
     if not text and not extras:
         return None
-    defaults = dict.fromkeys(p for s in settings for p in SETTING_REGISTRY[s].policies if p not in OPT_IN_ALGOS)
+    defaults = dict.fromkeys(p for s in settings for p in KNOWN_SETTINGS[s].policies if p not in OPT_IN_ALGOS)
     base = parse_policy_list(text) if text else list(defaults)
     return tuple(dict.fromkeys([*base, *extras]))
 

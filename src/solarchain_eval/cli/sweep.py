@@ -49,7 +49,7 @@ def sweep(
         soft_wrap=True,
     )
     from ..experiments.ray_executor import RayUnavailableError
-    from ..experiments.sweep import run_sweep
+    from ..experiments.sweep import RESULTS_FILE, run_sweep
 
     def on_dataset(key: str, fresh: bool) -> None:
         err_console.print(f"dataset {key}: {'building...' if fresh else 'already built'}", soft_wrap=True)
@@ -93,7 +93,14 @@ def sweep(
         soft_wrap=True,
     )
     if outcome.all_points:
-        console.print(f"results: {outcome.root / 'results.csv'}; sensitivity: {outcome.root / 'sensitivity'}")
+        # the sensitivity report reads the tidy results (the report layer sits above the experiments)
+        import pandas as pd
+
+        from ..report.sensitivity import write_sensitivity
+
+        results = pd.read_csv(outcome.root / RESULTS_FILE)
+        write_sensitivity(results, sweep_spec.axes, outcome.root / "sensitivity", sweep_spec.spec.bootstrap_resamples)
+        console.print(f"results: {outcome.root / RESULTS_FILE}; sensitivity: {outcome.root / 'sensitivity'}")
     if outcome.report.failed:
         for r in outcome.report.failed:
             err_console.print(f"  FAILED {r.unit}: {r.error} (log: {r.log})", soft_wrap=True)

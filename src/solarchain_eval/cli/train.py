@@ -8,12 +8,12 @@ from pathlib import Path
 
 import typer
 
+from ..agents.checkpoints import TRAINABLE_ALGOS
 from ..config import BenchmarkConfig, load_config
-from ..lagrangian import DEFAULT_MULTIPLIER_LR, LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
-from ..training import (
+from ..training.lagrangian import DEFAULT_MULTIPLIER_LR, LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
+from ..training.sb3_trainer import (
     DEFAULT_CHECKPOINT_EVERY,
     TRAIN_LOG_FILE,
-    TRAINABLE_ALGOS,
     TrainingError,
     TrainSpec,
     check_algo,
@@ -179,7 +179,7 @@ def _train_jax(
 ) -> None:
     """``train --backend jax``: every seed in one compiled vmap (see docs/jax.md)."""
     try:
-        from ..jax.train import JaxTrainSpec, seed_dirs, train_jax
+        from ..training.jax_trainer import JaxTrainSpec, seed_dirs, train_jax
     except ImportError as error:
         raise CliError(str(error)) from None
     spec = JaxTrainSpec(algo, tuple(seeds), steps, no_physics_penalty, data, cfg)

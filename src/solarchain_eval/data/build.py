@@ -15,8 +15,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..io import atomic_write_csv, atomic_write_json, sha256_file
-from ..versions import package_versions
+from ..common.atomic_files import atomic_write_csv, atomic_write_json, sha256_file
+from ..common.versions import package_versions
 from .cities import City, check_unique_prefixes, factories_for
 from .fdia import FDIA_FRACTION, FDIA_MULTIPLIERS, FdiaScenario, inject_false_data  # noqa: F401
 from .files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE  # noqa: F401

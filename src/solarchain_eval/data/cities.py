@@ -4,6 +4,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+from ..protocol import PAPER_SEED
+
 
 @dataclass(frozen=True)
 class City:
@@ -44,7 +46,7 @@ PAPER_FACTORIES: tuple[Factory, ...] = (
 )
 
 DEFAULT_TIMEZONE = "Asia/Shanghai"
-DEFAULT_SEED = 20260511
+DEFAULT_SEED = PAPER_SEED
 DEFAULT_START = "2026-04-01"
 DEFAULT_END = "2026-05-01"
 DEFAULT_NODES_PER_CITY = 10

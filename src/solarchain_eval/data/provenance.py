@@ -5,7 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 from typing import Any
 
-from ..io import sha256_file
+from ..common.atomic_files import sha256_file
 from .files import DATASET_FILES, MANIFEST_FILE
 from .table import HourlyTable
 

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from enum import StrEnum
 from pathlib import Path
 
-from ..io import sha256_file
+from ..common.atomic_files import sha256_file
 from .cities import City
 from .default import cache_dir
 from .weather import CityWeather, read_weather_cache, write_weather_cache

@@ -15,7 +15,7 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..io import atomic_write_text
+from ..common.atomic_files import atomic_write_text
 from .cities import City
 
 

@@ -14,9 +14,9 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..io import atomic_write_json, atomic_write_with, read_csv_exact
+from ..common.atomic_files import atomic_write_json, atomic_write_with, read_csv_exact
+from ..evaluation.records import ACTIONS_FILE, CITY_HOUR_FILE, DIAGNOSTICS_FILE, METRICS_FILE, SUMMARY_FILE, summarize
 from .layout import AGENTIC_LOG_FILE, combined_dir
-from .records import ACTIONS_FILE, CITY_HOUR_FILE, DIAGNOSTICS_FILE, METRICS_FILE, SUMMARY_FILE, summarize
 
 TABLES = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE)
 

@@ -23,16 +23,16 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..agentic.build import AgenticOptions
-from ..agentic.policy import EXTRA_LOG_KEY
 from ..config import BenchmarkConfig
-from .evaluate import PAPER_EPISODES, PAPER_SEEDS, EvaluationSpec, run_evaluation
-from .records import diagnostics_frame
-from .rollout import EpisodeResult
-from .settings import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS, setting_has_physics_penalty
+from ..evaluation.records import diagnostics_frame
+from ..evaluation.rollout import EpisodeResult
+from ..evaluation.runner import EvaluationSpec, run_evaluation
+from ..evaluation.settings import SETTING_AGENTIC, setting_has_physics_penalty
+from ..governance.factory import AgenticOptions
+from ..governance.wrapper import EXTRA_LOG_KEY
+from ..protocol import PAPER_EPISODES, PAPER_SEED, PAPER_SEEDS
 
 RUNS_DIR = "runs"
-GOVERNANCE_SETTINGS = (SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS)
 
 
 @dataclass(frozen=True)
@@ -185,7 +185,7 @@ def diagnostics_overhead(
     data_dir: Path,
     *,
     policies: Sequence[str] = ("static", "random", "myopic"),
-    run_seeds: Sequence[int] = (20260511,),
+    run_seeds: Sequence[int] = (PAPER_SEED,),
     episodes: int = 30,
     repeats: int = 3,
     options: AgenticOptions | None = None,

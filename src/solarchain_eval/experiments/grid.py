@@ -11,11 +11,12 @@ A grid is a list of *units*, each one directory under ``ROOT/units`` (see :mod:`
   run seed over the grid's episodes. An eval unit of a learned policy depends on the train unit
   of the same algorithm, seed and the setting's ``model_setting``.
 
-Settings are a registry: ``main`` and ``no_physics`` evaluate every policy; the agentic
-settings ``llm`` (models trained in ``main``) and ``llm_no_physics`` (models from
-``no_physics``) evaluate the learned policies behind the Planner/Auditor layer, whose planner and
-auditor kinds are the grid's :class:`~solarchain_eval.agentic.AgenticOptions` (rule by default).
-:func:`register_setting` adds more.
+Settings are :data:`~solarchain_eval.evaluation.settings.KNOWN_SETTINGS`: ``main`` and
+``no_physics`` evaluate every policy; the agentic settings ``llm`` (models trained in ``main``) and
+``llm_no_physics`` (models from ``no_physics``) evaluate the learned policies behind the
+Planner/Auditor layer, whose planner and auditor kinds are the grid's
+:class:`~solarchain_eval.governance.AgenticOptions` (rule by default).
+:func:`~solarchain_eval.evaluation.settings.register_setting` adds more.
 """
 
 from __future__ import annotations
@@ -25,117 +26,24 @@ from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
-from ..agentic.build import AgenticOptions
-from ..algorithms import ALGOS, OPT_IN_ALGOS, TRAINABLE_ALGOS
+from ..agents.checkpoints import OPT_IN_ALGOS, TRAINABLE_ALGOS
 from ..config import BenchmarkConfig
-from ..lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
-from ..policies.baselines import BASELINES
-from ..training import DEFAULT_CHECKPOINT_EVERY
-from .evaluate import PAPER_EPISODES, PAPER_SEEDS
-from .layout import UNITS_DIR, eval_unit_dir, seed_model_dir, train_unit_dir
-from .rollout import paper_episode_seeds
-from .settings import (
+from ..evaluation.settings import (
     KNOWN_SETTINGS,
     SETTING_AGENTIC,
     SETTING_AGENTIC_NO_PHYSICS,
     SETTING_MAIN,
     SETTING_NO_PHYSICS,
     TRAIN_SETTINGS,
-    Setting,
 )
-from .settings import register_setting as define_setting
+from ..governance.factory import AgenticOptions
+from ..protocol import EPISODE_SEED_RULES, PAPER_EPISODES, PAPER_SEEDS, independent_episode_seeds
+from ..training.lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
+from ..training.sb3_trainer import DEFAULT_CHECKPOINT_EVERY
+from .layout import UNITS_DIR, eval_unit_dir, seed_model_dir, train_unit_dir
 
 #: Training backends of the grid's train units.
 BACKENDS = ("sb3", "jax")
-
-#: ``spawn_key`` of the SeedSequence behind ``--episode-seeds independent``.
-EPISODE_SEED_SPAWN_KEY = 0x45504953  # "EPIS"
-
-
-def independent_episode_seeds(run_seed: int, episodes: int) -> list[int]:
-    """Episode seeds that do not overlap across episodes or run seeds.
-
-    Episode ``e`` of run seed ``s`` is reset with word ``e`` of
-    ``numpy.random.SeedSequence(entropy=s, spawn_key=(0x45504953,)).generate_state(E, uint64)``
-    shifted right by one bit (so it fits a signed 64-bit column). The words are a hash of
-    ``(s, spawn key, e)``: the seeds of episodes 0..E-1 do not depend on E (more episodes extend
-    the list), and two of them coincide with probability about n² / 2⁶⁴ for n seeds in a grid,
-    which :meth:`GridSpec.validate` checks anyway.
-    """
-    words = np.random.SeedSequence(entropy=int(run_seed), spawn_key=(EPISODE_SEED_SPAWN_KEY,)).generate_state(
-        episodes, dtype=np.uint64
-    )
-    return [int(w >> np.uint64(1)) for w in words]
-
-
-EPISODE_SEED_PROTOCOLS: dict[str, Callable[[int, int], list[int]]] = {
-    "paper": paper_episode_seeds,
-    "independent": independent_episode_seeds,
-}
-
-
-@dataclass(frozen=True)
-class GridSetting:
-    """One evaluation setting of the grid.
-
-    Attributes
-    ----------
-    name : str
-        The ``setting`` column value (e.g. "main").
-    no_physics_penalty : bool
-        Whether the setting's reward drops λp (V + A).
-    policies : tuple of str
-        Policies evaluated in it (learned ones need their train units).
-    model_setting : str
-        The training setting whose models the learned policies use ("main" or "no_physics").
-    agentic : bool
-        Whether its policies run behind the Planner/Auditor layer.
-    """
-
-    name: str
-    no_physics_penalty: bool
-    policies: tuple[str, ...]
-    model_setting: str
-    agentic: bool = False
-
-
-_POLICIES = (*BASELINES, *TRAINABLE_ALGOS)  # opt-in ones (ppo-lag) only when asked for
-
-
-def _grid_setting(name: str, policies: tuple[str, ...]) -> GridSetting:
-    s = KNOWN_SETTINGS[name]
-    return GridSetting(s.name, s.no_physics_penalty, policies, s.model_setting, agentic=s.agentic)
-
-
-#: The grid's settings: each :mod:`.settings` definition with the policies the grid evaluates in it.
-SETTING_REGISTRY: dict[str, GridSetting] = {
-    SETTING_MAIN: _grid_setting(SETTING_MAIN, _POLICIES),
-    SETTING_NO_PHYSICS: _grid_setting(SETTING_NO_PHYSICS, _POLICIES),
-    SETTING_AGENTIC: _grid_setting(SETTING_AGENTIC, ALGOS),
-    SETTING_AGENTIC_NO_PHYSICS: _grid_setting(SETTING_AGENTIC_NO_PHYSICS, ALGOS),
-}
-
-
-def register_setting(setting: GridSetting) -> None:
-    """Add (or replace) an evaluation setting; its ``model_setting`` must be a training setting.
-
-    The setting is defined in :mod:`.settings` too (labels default to its name), so rollouts and
-    the report know its reward and governance.
-    """
-    known = KNOWN_SETTINGS.get(setting.name)
-    define_setting(
-        Setting(
-            setting.name,
-            setting.no_physics_penalty,
-            setting.agentic,
-            setting.model_setting,
-            known.label if known is not None else setting.name,
-            known.governance_label if known is not None else setting.name,
-        )
-    )
-    SETTING_REGISTRY[setting.name] = setting
 
 
 @dataclass(frozen=True)
@@ -175,10 +83,10 @@ class GridSpec:
 
     @property
     def has_agentic(self) -> bool:
-        return any(SETTING_REGISTRY[s].agentic for s in self.settings)
+        return any(KNOWN_SETTINGS[s].agentic for s in self.settings)
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
-        listed = SETTING_REGISTRY[setting].policies
+        listed = KNOWN_SETTINGS[setting].policies
         chosen = dict(self.policies_by_setting).get(setting)
         if chosen is not None:
             return tuple(p for p in listed if p in chosen)
@@ -211,26 +119,26 @@ class GridSpec:
             raise ValueError(f"unknown backend '{self.backend}' (choose from {', '.join(BACKENDS)})")
         if len(set(self.seeds)) != len(self.seeds):
             raise ValueError(f"a seed is listed twice: {list(self.seeds)}")
-        unknown = [s for s in self.settings if s not in SETTING_REGISTRY]
+        unknown = [s for s in self.settings if s not in KNOWN_SETTINGS]
         if unknown:
-            raise ValueError(f"unknown setting(s) {', '.join(unknown)} (registered: {', '.join(SETTING_REGISTRY)})")
+            raise ValueError(f"unknown setting(s) {', '.join(unknown)} (registered: {', '.join(KNOWN_SETTINGS)})")
         if self.backend != "sb3" and self.uses_lagrangian:
             raise ValueError("ppo-lag trains with the sb3 backend only")
         if self.policies is not None:
-            offered = {p for s in self.settings for p in SETTING_REGISTRY[s].policies}
+            offered = {p for s in self.settings for p in KNOWN_SETTINGS[s].policies}
             unknown = [p for p in self.policies if p not in offered]
             if unknown or not self.policies:
                 raise ValueError(
                     f"unknown or no policies {', '.join(unknown)} (the settings offer {', '.join(sorted(offered))})"
                 )
         for setting, chosen in self.policies_by_setting:
-            offered = SETTING_REGISTRY[setting].policies if setting in SETTING_REGISTRY else ()
+            offered = KNOWN_SETTINGS[setting].policies if setting in KNOWN_SETTINGS else ()
             unknown = [p for p in chosen if p not in offered]
             if setting not in self.settings or unknown or not chosen:
                 raise ValueError(f"policies of setting '{setting}': {', '.join(unknown) or 'none'} not offered there")
-        if self.episode_seed_protocol not in EPISODE_SEED_PROTOCOLS:
+        if self.episode_seed_protocol not in EPISODE_SEED_RULES:
             raise ValueError(
-                f"unknown episode-seed protocol '{self.episode_seed_protocol}' (choose from {', '.join(EPISODE_SEED_PROTOCOLS)})"
+                f"unknown episode-seed protocol '{self.episode_seed_protocol}' (choose from {', '.join(EPISODE_SEED_RULES)})"
             )
         if self.episode_seed_protocol == "independent":
             seeds = [e for s in self.seeds for e in independent_episode_seeds(s, self.episodes)]
@@ -238,7 +146,7 @@ class GridSpec:
                 raise ValueError("the independent episode seeds of these run seeds collide; pick other run seeds")
 
     def episode_seeds(self) -> Callable[[int, int], list[int]]:
-        return EPISODE_SEED_PROTOCOLS[self.episode_seed_protocol]
+        return EPISODE_SEED_RULES[self.episode_seed_protocol]
 
 
 @dataclass(frozen=True)
@@ -301,7 +209,7 @@ def plan_units(spec: GridSpec) -> list[Unit]:
     needed: dict[tuple[str, str], set[int]] = {}
     wanted: list[tuple[str, str, int]] = []
     for setting_name in spec.settings:
-        setting = SETTING_REGISTRY[setting_name]
+        setting = KNOWN_SETTINGS[setting_name]
         for policy in spec.setting_policies(setting_name):
             for seed in spec.seeds:
                 wanted.append((policy, setting_name, seed))
@@ -318,7 +226,7 @@ def plan_units(spec: GridSpec) -> list[Unit]:
             trains.update({(algo, setting, seed): train_unit(algo, setting, seed, spec.backend) for seed in seeds})
     evals = []
     for policy, setting_name, seed in wanted:
-        train = trains.get((policy, SETTING_REGISTRY[setting_name].model_setting, seed))
+        train = trains.get((policy, KNOWN_SETTINGS[setting_name].model_setting, seed))
         evals.append(Unit("eval", policy, setting_name, seed, (train.name,) if train else ()))
     return list(dict.fromkeys(trains.values())) + evals
 

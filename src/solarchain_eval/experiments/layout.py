@@ -15,7 +15,7 @@ A paper root (``solarchain-eval paper --out ROOT``)::
     ROOT/report/                                        tables, figures, index.html
 
 Every unit directory gets the done-marker ``DONE`` written last; a unit without it is redone.
-``setting`` is one of :data:`~solarchain_eval.experiments.rollout.SETTINGS`.
+``setting`` is one of :data:`~solarchain_eval.evaluation.rollout.SETTINGS`.
 """
 
 from __future__ import annotations
@@ -24,7 +24,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from .records import ACTIONS_FILE, AGENTIC_LOG_FILE, CITY_HOUR_FILE, METADATA_FILE, METRICS_FILE
+from ..evaluation.records import ACTIONS_FILE, AGENTIC_LOG_FILE, CITY_HOUR_FILE, METADATA_FILE, METRICS_FILE
 
 DONE_MARKER = "DONE"
 PAPER_METADATA_FILE = "paper_metadata.json"

@@ -22,20 +22,21 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..algorithms import ALGOS, MODEL_FILE, TRAINABLE_ALGOS
+from ..agents.checkpoints import ALGOS, MODEL_FILE, TRAINABLE_ALGOS
+from ..common.atomic_files import atomic_write_json
+from ..common.errors import NamesOptions
+from ..common.redaction import redact_command
+from ..common.versions import git_commit, package_versions
 from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
-from ..io import atomic_write_json
-from ..option_errors import NamesOptions
-from ..redaction import redact_command
-from ..training import differences
-from ..versions import git_commit, package_versions
+from ..evaluation.settings import KNOWN_SETTINGS, setting_has_physics_penalty
+from ..protocol import independent_episode_seeds
+from ..training.sb3_trainer import differences
 from .combine import combine_setting
-from .grid import SETTING_REGISTRY, GridSpec, Unit, eval_model_path, independent_episode_seeds, plan_units
+from .grid import GridSpec, Unit, eval_model_path, plan_units
 from .layout import PAPER_METADATA_FILE
 from .pool import Executor, InlineExecutor, LocalPool, RunReport, run_units
-from .settings import setting_has_physics_penalty
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
 
 
@@ -75,7 +76,7 @@ def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
 
 def model_file(backend: str) -> str:
     """The model file a train unit of ``backend`` writes (the one its eval units load and hash)."""
-    from ..policies.jax_policy import JAX_MODEL_FILE
+    from ..agents.jax_checkpoint import JAX_MODEL_FILE
 
     return JAX_MODEL_FILE if backend == "jax" else MODEL_FILE
 
@@ -242,7 +243,7 @@ def _combine_and_record(spec: GridSpec, outcome: PaperOutcome, done: set[str], m
 
 def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str, str]]:
     """sha256 of each combined file, so that ``report`` can tell they are this grid's."""
-    from ..io import sha256_file
+    from ..common.atomic_files import sha256_file
     from .layout import combined_dir
 
     return {
@@ -258,7 +259,7 @@ def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str
 def _task(
     spec: GridSpec, root: Path, data_dir: Path, identity: dict, unit: Unit, command: list[str] | None
 ) -> UnitTask:
-    setting = SETTING_REGISTRY.get(unit.setting)
+    setting = KNOWN_SETTINGS.get(unit.setting)
     no_physics = setting.no_physics_penalty if setting is not None else not setting_has_physics_penalty(unit.setting)
     models: dict[str, Path] = {}
     unit_identity: dict[str, Any] = {

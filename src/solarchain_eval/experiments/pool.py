@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from multiprocessing.connection import Connection, wait
 from typing import Protocol
 
-from ..cpus import available_cpus, can_pin, pin_to_cpu
+from ..common.cpus import available_cpus, can_pin, pin_to_cpu
 from .grid import Unit
 from .units import UnitResult, UnitTask, execute_unit
 

@@ -23,9 +23,9 @@ from dataclasses import replace
 from pathlib import Path
 from typing import Any
 
+from ..common.atomic_files import atomic_write_bytes
+from ..common.errors import NamesOptions
 from ..data.files import DATASET_FILES, MANIFEST_FILE
-from ..io import atomic_write_bytes
-from ..option_errors import NamesOptions
 from .units import UnitResult, UnitTask, collect_files, execute_unit, write_done
 
 TOKEN_FILE = ".grid-token"

@@ -26,17 +26,17 @@ from typing import Any
 
 import pandas as pd
 
+from ..common.atomic_files import atomic_write_json, atomic_write_with
+from ..common.redaction import redact_command
+from ..common.versions import git_commit, package_versions
 from ..data.provenance import dataset_provenance
-from ..io import atomic_write_json, atomic_write_with
+from ..evaluation.records import ACTIONS_FILE, METRICS_FILE
 from ..records_schema import EPISODE_COST
-from ..redaction import redact_command
-from ..versions import git_commit, package_versions
 from .combine import combine_setting
 from .grid import GridSpec, Unit, plan_units, scoped
 from .layout import PAPER_METADATA_FILE, combined_dir
 from .paper import GridError, _executor, _locked, _metadata, _read_metadata, _stale_eval, _task, grid_identity
 from .pool import RunReport, run_units
-from .records import ACTIONS_FILE, METRICS_FILE
 from .sweep_spec import Sweep, SweepDataset, SweepPoint, dataset_cities, fdia_scenario
 from .units import UnitResult, UnitTask, read_done, undo
 
@@ -63,7 +63,7 @@ class SweepOutcome:
     already_done: list[str]
     report: RunReport
     complete_points: list[str] = field(default_factory=list)
-    all_points: bool = False  # every point complete (results.csv and sensitivity/ written)
+    all_points: bool = False  # every point complete (results.csv written; the CLI adds sensitivity/)
     results_rows: int = 0
     wall_s: float = 0.0
 
@@ -233,10 +233,6 @@ def run_sweep(
         if not results.empty:
             atomic_write_with(root / RESULTS_FILE, lambda tmp: results.to_csv(tmp, index=False))
             outcome.results_rows = len(results)
-            if outcome.all_points:
-                from ..report.sensitivity import write_sensitivity
-
-                write_sensitivity(results, sweep.axes, root / "sensitivity", sweep.spec.bootstrap_resamples)
         outcome.wall_s = time.perf_counter() - started
         _write_metadata(sweep, root, runs, outcome, command)
     return outcome

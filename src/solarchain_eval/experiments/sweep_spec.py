@@ -32,7 +32,7 @@ from ..data.cities import (
     synthetic_cities,
 )
 from ..data.fdia import FDIA_FRACTION, FdiaScenario, parse_severity
-from ..lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
+from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 
 
 class SweepError(ValueError):

@@ -19,12 +19,13 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..agentic.build import AgenticOptions
+from ..common.atomic_files import atomic_write_json, sha256_file
 from ..config import BenchmarkConfig
-from ..io import atomic_write_json, sha256_file
-from ..lagrangian import LagrangianSettings
-from ..training import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
-from .grid import EPISODE_SEED_PROTOCOLS, Unit
+from ..governance.factory import AgenticOptions
+from ..protocol import EPISODE_SEED_RULES
+from ..training.lagrangian import LagrangianSettings
+from ..training.sb3_trainer import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
+from .grid import Unit
 from .layout import DONE_MARKER, seed_model_dir
 
 UNIT_FILE = "unit.json"
@@ -86,7 +87,7 @@ def undo(unit_dir: Path) -> None:
 def clear_for_redo(unit: Unit, unit_dir: Path) -> None:
     """Remove the outputs of an unfinished earlier attempt.
 
-    A train unit keeps everything: :func:`~solarchain_eval.training.train` resumes from the
+    A train unit keeps everything: :func:`~solarchain_eval.training.sb3_trainer.train` resumes from the
     checkpoint (or finds the training finished) and replaces its outputs itself.
     """
     if not unit_dir.is_dir() or unit.kind == "train":
@@ -189,7 +190,7 @@ def _train_unit(task: UnitTask, log: _UnitLog) -> None:
 def _train_jax_unit(task: UnitTask, log: _UnitLog) -> None:
     """A seed group with the JAX backend, one vmap, each model in ``seed_<s>/`` (no checkpoints:
     a redone unit trains again unless it had finished)."""
-    from ..jax.train import JaxTrainSpec, train_jax
+    from ..training.jax_trainer import JaxTrainSpec, train_jax
 
     unit = task.unit
     seeds = unit.seed_group or (unit.seed,)
@@ -205,7 +206,7 @@ def _train_jax_unit(task: UnitTask, log: _UnitLog) -> None:
 
 
 def _evaluate_unit(task: UnitTask) -> None:
-    from .evaluate import EvaluationSpec, run_evaluation
+    from ..evaluation.runner import EvaluationSpec, run_evaluation
 
     unit = task.unit
     spec = EvaluationSpec(
@@ -216,7 +217,7 @@ def _evaluate_unit(task: UnitTask) -> None:
         no_physics_penalty=task.no_physics_penalty,
         config=task.config,
         models=dict(task.model_paths),
-        episode_seeds=EPISODE_SEED_PROTOCOLS[task.episode_seed_protocol],
+        episode_seeds=EPISODE_SEED_RULES[task.episode_seed_protocol],
         agentic=task.agentic,  # the Planner/Auditor layer in the agentic settings
     )
     if spec.setting != unit.setting:

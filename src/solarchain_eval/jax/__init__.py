@@ -16,6 +16,6 @@ except ImportError as error:  # pragma: no cover - depends on the installation
         f"the JAX backend needs the 'jax' extra ({error.name} is missing): pip install 'solarchain-eval[jax]'"
     ) from None
 
-from .env import EnvParams, EnvState, SolarChainJaxEnv, make_env_params
+from ..envs.jax_env import EnvParams, EnvState, SolarChainJaxEnv, make_env_params
 
 __all__ = ["EnvParams", "EnvState", "SolarChainJaxEnv", "make_env_params"]

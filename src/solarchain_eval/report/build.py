@@ -6,8 +6,8 @@ from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 
+from ..common.atomic_files import atomic_write_text
 from ..experiments.layout import REPORT_DIR
-from ..io import atomic_write_text
 from .figures import FigureFile, build_figures
 from .figures.heatmap import HEATMAPS
 from .html import render_html

@@ -2,7 +2,7 @@
 
 Input: ``governance_diagnostics.csv`` rows (one per governed step). Ground truth: a step is
 *unsafe* when its proposal's avoidable cost, ``proposal_cost - least_cost``, exceeds the
-threshold (default :data:`~solarchain_eval.agentic.counterfactual.DEFAULT_UNSAFE_THRESHOLD`).
+threshold (default :data:`~solarchain_eval.governance.counterfactual.DEFAULT_UNSAFE_THRESHOLD`).
 Per group (planner, auditor, policy, setting): the confusion matrix of audited vs unsafe steps,
 precision, recall and false-alarm rate; the per-step and per-revision effects of the auditor
 (final vs ā: Δcost, Δreward, Δartificial liquidity); the shares of revisions that lowered cost
@@ -19,7 +19,7 @@ import numpy as np
 import pandas as pd
 from scipy.stats import DegenerateDataWarning
 
-from ..agentic.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from .statistics import DEFAULT_RESAMPLES, DEFAULT_SEED, Interval, cluster_bootstrap
 
 GROUP_KEYS = ("planner", "auditor", "policy", "setting")

@@ -15,6 +15,10 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
+from ..common.errors import NamesOptions
+from ..common.redaction import redact_command
+from ..evaluation.records import DIAGNOSTICS_FILE, SUMMARY_FILE
+from ..evaluation.rundir import verify_files, verify_run_dir
 from ..experiments.layout import (
     ACTIONS_FILE,
     AGENTIC_LOG_FILE,
@@ -28,11 +32,7 @@ from ..experiments.layout import (
     is_paper_root,
     run_table_paths,
 )
-from ..experiments.records import DIAGNOSTICS_FILE, SUMMARY_FILE
-from ..experiments.rundir import verify_files, verify_run_dir
-from ..option_errors import NamesOptions
 from ..records_schema import EPISODE_KEYS, METRIC_NAMES, upgrade_columns
-from ..redaction import redact_command
 from .naming import SETTINGS
 
 #: Keys of one agentic log step that the report reads (the agentic contract has more).

@@ -8,7 +8,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import Any
 
-from ..experiments.settings import (
+from ..evaluation.settings import (
     KNOWN_SETTINGS,
     SETTING_AGENTIC,
     SETTING_AGENTIC_NO_PHYSICS,
@@ -17,7 +17,7 @@ from ..experiments.settings import (
     SETTING_NO_PHYSICS,
     SETTINGS,
 )
-from ..policies.baselines import BASELINES
+from ..market.baselines import BASELINES
 
 #: Policy display names (the paper's spelling).
 POLICY_DISPLAY = {

@@ -6,8 +6,8 @@ import json
 from pathlib import Path
 from typing import Any
 
+from ..common.atomic_files import sha256_file
 from ..data.files import MANIFEST_FILE  # not data.build: that imports pvlib
-from ..io import sha256_file
 from .loading import ReportData
 
 #: Run-metadata fields the report shows in its summary table (the rest is in the JSON dump).

@@ -26,8 +26,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from ..io import atomic_write_text, atomic_write_with
-from ..policies.baselines import BASELINES
+from ..common.atomic_files import atomic_write_text, atomic_write_with
+from ..market.baselines import BASELINES
 from .naming import is_learned
 from .statistics import Interval, bootstrap_mean, bootstrap_mean_difference
 

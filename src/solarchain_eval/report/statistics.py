@@ -19,11 +19,13 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from ..protocol import PAPER_SEED
+
 ArrayLike = Sequence[float] | np.ndarray | pd.Series
 #: Resamples per bootstrap interval (rliable's examples use 2,000).
 DEFAULT_RESAMPLES = 2000
 DEFAULT_CONFIDENCE = 0.95
-DEFAULT_SEED = 20260511
+DEFAULT_SEED = PAPER_SEED  # the bootstrap's seed
 
 
 @dataclass(frozen=True)

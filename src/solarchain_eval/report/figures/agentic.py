@@ -9,7 +9,7 @@ import numpy as np
 from matplotlib.patches import Patch
 from scipy import stats
 
-from ...experiments.rollout import SETTING_AGENTIC, SETTING_MAIN
+from ...evaluation.settings import SETTING_AGENTIC, SETTING_MAIN
 from ..casestudy import episode_steps, select_case
 from ..loading import ReportData
 from ..naming import GOVERNANCE_LABELS, governance_layer, learned_order, paper_order, policy_label, setting_label

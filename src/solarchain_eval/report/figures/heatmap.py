@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ...experiments.rollout import SETTING_MAIN
+from ...evaluation.settings import SETTING_MAIN
 from ..loading import ReportData
 from ..naming import paper_order, policy_label, setting_label
 from ..options import ReportOptions

@@ -10,7 +10,7 @@ import pandas as pd
 from matplotlib.axes import Axes
 from matplotlib.ticker import MaxNLocator
 
-from ...experiments.rollout import SETTING_MAIN
+from ...evaluation.settings import SETTING_MAIN
 from ..loading import ReportData
 from ..naming import paper_order, policy_label
 from ..options import ReportOptions

@@ -18,7 +18,7 @@ import numpy as np
 from matplotlib.axes import Axes
 from matplotlib.figure import Figure
 
-from ...io import atomic_write_bytes
+from ...common.atomic_files import atomic_write_bytes
 from ..naming import SETTINGS
 
 #: One colour per policy, the same in every figure (Okabe-Ito-like, colour-blind safe).

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ...experiments.rollout import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS
+from ...evaluation.settings import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS
 from ..casestudy import select_case
 from ..loading import ReportData
 from ..naming import AGENTIC_REWARD_LABELS, governance_layer, paper_order, policy_label, setting_label

@@ -10,7 +10,7 @@ from collections.abc import Sequence
 
 import pandas as pd
 
-from ...experiments.rollout import SETTING_AGENTIC, SETTING_MAIN
+from ...evaluation.settings import SETTING_AGENTIC, SETTING_MAIN
 from ..loading import ReportData
 from ..naming import (
     ABLATION_PAIRS,

@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ...agentic.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ...governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from ..governance import audit_quality
 from ..loading import ReportData
 from ..naming import AGENTIC_REWARD_LABELS, policy_label, setting_label

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import pandas as pd
 
-from ...experiments.rollout import SETTING_MAIN
+from ...evaluation.settings import SETTING_MAIN
 from ..loading import ReportData
 from ..naming import GOVERNANCE_LABELS, GOVERNANCE_ORDER, learned_order, paper_order, policy_label
 from ..options import ReportOptions

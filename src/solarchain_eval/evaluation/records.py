@@ -1,0 +1,200 @@
+"""Tables of evaluation records (metrics, actions, city-hour) and their on-disk files."""
+
+from __future__ import annotations
+
+import csv
+import io
+import json
+from collections.abc import Sequence
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+import pandas as pd
+
+from ..common.atomic_files import atomic_write_csv, atomic_write_json, atomic_write_text
+from ..governance.counterfactual import DIAGNOSTIC_COLUMNS
+from ..governance.wrapper import EXTRA_DIAGNOSTICS_KEY, EXTRA_LOG_KEY, EXTRA_METRICS_KEY
+from ..records_schema import EPISODE_KEYS, METRIC_NAMES
+from .rollout import STEP_FIELDS, EpisodeResult
+
+METRICS_FILE = "metrics.csv"
+ACTIONS_FILE = "actions.csv"
+CITY_HOUR_FILE = "city_hour_policy.csv"
+SUMMARY_FILE = "summary.json"
+METADATA_FILE = "run_metadata.json"
+AGENTIC_LOG_FILE = "agentic_logs.jsonl"
+DIAGNOSTICS_FILE = "governance_diagnostics.csv"
+
+
+def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
+    """One row per episode: identifiers, the episode metrics of docs/metrics.md, then any extra per-episode metrics."""
+    rows = []
+    for r in results:
+        row = {k: getattr(r, k) for k in EPISODE_KEYS}
+        row.update(r.metrics)
+        row.update(r.extras.get(EXTRA_METRICS_KEY, {}))
+        rows.append(row)
+    frame = pd.DataFrame(rows)
+    if frame.empty:
+        return pd.DataFrame(columns=[*EPISODE_KEYS, *METRIC_NAMES])
+    ordered = [*EPISODE_KEYS, *METRIC_NAMES]
+    return frame[ordered + [c for c in frame.columns if c not in ordered]]
+
+
+def actions_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
+    """One row per step: identifiers and every per-step info field."""
+    columns: dict[str, Any] = {}
+    lengths = [r.n_steps for r in results]
+    for key in ("policy", "setting", "run_seed", "episode", "episode_seed"):
+        columns[key] = np.repeat([getattr(r, key) for r in results], lengths)
+    columns["step"] = np.concatenate([np.arange(n) for n in lengths]) if results else np.zeros(0, dtype=int)
+    for name in STEP_FIELDS:
+        columns[name] = [value for r in results for value in r.steps[name]]
+    return pd.DataFrame(columns)
+
+
+def city_hour_frame(results: Sequence[EpisodeResult], cities: Sequence[str]) -> pd.DataFrame:
+    """One row per step and city: the city's reward and the executed action."""
+    n_cities = len(cities)
+    keys: dict[str, list] = {k: [] for k in ("policy", "setting", "run_seed", "episode")}
+    step, absolute_hour, hour, alpha, ell, burn, city_reward = [], [], [], [], [], [], []
+    for r in results:
+        n = r.n_steps
+        for key in keys:
+            keys[key].extend([getattr(r, key)] * (n * n_cities))
+        for t in range(n):
+            step.extend([t] * n_cities)
+            absolute_hour.extend([r.steps["absolute_hour"][t]] * n_cities)
+            hour.extend([r.steps["hour"][t]] * n_cities)
+            alpha.extend([r.steps["reward_ratio"][t]] * n_cities)
+            ell.extend([r.steps["liquidity_ratio"][t]] * n_cities)
+            burn.extend([r.steps["burn_rate"][t]] * n_cities)
+            city_reward.extend(r.city_rewards[t])
+    city = list(cities) * (len(step) // n_cities if n_cities else 0)
+    return pd.DataFrame(
+        {
+            **keys,
+            "step": step,
+            "absolute_hour": absolute_hour,
+            "hour": hour,
+            "city": city,
+            "city_reward": city_reward,
+            "reward_ratio": alpha,
+            "liquidity_ratio": ell,
+            "burn_rate": burn,
+        }
+    )
+
+
+def agentic_log_text(results: Sequence[EpisodeResult]) -> str | None:
+    """JSON Lines of every agentic step row (episode identifiers first), or None if none."""
+    if not any(EXTRA_LOG_KEY in r.extras for r in results):
+        return None
+    lines = []
+    for r in results:
+        ids = {
+            "policy": r.policy,
+            "setting": r.setting,
+            "run_seed": r.run_seed,
+            "episode": r.episode,
+            "episode_seed": r.episode_seed,
+        }
+        for row in r.extras.get(EXTRA_LOG_KEY, ()):
+            lines.append(json.dumps({**ids, **row}, ensure_ascii=False, allow_nan=False))
+    return "".join(line + "\n" for line in lines)
+
+
+def diagnostics_csv(results: Sequence[EpisodeResult]) -> str | None:
+    """:func:`diagnostics_frame` as CSV text, written row by row with the csv module (what pandas
+    writes for these columns: floats as ``repr``, None empty; several times faster)."""
+    if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
+        return None
+    ids = EPISODE_KEYS
+    buffer = io.StringIO()
+    writer = csv.writer(buffer, lineterminator="\n")
+    writer.writerow([*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
+    for r in results:
+        metrics = r.extras.get(EXTRA_METRICS_KEY, {})
+        head = [*(getattr(r, k) for k in ids), metrics.get("planner"), metrics.get("auditor")]
+        for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ()):
+            writer.writerow([*head, *(row[c] for c in DIAGNOSTIC_COLUMNS)])
+    return buffer.getvalue()
+
+
+def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
+    """One row per governed step with its counterfactual outcomes (docs/governance.md), or None
+    when no episode recorded diagnostics."""
+    if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
+        return None
+    ids = EPISODE_KEYS
+    rows = []
+    for r in results:
+        metrics = r.extras.get(EXTRA_METRICS_KEY, {})
+        head = {**{k: getattr(r, k) for k in ids}, "planner": metrics.get("planner"), "auditor": metrics.get("auditor")}
+        rows.extend({**head, **row} for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ()))
+    return pd.DataFrame(rows, columns=[*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
+
+
+def _finite_or_none(value: float) -> float | None:
+    return value if np.isfinite(value) else None
+
+
+def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
+    """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric.
+
+    ``std`` is the sample standard deviation (ddof=1), as in the paper's tables. Of a single
+    episode it is undefined: NaN, written as ``null`` (strict JSON), as the report's
+    :func:`~solarchain_eval.report.statistics.mean_std` has NaN (docs/metrics.md#summaries).
+    """
+    if metrics.empty:
+        return []
+    summary = []
+    numeric = [c for c in metrics.columns if c not in EPISODE_KEYS and pd.api.types.is_numeric_dtype(metrics[c])]
+    static_slippage = {
+        setting: float(group["mean_slippage"].mean())
+        for (policy, setting), group in metrics.groupby(["policy", "setting"], sort=False)
+        if policy == "static"
+    }
+    for (policy, setting), group in metrics.groupby(["policy", "setting"], sort=False):
+        entry: dict[str, Any] = {
+            "policy": policy,
+            "setting": setting,
+            "episodes": int(len(group)),
+            "run_seeds": sorted(int(s) for s in group["run_seed"].unique()),
+            "distinct_episode_seeds": int(group["episode_seed"].nunique()),
+            "distinct_start_hours": int(group["start_hour"].nunique()),
+            "metrics": {
+                name: {
+                    "mean": float(group[name].mean()),
+                    "std": _finite_or_none(float(group[name].std(ddof=1))),
+                    "min": float(group[name].min()),
+                    "max": float(group[name].max()),
+                }
+                for name in numeric
+            },
+        }
+        if setting in static_slippage and "mean_slippage" in group:
+            base = static_slippage[setting]
+            entry["slippage_reduction_vs_static"] = (base - float(group["mean_slippage"].mean())) / max(base, 1e-9)
+        summary.append(entry)
+    return summary
+
+
+def write_records(run_dir: Path, results: Sequence[EpisodeResult], cities: Sequence[str]) -> dict[str, Path]:
+    """Write metrics, actions and city-hour CSVs, the agentic log (agentic runs only) and the
+    summary, each file atomically."""
+    metrics = metrics_frame(results)
+    paths = {
+        METRICS_FILE: atomic_write_csv(run_dir / METRICS_FILE, metrics),
+        ACTIONS_FILE: atomic_write_csv(run_dir / ACTIONS_FILE, actions_frame(results)),
+        CITY_HOUR_FILE: atomic_write_csv(run_dir / CITY_HOUR_FILE, city_hour_frame(results, cities)),
+    }
+    log = agentic_log_text(results)
+    if log is not None:
+        paths[AGENTIC_LOG_FILE] = atomic_write_text(run_dir / AGENTIC_LOG_FILE, log)
+    diagnostics = diagnostics_csv(results)
+    if diagnostics is not None:
+        paths[DIAGNOSTICS_FILE] = atomic_write_text(run_dir / DIAGNOSTICS_FILE, diagnostics)
+    paths[SUMMARY_FILE] = atomic_write_json(run_dir / SUMMARY_FILE, summarize(metrics))
+    return paths

@@ -1,0 +1,123 @@
+"""Roll policies out in the environment and collect per-step and per-episode records."""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterable, Sequence
+from dataclasses import dataclass, field
+from typing import Any
+
+import numpy as np
+
+from ..agents.base import Policy
+from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
+from ..protocol import paper_episode_seeds
+from .metrics import episode_metrics
+
+#: Per-step record columns (docs/metrics.md#per-step-record, the original release's names) plus cost and F.
+STEP_FIELDS = STEP_INFO_KEYS
+
+
+@dataclass
+class EpisodeResult:
+    """One evaluated episode: identifiers, per-step columns, city rewards and metrics."""
+
+    policy: str
+    setting: str
+    run_seed: int
+    episode: int
+    episode_seed: int
+    start_hour: int
+    steps: dict[str, list]
+    city_rewards: list[tuple[float, ...]]
+    metrics: dict[str, float]
+    extras: dict[str, Any] = field(default_factory=dict)
+
+    @property
+    def n_steps(self) -> int:
+        return len(self.steps["reward"])
+
+
+def run_episode(
+    env: SolarChainEnv,
+    policy: Policy,
+    *,
+    episode_seed: int,
+    setting: str,
+    run_seed: int,
+    episode: int,
+) -> EpisodeResult:
+    """Run one full episode with ``policy`` acting deterministically."""
+    obs, reset_info = env.reset(seed=episode_seed)
+    begin = getattr(policy, "begin_episode", None)
+    if begin is not None:
+        begin(
+            env=env,
+            episode=episode,
+            run_seed=run_seed,
+            episode_seed=episode_seed,
+            start_hour=reset_info["episode_start_hour"],
+        )
+    columns: dict[str, list] = {name: [] for name in STEP_FIELDS}
+    appenders = [(columns[name].append, name) for name in STEP_FIELDS]
+    city_rewards: list[tuple[float, ...]] = []
+    observe = getattr(policy, "observe", None)
+    truncated = terminated = False
+    while not (truncated or terminated):
+        action = policy.act(obs)
+        obs, _, terminated, truncated, info = env.step(action)
+        for append, name in appenders:
+            append(info[name])
+        city_rewards.append(tuple(info["city_rewards"].values()))
+        if observe is not None:
+            observe(info)
+    actions = np.column_stack(
+        [np.asarray(columns[c], dtype=np.float32) for c in ("reward_ratio", "liquidity_ratio", "burn_rate")]
+    )
+    metrics = episode_metrics(
+        reward=np.asarray(columns["reward"]),
+        matched_mwh=np.asarray(columns["matched_energy_MWh"]),
+        violation_rate=np.asarray(columns["physics_violation_rate"]),
+        liquidity=np.asarray(columns["liquidity"]),
+        token_price=np.asarray(columns["token_price"]),
+        actions=actions,
+        slippage=np.asarray(columns["slippage"]),
+        artificial_liquidity_mwh=np.asarray(columns["artificial_liquidity_MWh"]),
+        city_totals=np.asarray(list(env.city_totals.values())),
+    )
+    result = EpisodeResult(
+        policy=policy.name,
+        setting=setting,
+        run_seed=run_seed,
+        episode=episode,
+        episode_seed=episode_seed,
+        start_hour=int(reset_info["episode_start_hour"]),
+        steps=columns,
+        city_rewards=city_rewards,
+        metrics=metrics,
+    )
+    finish = getattr(policy, "end_episode", None)
+    if finish is not None:
+        result.extras.update(finish() or {})
+    return result
+
+
+def run_policy(
+    env: SolarChainEnv,
+    policy: Policy,
+    *,
+    setting: str,
+    run_seeds: Sequence[int],
+    episodes: int,
+    episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds,
+    on_episode: Callable[[EpisodeResult], None] | None = None,
+) -> Iterable[EpisodeResult]:
+    """Yield the episodes of ``policy`` for each run seed (episodes in protocol order)."""
+    if env.action_mode != policy.action_mode:
+        raise ValueError(f"policy '{policy.name}' acts in {policy.action_mode} mode but the env is {env.action_mode}")
+    for run_seed in run_seeds:
+        policy.begin_run(run_seed)
+        for episode, seed in enumerate(episode_seeds(run_seed, episodes)):
+            result = run_episode(env, policy, episode_seed=seed, setting=setting, run_seed=run_seed, episode=episode)
+            if on_episode is not None:
+                on_episode(result)
+            yield result

@@ -1,0 +1,184 @@
+"""Options of the agentic layer and the factory that wraps policies with it."""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+from ..agents.base import Policy
+from ..config import MarketConfig
+from ..llm.client import LLMSettings, StructuredLLM
+from ..llm.errors import LLMConfigError
+from ..market.actions import ActionCodec
+from .auditor import AUDITOR_KINDS, ApproveOnlyAuditor, Auditor, LLMAuditor, RuleAuditor
+from .calibrated import DEFAULT_TARGET_AUDIT_RATE, CalibratedRulePlanner
+from .controls import DEFAULT_ORACLE_REWARD_LOSS, AlwaysAuditAuditor, OracleAuditor, RandomAuditor, SchedulerControls
+from .planner import PLANNER_KINDS, DefaultPlanner, LLMPlanner, Planner, RulePlanner
+from .wrapper import GovernedPolicy
+
+
+@dataclass(frozen=True)
+class LLMOptions:
+    """Endpoint settings and the record/replay cache of the LLM components."""
+
+    settings: LLMSettings
+    cache_dir: Path | None = None
+    cache_mode: str = "off"
+
+    def describe(self) -> dict[str, Any]:
+        return {
+            **self.settings.describe(),
+            "cache_dir": str(self.cache_dir) if self.cache_dir is not None else None,
+            "cache_mode": self.cache_mode,
+        }
+
+
+@dataclass(frozen=True)
+class AgenticOptions:
+    """Which planner and auditor govern the policies (``rule`` by default: no endpoint needed).
+
+    Parameters
+    ----------
+    planner : {"rule", "llm", "default", "calibrated-rule"}
+    auditor : {"rule", "llm", "approve-only", "always-audit", "random", "oracle"}
+    llm : LLMOptions, optional
+        Required when the planner or the auditor is ``llm``.
+    controls : SchedulerControls
+        Trigger ablation and budget/cooldown overrides (docs/governance.md#controls).
+    diagnostics : bool
+        Record counterfactual step records (``governance_diagnostics.csv``; on by default, so the
+        report's governance section has them whenever a run has agentic logs).
+    target_audit_rate : float
+        The calibrated rule planner's target audit rate.
+    random_audit_rate : float or mapping of policy -> float, optional
+        The random auditor's audit rate (default: the plan's budget B per episode).
+    random_seed : int
+        Seed of the random auditor's step choice.
+    random_audit_counts : mapping of (policy, run seed, episode) -> int, optional
+        Audits per episode for the random auditor to match exactly (e.g. a reference run's).
+    oracle_reward_loss : float
+        The oracle auditor's reward-loss bound per audited step.
+    """
+
+    planner: str = "rule"
+    auditor: str = "rule"
+    llm: LLMOptions | None = None
+    controls: SchedulerControls = field(default_factory=SchedulerControls)
+    diagnostics: bool = True
+    target_audit_rate: float = DEFAULT_TARGET_AUDIT_RATE
+    random_audit_rate: float | Mapping[str, float] | None = None
+    random_seed: int = 0
+    random_audit_counts: Mapping[tuple[str, int, int], int] | None = None
+    oracle_reward_loss: float = DEFAULT_ORACLE_REWARD_LOSS
+
+    def __post_init__(self) -> None:
+        if self.planner not in PLANNER_KINDS:
+            raise LLMConfigError(f"unknown planner {self.planner!r} (choose from {', '.join(PLANNER_KINDS)})")
+        if self.auditor not in AUDITOR_KINDS:
+            raise LLMConfigError(f"unknown auditor {self.auditor!r} (choose from {', '.join(AUDITOR_KINDS)})")
+        if self.uses_llm and self.llm is None:
+            raise LLMConfigError.about(
+                "an LLM planner or auditor needs LLM settings ({opt_llm_api}, {opt_llm_model}, ...)"
+            )
+
+    @property
+    def uses_llm(self) -> bool:
+        return self.planner == "llm" or self.auditor == "llm"
+
+    def describe(self) -> dict[str, Any]:
+        described: dict[str, Any] = {
+            "mode": "planner_auditor",
+            "planner": self.planner,
+            "auditor": self.auditor,
+            "llm": self.llm.describe() if (self.llm is not None and self.uses_llm) else None,
+        }
+        # What differs from the paper's layer only, so default runs describe themselves as before.
+        if not self.controls.is_default:
+            described["controls"] = self.controls.describe()
+        if not self.diagnostics:
+            described["diagnostics"] = False
+        if self.planner == "calibrated-rule":
+            described["target_audit_rate"] = self.target_audit_rate
+        if self.auditor == "random":
+            rate = self.random_audit_rate
+            described["random_audit_rate"] = dict(rate) if isinstance(rate, Mapping) else rate
+            described["random_seed"] = self.random_seed
+            if self.random_audit_counts:
+                described["random_audit_counts"] = {
+                    f"{policy}/{seed}/{episode}": int(n)
+                    for (policy, seed, episode), n in self.random_audit_counts.items()
+                }
+        if self.auditor == "oracle":
+            described["oracle_reward_loss"] = self.oracle_reward_loss
+        return described
+
+    def label(self) -> str:
+        """What ran, e.g. "rule planner, oracle auditor" or "rule planner, llm:gpt-4o auditor"."""
+        model = self.llm.settings.model if self.llm is not None else None
+
+        def name(kind: str) -> str:
+            return f"llm:{model}" if kind == "llm" and model else kind
+
+        return f"{name(self.planner)} planner, {name(self.auditor)} auditor"
+
+
+class Governance:
+    """Wraps policies with one planner and auditor; owns the shared LLM client.
+
+    Use as a context manager (or call :meth:`close`) so the HTTP client is released.
+    """
+
+    def __init__(self, options: AgenticOptions, market: MarketConfig) -> None:
+        self.options = options
+        codec = ActionCodec.from_config(market)
+        self.client: StructuredLLM | None = None
+        if options.uses_llm:
+            assert options.llm is not None
+            self.client = StructuredLLM(
+                options.llm.settings, cache_dir=options.llm.cache_dir, cache_mode=options.llm.cache_mode
+            )
+        self.planner = self._planner(options.planner, codec)
+        self.auditor = self._auditor(options.auditor, codec)
+
+    def _planner(self, kind: str, codec: ActionCodec) -> Planner:
+        if kind == "rule":
+            return RulePlanner(codec)
+        if kind == "default":
+            return DefaultPlanner(codec)
+        if kind == "calibrated-rule":
+            return CalibratedRulePlanner(codec, self.options.target_audit_rate)
+        assert self.client is not None
+        return LLMPlanner(self.client, codec)
+
+    def _auditor(self, kind: str, codec: ActionCodec) -> Auditor:
+        if kind == "rule":
+            return RuleAuditor(codec)
+        if kind == "approve-only":
+            return ApproveOnlyAuditor()
+        if kind == "always-audit":
+            return AlwaysAuditAuditor(codec)
+        if kind == "random":
+            return RandomAuditor(
+                codec, self.options.random_audit_rate, self.options.random_seed, self.options.random_audit_counts
+            )
+        if kind == "oracle":
+            return OracleAuditor(codec, self.options.oracle_reward_loss)
+        assert self.client is not None
+        return LLMAuditor(self.client, codec)
+
+    def wrap(self, policy: Policy) -> GovernedPolicy:
+        return GovernedPolicy(
+            policy, self.planner, self.auditor, controls=self.options.controls, diagnostics=self.options.diagnostics
+        )
+
+    def close(self) -> None:
+        if self.client is not None:
+            self.client.close()
+
+    def __enter__(self) -> Governance:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()

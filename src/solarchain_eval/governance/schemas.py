@@ -1,0 +1,251 @@
+"""Structured outputs of the Planner and the Auditor, and their validation (docs/planner_auditor.md#schemas).
+
+The pydantic models below are what a model must return; the JSON schema sent to it is the
+one the OpenAI SDK derives from them in strict mode (see :func:`~solarchain_eval.llm.response_format.response_format`). Parsing is
+strict (extra or missing fields, wrong types, NaN and infinities are errors). Validation then
+turns a parsed output into the values that may touch the market: every number is clipped to
+the benchmark's ranges (each clip is reported as a :class:`ClipEvent`), the auditor's action is
+sanitised with the environment's :class:`~solarchain_eval.market.actions.ActionCodec`
+(including α + ℓ ≤ 0.98), and free text is length-capped and only ever logged.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Any, ClassVar, Literal
+
+import numpy as np
+from pydantic import BaseModel, ConfigDict, Field
+
+from ..market.actions import ActionCodec
+
+#: Maximum lengths of the free-text fields (characters); longer text is cut and logged.
+GOVERNANCE_MODE_MAX_CHARS = 64
+TEXT_MAX_CHARS = 2000
+#: ``maxLength`` of the free-text fields in the ``json_object`` schema: a grammar-constrained
+#: local model otherwise runs on in them until the token budget ends (see docs/llm.md), and
+#: every character is a token to generate.
+SCHEMA_TEXT_MAX_CHARS = {"governance_mode": 32, "rationale": 64, "reason": 64}
+
+#: Audit-policy ranges (docs/planner_auditor.md#schemas; the two integer ranges end at the episode length).
+VIOLATION_THRESHOLD_RANGE = (0.0, 1.0)
+GAP_THRESHOLD_RANGE = (-1.0, 0.0)
+JITTER_THRESHOLD_RANGE = (0.0, 3.0)
+SLIPPAGE_THRESHOLD_RANGE = (0.0, 10.0)
+TARGET_AUDIT_RATE_RANGE = (0.0, 1.0)
+
+ACTION_FIELDS = ("reward_ratio", "liquidity_ratio", "burn_rate")
+RiskLevel = Literal["low", "medium", "high", "unknown"]
+
+
+class _StrictOutput(BaseModel):
+    # strict: JSON types must match the schema exactly; NaN/inf are rejected as non-finite.
+    model_config = ConfigDict(extra="forbid", strict=True, allow_inf_nan=False, frozen=True)
+    #: Read by :func:`~solarchain_eval.llm.response_format.response_format` for ``chat-json-object``.
+    json_object_text_caps: ClassVar[dict[str, int]] = SCHEMA_TEXT_MAX_CHARS
+
+
+class Bounds(_StrictOutput):
+    low: float = Field(description="Lowest admissible value.")
+    high: float = Field(description="Highest admissible value.")
+
+
+class ActionBounds(_StrictOutput):
+    reward_ratio: Bounds = Field(description="Bounds on the reward ratio α (benchmark range 0.05-0.65).")
+    liquidity_ratio: Bounds = Field(description="Bounds on the liquidity ratio ℓ (benchmark range 0.20-0.95).")
+    burn_rate: Bounds = Field(description="Bounds on the burn rate b (benchmark range 0-0.20).")
+
+
+class AuditPolicy(_StrictOutput):
+    violation_threshold: float = Field(
+        description="Hard trigger: audit when the raw physics-violation rate exceeds this (0-1)."
+    )
+    gap_threshold: float = Field(
+        description="Hard trigger: audit when the supply gap (verified - demand) / demand is below this (-1-0)."
+    )
+    jitter_threshold: float = Field(
+        description="Soft trigger: audit when the L1 change from the previous executed action exceeds this (0-3)."
+    )
+    slippage_threshold: float = Field(
+        description="Hard trigger: audit when the static market slippage exceeds this (0-10)."
+    )
+    max_audits_per_episode: int = Field(description="Budget for soft-triggered audits per 24-step episode (1-24).")
+    target_audit_rate: float = Field(description="Target fraction of audited steps (0-1).")
+    cooldown_steps: int = Field(description="Minimum steps between soft-triggered audits (0-24).")
+
+
+class PlannerOutput(_StrictOutput):
+    """What the Planner returns once per episode."""
+
+    governance_mode: str = Field(description="A short label for the chosen governance stance.")
+    action_bounds: ActionBounds
+    audit_policy: AuditPolicy
+    rationale: str = Field(description="Why these bounds and thresholds (logged, never executed).")
+
+
+class ActionValues(_StrictOutput):
+    reward_ratio: float
+    liquidity_ratio: float
+    burn_rate: float
+
+
+class RiskAssessment(_StrictOutput):
+    physics: RiskLevel
+    liquidity: RiskLevel
+    jitter: RiskLevel
+    fairness: RiskLevel
+
+
+class AuditorOutput(_StrictOutput):
+    """What the Auditor returns for one audited step."""
+
+    decision: Literal["approve", "revise"] = Field(
+        description="approve keeps the bounded proposed action; revise executes final_action."
+    )
+    final_action: ActionValues = Field(description="The action to execute when revising (market units).")
+    risk_assessment: RiskAssessment
+    reason: str = Field(description="Why (logged, never executed).")
+
+
+# --- validated forms -------------------------------------------------------------------------
+@dataclass(frozen=True)
+class ClipEvent:
+    """One value changed by validation: ``field`` went from ``value`` to ``clipped_to``."""
+
+    field: str
+    value: Any
+    clipped_to: Any
+
+    def to_log(self) -> dict[str, Any]:
+        return {"field": self.field, "value": self.value, "clipped_to": self.clipped_to}
+
+
+@dataclass(frozen=True)
+class Plan:
+    """A validated plan: the bounds and audit policy in force for one episode."""
+
+    governance_mode: str
+    bounds: tuple[tuple[float, float], tuple[float, float], tuple[float, float]]
+    violation_threshold: float
+    gap_threshold: float
+    jitter_threshold: float
+    slippage_threshold: float
+    max_audits_per_episode: int
+    target_audit_rate: float
+    cooldown_steps: int
+    rationale: str
+
+    def to_log(self) -> dict[str, Any]:
+        return {
+            "governance_mode": self.governance_mode,
+            "bounds": {name: list(pair) for name, pair in zip(ACTION_FIELDS, self.bounds, strict=True)},
+            "audit_policy": {
+                "violation_threshold": self.violation_threshold,
+                "gap_threshold": self.gap_threshold,
+                "jitter_threshold": self.jitter_threshold,
+                "slippage_threshold": self.slippage_threshold,
+                "max_audits_per_episode": self.max_audits_per_episode,
+                "target_audit_rate": self.target_audit_rate,
+                "cooldown_steps": self.cooldown_steps,
+            },
+            "rationale": self.rationale,
+        }
+
+
+@dataclass(frozen=True)
+class AuditVerdict:
+    """A validated auditor output: ``final_action`` is sanitised float32 (α, ℓ, b)."""
+
+    decision: str
+    final_action: tuple[float, float, float]
+    risk_assessment: dict[str, str]
+    reason: str
+
+
+def _clip(field: str, value: float, low: float, high: float, events: list[ClipEvent]) -> float:
+    clipped = min(max(value, low), high)
+    if clipped != value:
+        events.append(ClipEvent(field, value, clipped))
+    return clipped
+
+
+def _cap_text(field: str, text: str, limit: int, events: list[ClipEvent]) -> str:
+    if len(text) <= limit:
+        return text
+    events.append(ClipEvent(field, f"<{len(text)} characters>", f"<{limit} characters>"))
+    return text[:limit]
+
+
+def validate_plan(output: PlannerOutput, codec: ActionCodec, episode_steps: int) -> tuple[Plan, list[ClipEvent]]:
+    """Clip a parsed plan to the benchmark's ranges (docs/planner_auditor.md#schemas).
+
+    Bounds are sorted (a swap is reported) and clipped to the action ranges; thresholds,
+    budget, target rate and cooldown to the audit-policy ranges.
+    """
+    events: list[ClipEvent] = []
+    bounds = []
+    for name, pair, low, high in zip(
+        ACTION_FIELDS, _bound_pairs(output.action_bounds), codec.lo, codec.hi, strict=True
+    ):
+        lo, hi = pair
+        if lo > hi:
+            events.append(ClipEvent(f"action_bounds.{name}", [lo, hi], [hi, lo]))
+            lo, hi = hi, lo
+        bounds.append(
+            (
+                _clip(f"action_bounds.{name}.low", lo, low, high, events),
+                _clip(f"action_bounds.{name}.high", hi, low, high, events),
+            )
+        )
+    p = output.audit_policy
+    plan = Plan(
+        governance_mode=_cap_text("governance_mode", output.governance_mode, GOVERNANCE_MODE_MAX_CHARS, events),
+        bounds=(bounds[0], bounds[1], bounds[2]),
+        violation_threshold=_clip(
+            "audit_policy.violation_threshold", p.violation_threshold, *VIOLATION_THRESHOLD_RANGE, events
+        ),
+        gap_threshold=_clip("audit_policy.gap_threshold", p.gap_threshold, *GAP_THRESHOLD_RANGE, events),
+        jitter_threshold=_clip("audit_policy.jitter_threshold", p.jitter_threshold, *JITTER_THRESHOLD_RANGE, events),
+        slippage_threshold=_clip(
+            "audit_policy.slippage_threshold", p.slippage_threshold, *SLIPPAGE_THRESHOLD_RANGE, events
+        ),
+        max_audits_per_episode=int(
+            _clip("audit_policy.max_audits_per_episode", p.max_audits_per_episode, 1, episode_steps, events)
+        ),
+        target_audit_rate=_clip(
+            "audit_policy.target_audit_rate", p.target_audit_rate, *TARGET_AUDIT_RATE_RANGE, events
+        ),
+        cooldown_steps=int(_clip("audit_policy.cooldown_steps", p.cooldown_steps, 0, episode_steps, events)),
+        rationale=_cap_text("rationale", output.rationale, TEXT_MAX_CHARS, events),
+    )
+    return plan, events
+
+
+def _bound_pairs(bounds: ActionBounds) -> list[tuple[float, float]]:
+    return [(b.low, b.high) for b in (bounds.reward_ratio, bounds.liquidity_ratio, bounds.burn_rate)]
+
+
+def validate_audit(output: AuditorOutput, codec: ActionCodec) -> tuple[AuditVerdict, list[ClipEvent]]:
+    """Sanitise the auditor's action (ranges and α + ℓ ≤ cap, float32) and cap its text."""
+    events: list[ClipEvent] = []
+    raw = (output.final_action.reward_ratio, output.final_action.liquidity_ratio, output.final_action.burn_rate)
+    clipped = [
+        _clip(f"final_action.{name}", value, low, high, events)
+        for name, value, low, high in zip(ACTION_FIELDS, raw, codec.lo, codec.hi, strict=True)
+    ]
+    total = clipped[0] + clipped[1]
+    if total > codec.max_total_allocation:
+        events.append(ClipEvent("final_action.reward_ratio+liquidity_ratio", total, codec.max_total_allocation))
+    final = codec.sanitize(*raw)
+    verdict = AuditVerdict(
+        decision=output.decision,
+        final_action=final,
+        risk_assessment=output.risk_assessment.model_dump(),
+        reason=_cap_text("reason", output.reason, TEXT_MAX_CHARS, events),
+    )
+    return verdict, events
+
+
+def as_f32_list(action: tuple[float, float, float] | np.ndarray) -> list[float]:
+    """An action as a JSON-ready list of the float32 values (exact, as Python floats)."""
+    return [float(np.float32(v)) for v in action]

@@ -1,0 +1,374 @@
+"""rejax training on the JAX environment: all seeds of one algorithm in one jitted ``vmap``.
+
+Hyperparameters follow the SB3 reference (docs/training.md): learning rate, batch size and γ
+from the config (3e-4, 64, 0.98), SB3's default network sizes and other defaults where rejax
+has the same knob. The optimiser is SB3's (global-norm gradient clipping, SB3's Adam ε), and
+so is PPO's value loss (unclipped); the remaining differences between the libraries are
+listed in docs/jax.md. Each seed's acting network (actor, or
+Q-network for DQN) is written to ``jax_model.msgpack`` in its directory with
+``train_config.json`` and ``train_metadata.json`` beside it; ``evaluate --models`` loads it
+through :class:`~solarchain_eval.agents.jax_checkpoint.JaxPolicy`.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+import time
+import warnings
+from collections.abc import Callable
+from dataclasses import dataclass, field
+from datetime import UTC, datetime
+from pathlib import Path
+from typing import Any
+
+import jax
+import numpy as np
+from flax import serialization
+
+from ..agents.checkpoints import ACTION_MODES, TRAIN_CONFIG_FILE, TrainingError, check_algo, read_training_json
+from ..agents.jax_checkpoint import JAX_MODEL_FILE
+from ..common.atomic_files import atomic_write_bytes, atomic_write_json
+from ..common.redaction import redact_command
+from ..common.versions import git_commit, package_versions
+from ..config import BenchmarkConfig
+from ..envs.jax_env import EnvParams, SolarChainJaxEnv, make_env_params
+from .jax_alignment import SB3_ALIGNMENT, sb3_variant
+from .sb3_trainer import TRAIN_METADATA_FILE, TrainSpec, differences, dqn_learning_starts
+
+
+def rejax_config(
+    algo: str, config: BenchmarkConfig, timesteps: int, buffer_timesteps: int | None = None
+) -> dict[str, Any]:
+    """rejax keyword arguments mirroring SB3's defaults plus the config's lr, batch and γ.
+
+    SAC's and DQN's replay buffer holds SB3's 1e6 transitions, or all of a shorter training's;
+    ``buffer_timesteps`` sizes it for a training of that many steps instead (``bench-train``
+    times short trainings with the paper's buffer).
+    """
+    t = config.training
+    buffer_size = min(1_000_000, int(buffer_timesteps or timesteps))
+    common = {
+        "learning_rate": t.learning_rate,
+        "gamma": t.gamma,
+        "total_timesteps": int(timesteps),
+        "eval_freq": int(timesteps),
+        "skip_initial_evaluation": True,
+    }
+    if algo == "ppo":
+        # SB3 PPO: n_steps 2048, n_epochs 10, minibatches of batch_size, ent 0, clip 0.2, grad norm 0.5,
+        # separate 64x64 tanh actor and critic.
+        n_steps = 2048  # SB3 collects whole 2,048-step rollouts even for smaller budgets
+        return {
+            **common,
+            "num_envs": 1,
+            "num_steps": n_steps,
+            "num_epochs": 10,
+            "num_minibatches": max(1, n_steps // t.batch_size),
+            "gae_lambda": 0.95,
+            "clip_eps": 0.2,
+            "vf_coef": 0.5,
+            "ent_coef": 0.0,
+            "max_grad_norm": 0.5,
+            "agent_kwargs": {"activation": "tanh", "hidden_layer_sizes": (64, 64)},
+        }  # rejax PPO reads sizes here
+    if algo == "sac":
+        # SB3 SAC: 256x256 ReLU, buffer 1e6, learning_starts 100, tau 0.005, one update per step.
+        return {
+            **common,
+            "num_envs": 1,
+            "batch_size": t.batch_size,
+            "buffer_size": buffer_size,
+            "fill_buffer": 100,
+            "polyak": 0.995,
+            "target_update_freq": 1,
+            "num_epochs": 1,
+            "hidden_layer_sizes": (256, 256),
+            "agent_kwargs": {"activation": "relu"},
+        }
+    if algo == "dqn":
+        # SB3 DQN: 64x64 ReLU, train_freq 4 (here: 4 envs per iteration, one update), hard target
+        # update every 10,000 steps, eps 1 -> 0.05 over 10 %, grad norm 10, no double DQN.
+        return {
+            **common,
+            "num_envs": 4,
+            "batch_size": t.batch_size,
+            "buffer_size": buffer_size,
+            "fill_buffer": max(dqn_learning_starts(timesteps), t.batch_size),
+            "polyak": 0.0,
+            "target_update_freq": 10_000,
+            "num_epochs": 1,
+            "eps_start": 1.0,
+            "eps_end": 0.05,
+            "exploration_fraction": 0.1,
+            "max_grad_norm": 10.0,
+            "ddqn": False,
+            "agent_kwargs": {"activation": "relu"},
+        }  # rejax fixes DQN at 64x64, SB3's size
+    raise ValueError(f"unknown algorithm {algo!r} (choose from ppo, sac, dqn)")
+
+
+def iteration_steps(algo: str, settings: dict[str, Any]) -> int:
+    """Env steps per rejax training iteration (all of one seed's parallel envs)."""
+    return int(settings["num_envs"]) * (int(settings["num_steps"]) if algo == "ppo" else 1)
+
+
+def progress_chunks(iterations: int, most: int = 10) -> int:
+    """The largest divisor of ``iterations`` up to ``most``: progress reports that keep the step count exact."""
+    return max(k for k in range(1, min(most, iterations) + 1) if iterations % k == 0)
+
+
+def make_algo(
+    algo: str,
+    params: EnvParams,
+    config: BenchmarkConfig,
+    timesteps: int,
+    on_progress: Callable[[int], None] | None = None,
+    buffer_timesteps: int | None = None,
+) -> Any:
+    """The rejax algorithm, reporting the steps done ``progress_chunks`` times through ``on_progress``.
+
+    rejax runs ``ceil(total / eval_freq)`` chunks of ``ceil(eval_freq / iteration)`` iterations
+    with an evaluation callback after each; ``eval_freq`` is set to a whole number of iterations
+    so that the chunks add up to exactly SB3's step count, and the callback only reports progress.
+    """
+    import jax.numpy as jnp
+
+    settings = rejax_config(algo, config, timesteps, buffer_timesteps)
+    per_iteration = iteration_steps(algo, settings)
+    iterations = -(-int(timesteps) // per_iteration)
+    settings["eval_freq"] = iterations // progress_chunks(iterations) * per_iteration
+    instance = sb3_variant(algo).create(env=SolarChainJaxEnv(params), env_params=params, **settings)
+
+    def report(algo_instance: Any, ts: Any, rng: Any) -> Any:
+        if on_progress is not None:
+            jax.debug.callback(lambda step: on_progress(int(np.max(step))), ts.global_step)
+        return jnp.zeros(())
+
+    return instance.replace(eval_callback=report)
+
+
+def use_compilation_cache() -> None:
+    """Keep compiled training programs on disk (unless ``JAX_COMPILATION_CACHE_DIR`` says where already).
+
+    Every seed and every rerun of one algorithm and setting compiles the same program (the seeds'
+    keys are its arguments), so a grid's second train unit of a kind loads it instead of compiling.
+    """
+    if not jax.config.jax_compilation_cache_dir:
+        from ..data.default import cache_dir
+
+        jax.config.update("jax_compilation_cache_dir", str(cache_dir() / "jax-compilation"))
+
+
+def compile_training(
+    algo: str,
+    seeds: tuple[int, ...],
+    timesteps: int,
+    params: EnvParams,
+    config: BenchmarkConfig,
+    on_progress: Callable[[int], None] | None = None,
+    buffer_timesteps: int | None = None,
+) -> tuple[Any, float]:
+    """``jit(vmap(train))`` over the seeds' keys, compiled; returns (compiled function, compile s)."""
+    use_compilation_cache()
+    instance = make_algo(algo, params, config, timesteps, on_progress, buffer_timesteps)
+    keys = seed_keys(seeds)
+    start = time.perf_counter()
+    with warnings.catch_warnings():
+        # rejax asks for int64 indices, which JAX truncates to int32 without x64: harmless here.
+        warnings.filterwarnings("ignore", message="Explicitly requested dtype int64")
+        compiled = jax.jit(jax.vmap(instance.train)).lower(keys).compile()
+    return compiled, time.perf_counter() - start
+
+
+def seed_keys(seeds: tuple[int, ...]) -> jax.Array:
+    return jax.vmap(jax.random.key)(np.asarray(seeds, dtype=np.uint32))
+
+
+def train_seeds(
+    algo: str,
+    seeds: tuple[int, ...],
+    timesteps: int,
+    params: EnvParams,
+    config: BenchmarkConfig,
+    on_progress: Callable[[int], None] | None = None,
+) -> tuple[Any, float, float]:
+    """Train one model per seed in one jitted vmap; returns (train states, compile s, train s)."""
+    compiled, compile_s = compile_training(algo, seeds, timesteps, params, config, on_progress)
+    start = time.perf_counter()
+    states, _ = jax.block_until_ready(compiled(seed_keys(seeds)))
+    return states, compile_s, time.perf_counter() - start
+
+
+@dataclass(frozen=True)
+class JaxTrainSpec:
+    """One JAX training command: one model per seed, all seeds in one jitted ``vmap``.
+
+    Parameters
+    ----------
+    algo : {"ppo", "sac", "dqn"}
+    seeds : tuple of int
+        One model per seed; each seed's ``jax.random.key`` drives its initialisation, env
+        resets and exploration.
+    timesteps : int
+        Environment steps per model (PPO rounds up to whole 2,048-step rollouts, DQN to a
+        multiple of its 4 envs, as SB3 does).
+    no_physics_penalty : bool
+    data_dir : path, optional
+    config : BenchmarkConfig
+    """
+
+    algo: str
+    seeds: tuple[int, ...]
+    timesteps: int
+    no_physics_penalty: bool = False
+    data_dir: Path | None = None
+    config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+
+    def seed_spec(self, seed: int) -> TrainSpec:
+        return TrainSpec(self.algo, seed, self.timesteps, self.no_physics_penalty, self.data_dir, self.config)
+
+
+@dataclass(frozen=True)
+class JaxTrainOutcome:
+    algo: str
+    seeds: tuple[int, ...]
+    timesteps: int
+    compile_s: float
+    train_s: float
+    model_paths: tuple[Path, ...]
+    already_complete: bool = False
+
+    @property
+    def steps_per_s(self) -> float:
+        """Env steps of all seeds per second of training (compilation excluded)."""
+        return self.timesteps * len(self.seeds) / max(self.train_s, 1e-9)
+
+
+def seed_dirs(out_dir: Path, seeds: tuple[int, ...]) -> dict[int, Path]:
+    """Where each seed's model goes: ``out_dir`` itself for one seed, ``out_dir/seed_<s>`` for several."""
+    out_dir = Path(out_dir)
+    if len(seeds) == 1:
+        return {int(seeds[0]): out_dir}
+    return {int(s): out_dir / f"seed_{s}" for s in seeds}
+
+
+def _identity(spec: JaxTrainSpec, seed: int, dataset: dict[str, Any]) -> dict[str, Any]:
+    cfg = spec.seed_spec(seed).resolved_config()
+    return {
+        "algo": spec.algo,
+        "backend": "jax",
+        "seed": int(seed),
+        "timesteps": int(spec.timesteps),
+        "no_physics_penalty": bool(spec.no_physics_penalty),
+        "action_mode": cfg.action_mode,
+        "hyperparameters": json.loads(json.dumps(rejax_config(spec.algo, cfg, spec.timesteps), default=list)),
+        "sb3_alignment": SB3_ALIGNMENT[spec.algo],
+        "dataset_sha256": dataset.get("files", {}),
+        "config": cfg.model_dump(mode="json"),
+    }
+
+
+def save_network(path: Path, algo: str, states: Any, index: int) -> Path:
+    """Write seed ``index``'s acting network (what the policy adapter needs to act) as flax msgpack."""
+    network = states.q_ts.params if algo == "dqn" else states.actor_ts.params
+    one = jax.tree.map(lambda x: np.asarray(x[index]), network)
+    return atomic_write_bytes(path, serialization.to_bytes(one))
+
+
+def write_train_config(directory: Path, record: dict[str, Any]) -> Path:
+    """``train_config.json``: the identity and the rejax settings the policy adapter rebuilds the network from."""
+    return atomic_write_bytes(directory / TRAIN_CONFIG_FILE, json.dumps(record, indent=2, default=list).encode())
+
+
+def _finished(directory: Path, identity: dict[str, Any], overwrite: bool) -> bool:
+    """Whether ``directory`` holds this finished training; a different one is an error unless overwriting."""
+    previous = read_training_json(directory / TRAIN_CONFIG_FILE)
+    if previous is not None and previous.get("identity") != identity and not overwrite:
+        diffs = differences(previous.get("identity") or {}, identity)
+        raise TrainingError.about(
+            "{out_dir} holds a different training ({diffs}); choose another output directory or pass {opt_overwrite}",
+            out_dir=directory,
+            diffs="; ".join(diffs[:6]),
+        )
+    meta = read_training_json(directory / TRAIN_METADATA_FILE) or {}
+    same = previous is not None and previous.get("identity") == identity
+    return same and bool(meta.get("complete")) and (directory / JAX_MODEL_FILE).is_file() and not overwrite
+
+
+def train_jax(
+    spec: JaxTrainSpec,
+    out_dirs: dict[int, Path],
+    *,
+    on_progress: Callable[[int], None] | None = None,
+    overwrite: bool = False,
+    command: list[str] | None = None,
+) -> JaxTrainOutcome:
+    """Train ``spec.algo`` for every seed at once and write each seed's directory.
+
+    Each ``out_dirs[seed]`` receives ``jax_model.msgpack`` (the acting network's parameters,
+    flax msgpack), ``train_config.json`` (identity, rejax settings; written first) and
+    ``train_metadata.json`` (times, steps/s, versions; ``"complete": true``, written last).
+    A directory that already holds the same finished training is left as it is; when every
+    seed's is, nothing is trained (``already_complete``). There are no checkpoints: a killed
+    run trains again from the start.
+
+    Raises
+    ------
+    TrainingError
+        An unknown algorithm, a bad step count, or a directory holding a different training.
+    """
+    from ..data.default import resolve_data_dir
+    from ..data.provenance import dataset_provenance
+    from ..data.table import load_table
+
+    algo = check_algo(spec.algo)
+    if algo not in ACTION_MODES or spec.timesteps < 1 or not spec.seeds or set(out_dirs) != set(spec.seeds):
+        raise TrainingError(f"cannot train {algo} with the JAX backend for seeds {list(spec.seeds)}")
+    cfg = spec.config
+    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir)
+    table = load_table(data_dir)
+    dataset = dataset_provenance(table)
+    identities = {s: _identity(spec, s, dataset) for s in spec.seeds}
+    if all(_finished(Path(out_dirs[s]), identities[s], overwrite) for s in spec.seeds):
+        paths = tuple(Path(out_dirs[s]) / JAX_MODEL_FILE for s in spec.seeds)
+        return JaxTrainOutcome(algo, tuple(spec.seeds), int(spec.timesteps), 0.0, 0.0, paths, already_complete=True)
+    started_at = datetime.now(UTC).isoformat(timespec="seconds")
+    settings = rejax_config(algo, cfg, spec.timesteps)
+    for seed in spec.seeds:
+        directory = Path(out_dirs[seed])
+        for name in (JAX_MODEL_FILE, TRAIN_METADATA_FILE):
+            (directory / name).unlink(missing_ok=True)
+        record = {"identity": identities[seed], "rejax": settings, "data_dir": str(data_dir.resolve())}
+        write_train_config(directory, record)
+    params = make_env_params(
+        table=table, config=cfg, action_mode=ACTION_MODES[algo], no_physics_penalty=spec.no_physics_penalty
+    )
+    states, compile_s, train_s = train_seeds(algo, tuple(spec.seeds), spec.timesteps, params, cfg, on_progress)
+    paths = []
+    for i, seed in enumerate(spec.seeds):
+        directory = Path(out_dirs[seed])
+        paths.append(save_network(directory / JAX_MODEL_FILE, algo, states, i))
+        steps_done = int(np.asarray(states.global_step)[i])
+        atomic_write_json(
+            directory / TRAIN_METADATA_FILE,
+            {
+                "complete": True,
+                "backend": "jax",
+                "algo": algo,
+                "seed": int(seed),
+                "seeds_in_batch": [int(s) for s in spec.seeds],
+                "timesteps_requested": int(spec.timesteps),
+                "timesteps_done": steps_done,
+                "compile_s": round(compile_s, 3),
+                "train_s": round(train_s, 3),
+                "wall_s": round(compile_s + train_s, 3),
+                "steps_per_s": round(steps_done / max(train_s, 1e-9), 2),
+                "jax_devices": [str(d) for d in jax.devices()],
+                "started_at": started_at,
+                "command": redact_command(command if command is not None else sys.argv),
+                "git_commit": git_commit(),
+                "package_versions": package_versions(),
+            },
+        )
+    return JaxTrainOutcome(algo, tuple(spec.seeds), int(spec.timesteps), compile_s, train_s, tuple(paths))
