@@ -11,9 +11,21 @@ import numpy as np
 class Policy(Protocol):
     """A policy maps observations to actions in the env's action space.
 
-    ``action_mode`` says which env it needs (``"continuous"`` or ``"discrete"``).
-    ``begin_run`` is called once per run seed before its first episode (the Random baseline
-    seeds its generator there); ``act`` must be deterministic given the policy's state.
+    Required: ``name`` (the ``policy`` column of every record), ``action_mode`` (``"continuous"``:
+    three numbers in [0, 1]; ``"discrete"``: an index into the 125-point grid) and ``act``, which
+    must be deterministic given the policy's state.
+
+    Optional hooks, called by the evaluation runner (:mod:`solarchain_eval.evaluation.rollout`)
+    when the policy has them:
+
+    - ``begin_run(run_seed)``: once per run seed, before its first episode (the Random baseline
+      seeds its generator there);
+    - ``begin_episode(*, env, episode, run_seed, episode_seed, start_hour)``: after each reset,
+      before the first ``act`` (the Planner/Auditor wrapper plans the episode there);
+    - ``observe(info)``: after each step, with that step's ``info`` dict;
+    - ``end_episode()``: after the last step; a returned dict is kept in the episode's
+      ``extras`` (the wrapper returns its log rows and agentic metrics).
+
     A policy may also declare ``stateless = True``: its action depends on the observation only
     and ``act`` may be called from several threads, so its episodes can run concurrently
     (``evaluate --llm-concurrency``); without it, a run's episodes run in order.

@@ -55,7 +55,9 @@ def read_training_json(path: Path) -> dict[str, Any] | None:
         return json.loads(Path(path).read_text(encoding="utf-8"))
     except FileNotFoundError:
         return None
-    except (OSError, ValueError) as error:
+    except ValueError as error:
+        raise TrainingError(f"{path} is not valid JSON ({error}); remove the directory to retrain") from None
+    except OSError as error:
         raise TrainingError(f"{path} cannot be read ({error}); remove the directory to retrain") from None
 
 

@@ -12,8 +12,6 @@ from rich.table import Table
 from .common import CliError, console, err_console
 
 #: Goals of the JAX backend on 2 CPU cores.
-SAC_SPEEDUP_GOAL = 3.0
-PAPER_JAX_GOAL_MIN = 45.0
 
 
 def bench_jax(
@@ -73,10 +71,8 @@ def bench_jax(
     console.print(table)
     if "sac" in rates and "sac" in sb3_times.steps_per_s:
         ratio = rates["sac"] / sb3_times.steps_per_s["sac"]
-        verdict = "met" if ratio >= SAC_SPEEDUP_GOAL else "NOT met"
         console.print(
-            f"SAC: JAX {ratio:.2f}× SB3 in wall-clock steps/s, {cpu_ratios['sac']:.2f}× per CPU second "
-            f"(goal >= {SAC_SPEEDUP_GOAL:.0f}×: {verdict})"
+            f"SAC: JAX {ratio:.2f}× SB3 in wall-clock steps/s, {cpu_ratios['sac']:.2f}× per CPU second"
         )
     missing = [a for a in ("ppo", "sac", "dqn") if a not in rates]
     if missing:
@@ -96,10 +92,9 @@ def bench_jax(
         )
         estimate = measure.estimate_paper_wall_time(times, workers, paper)
         minutes = estimate["wall_s"] / 60
-        verdict = "met" if minutes <= PAPER_JAX_GOAL_MIN else "NOT met"
         console.print(
             f"paper preset with --backend jax on {workers} worker(s), from {label} rates: estimated wall time "
-            f"{minutes:.1f} min (goal <= {PAPER_JAX_GOAL_MIN:.0f} min on 2 CPU cores: {verdict}); total CPU "
+            f"{minutes:.1f} min; total CPU "
             f"{estimate['cpu_s'] / 60:.1f} min, of which SAC training {estimate['train_sac_cpu_s'] / 60:.1f} min"
         )
     console.print(

@@ -1,0 +1,144 @@
+"""The layout is the architecture: wings import only downwards, no import circle, a small top level.
+
+The layers (docs/architecture.md), lowest first. A module may import its own wing and any wing of
+a lower rank; wings of one rank do not import each other.
+"""
+
+from __future__ import annotations
+
+import ast
+from pathlib import Path
+
+import pytest
+
+PACKAGE = Path(__file__).resolve().parents[1] / "src" / "solarchain_eval"
+
+RANKS = {
+    "common": 0,
+    "protocol": 0,
+    "records_schema": 0,
+    "config": 1,
+    "data": 2,
+    "market": 3,
+    "envs": 4,
+    "agents": 5,
+    "llm": 5,
+    "governance": 6,
+    "evaluation": 7,
+    "training": 8,
+    "experiments": 9,
+    "report": 10,
+    "perf": 10,
+    "jax": 11,
+    "cli": 12,
+    "": 13,  # the package's face: solarchain_eval/__init__.py
+}
+#: The package's top level: its face and three contracts every layer reads.
+TOP_LEVEL = {"__init__.py", "config.py", "protocol.py", "records_schema.py", "py.typed"}
+
+
+def _module_name(path: Path) -> str:
+    parts = list(path.relative_to(PACKAGE).with_suffix("").parts)
+    if parts[-1] == "__init__":
+        parts.pop()
+    return ".".join(parts)
+
+
+def _imports(path: Path, *, top_level_only: bool) -> set[str]:
+    """First-party modules ``path`` imports (relative to the package), at module level or anywhere."""
+    module = _module_name(path)
+    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+    package = [p for p in package if p]
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    nodes = tree.body if top_level_only else list(ast.walk(tree))
+    if top_level_only:  # statements of the module body, including inside if/try blocks
+        stack, nodes = list(tree.body), []
+        while stack:
+            node = stack.pop()
+            nodes.append(node)
+            if isinstance(node, ast.If | ast.Try):
+                stack.extend([*node.body, *node.orelse, *getattr(node, "finalbody", [])])
+                for handler in getattr(node, "handlers", []):
+                    stack.extend(handler.body)
+    found: set[str] = set()
+    for node in nodes:
+        if isinstance(node, ast.ImportFrom):
+            if node.level:
+                base = package[: len(package) - (node.level - 1)] if node.level > 1 else package
+                target = ".".join([*base, *([node.module] if node.module else [])])
+            elif node.module and node.module.startswith("solarchain_eval"):
+                target = node.module.removeprefix("solarchain_eval").lstrip(".")
+            else:
+                continue
+            for alias in node.names:  # `from . import x` may name a submodule
+                sub = f"{target}.{alias.name}" if target else alias.name
+                found.add(sub if _exists(sub) else target)
+        elif isinstance(node, ast.Import):
+            for alias in node.names:
+                if alias.name.startswith("solarchain_eval"):
+                    found.add(alias.name.removeprefix("solarchain_eval").lstrip("."))
+    return found
+
+
+def _exists(module: str) -> bool:
+    path = PACKAGE.joinpath(*module.split("."))
+    return path.with_suffix(".py").is_file() or (path / "__init__.py").is_file()
+
+
+def _wing(module: str) -> str:
+    return module.split(".")[0]
+
+
+MODULES = {_module_name(p): p for p in sorted(PACKAGE.rglob("*.py"))}
+
+
+def test_every_wing_has_a_rank():
+    assert {_wing(m) for m in MODULES} <= set(RANKS), "a new wing needs a rank here and a line in docs/architecture.md"
+
+
+@pytest.mark.parametrize("module", sorted(MODULES))
+def test_imports_only_go_down(module):
+    wing = _wing(module)
+    wrong = sorted(
+        target
+        for target in _imports(MODULES[module], top_level_only=False)
+        if _wing(target) != wing and RANKS[_wing(target)] >= RANKS[wing]
+    )
+    assert not wrong, f"{module} (layer {wing}) imports {', '.join(wrong)} from its own or a higher layer"
+
+
+def test_no_import_circle():
+    graph = {m: {t for t in _imports(p, top_level_only=True) if t in MODULES and t != m} for m, p in MODULES.items()}
+    index: dict[str, int] = {}
+    low: dict[str, int] = {}
+    stack: list[str] = []
+    circles: list[list[str]] = []
+
+    def visit(node: str) -> None:  # Tarjan's strongly connected components
+        index[node] = low[node] = len(index)
+        stack.append(node)
+        for nxt in graph[node]:
+            if nxt not in index:
+                visit(nxt)
+                low[node] = min(low[node], low[nxt])
+            elif nxt in stack:
+                low[node] = min(low[node], index[nxt])
+        if low[node] == index[node]:
+            component = []
+            while True:
+                top = stack.pop()
+                component.append(top)
+                if top == node:
+                    break
+            if len(component) > 1:
+                circles.append(sorted(component))
+
+    for node in graph:
+        if node not in index:
+            visit(node)
+    assert not circles, f"import circles: {circles}"
+
+
+def test_the_top_level_is_only_the_face():
+    names = {p.name for p in PACKAGE.iterdir() if not p.name.startswith("__pycache__")}
+    assert {n for n in names if not (PACKAGE / n).is_dir()} == TOP_LEVEL
