@@ -71,9 +71,7 @@ def bench_jax(
     console.print(table)
     if "sac" in rates and "sac" in sb3_times.steps_per_s:
         ratio = rates["sac"] / sb3_times.steps_per_s["sac"]
-        console.print(
-            f"SAC: JAX {ratio:.2f}× SB3 in wall-clock steps/s, {cpu_ratios['sac']:.2f}× per CPU second"
-        )
+        console.print(f"SAC: JAX {ratio:.2f}× SB3 in wall-clock steps/s, {cpu_ratios['sac']:.2f}× per CPU second")
     missing = [a for a in ("ppo", "sac", "dqn") if a not in rates]
     if missing:
         console.print(f"no JAX paper estimate: it needs all three algorithms (missing {', '.join(missing)})")
