@@ -142,3 +142,46 @@ def test_no_import_circle():
 def test_the_top_level_is_only_the_face():
     names = {p.name for p in PACKAGE.iterdir() if not p.name.startswith("__pycache__")}
     assert {n for n in names if not (PACKAGE / n).is_dir()} == TOP_LEVEL
+
+
+#: The solar market's interface to the layers that are not specific to it (docs/architecture.md,
+#: "The market domain interface"): what evaluation, governance and the report may name from
+#: data/ and market/. A second market domain provides the same names; widening this set is a
+#: design decision, not a drive-by import.
+DOMAIN_INTERFACE = {
+    "evaluation": {
+        "data.default.resolve_data_dir",
+        "data.provenance.dataset_provenance",
+        "data.table.HourlyTable",
+        "data.table.load_table",
+        "market.baselines.BASELINES",
+    },
+    "governance": {
+        "market.actions.ActionCodec",
+        "market.actions.DiscreteActions",
+        "market.actions.action_jitter_f32",
+        "market.actions.initial_action",
+        "market.dynamics.StepOutcome",
+        "market.observation.OBSERVATION_NAMES",
+        "market.observation.OBS_GAP",
+        "market.observation.OBS_SLIPPAGE",
+        "market.observation.OBS_VIOLATION",
+    },
+    "report": {"data.files.MANIFEST_FILE", "market.baselines.BASELINES"},
+}
+
+
+@pytest.mark.parametrize("wing", sorted(DOMAIN_INTERFACE))
+def test_generic_layers_reach_the_market_only_through_its_interface(wing):
+    named: set[str] = set()
+    for module, path in MODULES.items():
+        if _wing(module) != wing:
+            continue
+        package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+        for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
+            if isinstance(node, ast.ImportFrom) and node.level and node.module:
+                base = package[: len(package) - (node.level - 1)] if node.level > 1 else package
+                target = ".".join([*base, node.module])
+                if _wing(target) in ("data", "market"):
+                    named |= {f"{target}.{alias.name}" for alias in node.names}
+    assert named <= DOMAIN_INTERFACE[wing], f"{wing} names {sorted(named - DOMAIN_INTERFACE[wing])} outside the interface"

@@ -20,6 +20,7 @@ from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
 from ..experiments.units import UnitResult
 from ..governance.request import GovernanceRequest
+from ..protocol import PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 from . import agentic as agentic_cli
 from . import app
@@ -140,7 +141,10 @@ def paper(
         help="Dataset directory (default: the embedded default dataset; the paper's numbers need the published one).",
     ),
     preset: Preset = typer.Option(
-        Preset.paper, "--preset", help="paper: 300,000 steps, 30 episodes, seeds 20260511-13. smoke: tiny budgets."
+        Preset.paper,
+        "--preset",
+        help=f"paper: {PAPER_TIMESTEPS:,} steps, {PAPER_EPISODES} episodes, seeds {PAPER_SEEDS[0]}-{PAPER_SEEDS[-1] % 100}. "
+        "smoke: tiny budgets.",
     ),
     timesteps: int | None = typer.Option(
         None, "--timesteps", min=1, help="Training steps per model (overrides the preset)."

@@ -10,6 +10,7 @@ import typer
 
 from ..agents.checkpoints import TRAINABLE_ALGOS
 from ..config import BenchmarkConfig, load_config
+from ..protocol import PAPER_SEED
 from ..training.lagrangian import DEFAULT_MULTIPLIER_LR, LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 from ..training.sb3_trainer import (
     DEFAULT_CHECKPOINT_EVERY,
@@ -43,7 +44,7 @@ def train_command(
         help=f"Algorithm: {', '.join(TRAINABLE_ALGOS)} (DQN acts on the 125-point grid; ppo-lag is PPO-Lagrangian, "
         "which needs --cost-limit).",
     ),
-    seed: int | None = typer.Option(None, "--seed", help="Training seed (default: the config seed, 20260511)."),
+    seed: int | None = typer.Option(None, "--seed", help=f"Training seed (default: the config seed, {PAPER_SEED})."),
     backend: str = typer.Option(
         "sb3",
         "--backend",

@@ -37,7 +37,7 @@ from ..evaluation.settings import (
     TRAIN_SETTINGS,
 )
 from ..governance.factory import AgenticOptions
-from ..protocol import EPISODE_SEED_RULES, PAPER_EPISODES, PAPER_SEEDS, independent_episode_seeds
+from ..protocol import EPISODE_SEED_RULES, PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS, independent_episode_seeds
 from ..training.lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
 from ..training.sb3_trainer import DEFAULT_CHECKPOINT_EVERY
 from .layout import UNITS_DIR, eval_unit_dir, seed_model_dir, train_unit_dir
@@ -55,7 +55,7 @@ class Preset:
 
 
 PRESETS = {
-    "paper": Preset(300_000, PAPER_EPISODES, PAPER_SEEDS, DEFAULT_CHECKPOINT_EVERY),
+    "paper": Preset(PAPER_TIMESTEPS, PAPER_EPISODES, PAPER_SEEDS, DEFAULT_CHECKPOINT_EVERY),
     # Tiny budgets that exercise every stage (PPO still collects one 2,048-step rollout).
     "smoke": Preset(300, 2, PAPER_SEEDS[:1], DEFAULT_CHECKPOINT_EVERY),
 }

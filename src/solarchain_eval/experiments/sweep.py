@@ -29,6 +29,7 @@ import pandas as pd
 from ..common.atomic_files import atomic_write_json, atomic_write_with
 from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
+from ..data.files import MANIFEST_FILE
 from ..data.provenance import dataset_provenance
 from ..evaluation.records import ACTIONS_FILE, METRICS_FILE
 from ..records_schema import EPISODE_COST
@@ -79,7 +80,7 @@ def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
     The paper's cities use the cached weather file when ``dataset.weather_cache`` is given; any
     other cities (synthetic or listed) get synthetic weather.
     """
-    from ..data.build import MANIFEST_FILE, build_dataset
+    from ..data.build import build_dataset
     from ..data.sources import WeatherSource, choose_weather
 
     if (out / MANIFEST_FILE).is_file():
@@ -148,7 +149,7 @@ def _prepare_points(
         else:
             data_dir = (root / DATASETS_DIR / point.dataset_key).resolve()
             if str(data_dir) not in tables:
-                fresh = not (data_dir / "manifest.json").is_file()
+                fresh = not (data_dir / MANIFEST_FILE).is_file()
                 if on_dataset is not None:  # before the build: a large one takes minutes
                     on_dataset(point.dataset_key, fresh)
                 build_point_dataset(sweep, point.dataset, data_dir)

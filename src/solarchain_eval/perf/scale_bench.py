@@ -18,6 +18,7 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
+from ..data.files import GENERATION_FILE
 from ..protocol import PAPER_SEED
 from .env_bench import single_env_steps_per_s, vector_env_steps_per_s
 
@@ -104,7 +105,7 @@ def measure_scale(
             cities=cities,
             nodes=nodes,
             hours=table.hours,
-            generation_rows=int(result.manifest["files"]["spatiotemporal_generation.csv"]["rows"]),
+            generation_rows=int(result.manifest["files"][GENERATION_FILE]["rows"]),
             weather_s=weather_s,
             build_s=build_s,
             build_cpu_s=build_cpu_s,

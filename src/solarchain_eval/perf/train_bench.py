@@ -28,7 +28,7 @@ import gymnasium as gym
 import numpy as np
 
 from ..agents.checkpoints import ACTION_MODES, algorithm_class
-from ..config import MarketConfig
+from ..config import BenchmarkConfig
 from ..experiments.grid import GridSpec, Unit, plan_units
 from ..experiments.layout import PAPER_METADATA_FILE, UNITS_DIR
 from ..market.observation import OBSERVATION_SHAPE
@@ -52,7 +52,7 @@ class TrivialEnv(gym.Env):
 
     def __init__(self, action_mode: str = "continuous") -> None:
         self.observation_space = observation_space()
-        self.action_space = action_space(action_mode, MarketConfig().discrete_levels)
+        self.action_space = action_space(action_mode, BenchmarkConfig().discrete_levels)
         self._obs = np.zeros(OBSERVATION_SHAPE, dtype=np.float32)
         self._k = 0
 

@@ -10,6 +10,8 @@ from collections.abc import Sequence
 from pathlib import Path
 from typing import Any
 
+from ..evaluation.records import METADATA_FILE
+from ..experiments.layout import PAPER_METADATA_FILE
 from .figures.style import FigureFile
 from .loading import ReportData
 from .naming import paper_order, policy_label, setting_label
@@ -130,7 +132,7 @@ def _run_metadata(data: ReportData) -> str:
     fields that do differ. Values are plain text; the full record stays in the metadata file.
     """
     records = run_records(data)
-    name = "paper_metadata.json" if data.kind == "paper" else "run_metadata.json"
+    name = PAPER_METADATA_FILE if data.kind == "paper" else METADATA_FILE
     if not records:
         return "<p>No per-run metadata found.</p>\n"
     keys = [k for k in dict.fromkeys(k for r in records for k in r) if k != "unit"]

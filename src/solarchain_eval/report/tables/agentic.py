@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import pandas as pd
 
+from ...evaluation.records import ACTIONS_FILE, AGENTIC_LOG_FILE
 from ...evaluation.settings import SETTING_AGENTIC, SETTING_AGENTIC_NO_PHYSICS
 from ..casestudy import select_case
 from ..loading import ReportData
@@ -43,7 +44,7 @@ def _agentic_groups(data: ReportData, key: str, title: str):
 
 def _step_count(data: ReportData, setting: str, policy: str, episodes: int) -> tuple[int, str]:
     """Governance steps of a group: log rows, else action rows, else none."""
-    for name, frame in (("agentic_logs.jsonl", data.logs), ("actions.csv", data.actions)):
+    for name, frame in ((AGENTIC_LOG_FILE, data.logs), (ACTIONS_FILE, data.actions)):
         if not frame.empty:
             rows = int(((frame["setting"] == setting) & (frame["policy"] == policy)).sum())
             if rows:
@@ -91,8 +92,8 @@ def llm_operations(data: ReportData, options: ReportOptions) -> ReportTable | Sk
         notes.append("The LLM retry count is zero for every row and is therefore not shown.")
     else:
         columns.append(Column("LLM Retries", integer("llm_retry_count")))
-    if sources - {"agentic_logs.jsonl"}:
-        notes.append("Steps count actions.csv rows where a group has no agentic log.")
+    if sources - {AGENTIC_LOG_FILE}:
+        notes.append(f"Steps count {ACTIONS_FILE} rows where a group has no agentic log.")
     if frame["llm_calls"].sum() > 0:
         columns += LLM_CALL_COLUMNS
         notes.append(
