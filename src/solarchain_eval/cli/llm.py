@@ -2,7 +2,9 @@
 
 from __future__ import annotations
 
+import contextlib
 import time
+from collections.abc import Iterator
 
 import typer
 from rich.table import Table
@@ -37,6 +39,29 @@ def _spec(model: str | None, port: int, parallel: int, threads: int | None, deco
     )
 
 
+def _port_message(port: int, problem: str) -> str:
+    return f"port {port} on 127.0.0.1 {problem} (choose another with --port)"
+
+
+def _check_port(port: int) -> None:
+    problem = local_server.port_problem(port)
+    if problem is not None:
+        raise CliError(_port_message(port, problem))
+
+
+@contextlib.contextmanager
+def _port_named(port: int) -> Iterator[None]:
+    """A port the server found taken as it started (another process took it after the check),
+    named with the option that picks another; a port picked free (``--port 0``) as the library says."""
+    try:
+        yield
+    except local_server.PortInUseError as error:
+        if not port or error.port != port:
+            raise
+        problem = local_server.port_problem(port) or "is already in use"
+        raise CliError(_port_message(port, problem)) from None
+
+
 @llm_app.command("serve")
 @reports_errors
 def serve(
@@ -67,10 +92,12 @@ def serve(
     Waits until the server answers, then prints its base URL and the flags that point
     evaluate/paper at it ([bold]--llm-api chat-json-object[/bold]).
     """
+    if port:
+        _check_port(port)  # before the model is looked up or loaded
     spec = _spec(model, port, parallel, threads, decoding)
     err_console.print(f"starting llama-cpp-python's server with {spec.model_path} ...")
     try:
-        with local_server.LocalServer(spec) as server:
+        with _port_named(port), local_server.LocalServer(spec) as server:
             console.print(server.base_url, highlight=False)
             err_console.print(
                 f"model '{spec.model_name}' ready; use --llm-base-url {server.base_url} --llm-api "
