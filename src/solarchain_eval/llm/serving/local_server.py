@@ -140,6 +140,23 @@ def resolve_model(model: str | None) -> tuple[str, Path | None]:
     return path.stem, path
 
 
+def is_local_model(model: str | None) -> bool:
+    """Whether ``--llm-model`` names a model the local backend serves: None or the default
+    model's name, or an existing file (a GGUF path)."""
+    return model is None or model == default_model_name() or Path(model).expanduser().is_file()
+
+
+def local_model_available(model: str | None = None) -> bool:
+    """Whether the local backend could serve ``model`` (None: the default model) now:
+    llama-cpp-python is importable and the model's GGUF file is there."""
+    if not llama_cpp_available() or not is_local_model(model):
+        return False
+    try:
+        return resolve_model(model)[1] is not None
+    except LLMConfigError:
+        return False
+
+
 def free_port() -> int:
     """An unused TCP port on 127.0.0.1."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
