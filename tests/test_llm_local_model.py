@@ -398,3 +398,15 @@ def test_requantize_is_only_for_the_default_model():
     command = local_server.LocalServer(spec).command()
     assert command[command.index("--requantize") + 1] == "Q4_0"
     assert "--requantize" not in local_server.LocalServer(dataclasses.replace(spec, requantize=None)).command()
+
+
+def test_bench_llm_with_no_backend_measures_the_local_model(monkeypatch):
+    _model_or_skip()
+    for name in ("SOLARCHAIN_LLM_BASE_URL", "OPENAI_BASE_URL", "SOLARCHAIN_LLM_MODEL", "OPENAI_MODEL"):
+        monkeypatch.delenv(name, raising=False)
+    before = set(_children(os.getpid()))
+    result = CliRunner().invoke(app, ["bench-llm", "--calls", "1", "--audits-per-plan", "0"], terminal_width=250)
+    assert result.exit_code == 0, result.output
+    assert f"bench-llm: {local_server.default_model_name()} via --llm-api {local_server.LOCAL_API}" in result.output
+    assert "1/1" in next(line for line in result.output.splitlines() if line.startswith("│ planner"))
+    assert set(_children(os.getpid())) <= before  # the server was stopped

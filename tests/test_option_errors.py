@@ -45,3 +45,26 @@ def test_cli_shows_flags(tmp_path: Path):
     result = CliRunner().invoke(app, ["evaluate", "--out", str(out), "--episodes", "1"])
     assert result.exit_code == 2
     assert f"--out {out} is an existing file" in " ".join(result.output.split())
+
+
+@pytest.mark.parametrize(
+    ("flag", "value", "kinds"),
+    [("--auditor", "wizard", "rule, llm, approve-only"), ("--planner", "wizard", "rule, llm, default")],
+)
+def test_unknown_planner_or_auditor_names_the_flag(tmp_path: Path, flag, value, kinds):
+    out = tmp_path / "run"
+    args = ["evaluate", "--agentic", "planner_auditor", flag, value, "--episodes", "1", "--out", str(out)]
+    result = CliRunner().invoke(app, args)
+    text = " ".join(result.output.split())
+    kind = flag.removeprefix("--")
+    assert result.exit_code == 2, text
+    assert f"{flag}: unknown {kind} '{value}' (choose from {kinds}" in text, text
+    assert "LLM settings" not in text and len(result.output.strip().splitlines()) == 1, text
+    assert not out.exists()
+
+
+def test_unknown_planner_or_auditor_names_the_field():
+    with pytest.raises(GovernanceRequestError, match=r"^auditor: unknown auditor 'wizard' \(choose from rule, "):
+        GovernanceRequest(agentic="planner_auditor", auditor="wizard").resolve()
+    with pytest.raises(GovernanceRequestError, match=r"^planner: unknown planner 'wizard' \(choose from rule, "):
+        GovernanceRequest(agentic="planner_auditor", planner="wizard", auditor="llm").resolve()

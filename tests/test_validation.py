@@ -142,3 +142,57 @@ def test_data_check_accepts_a_valid_dataset(tiny_dataset):
     assert result.exit_code == 0, result.output
     assert "Kunming, Wuhan, Xian" in result.output
     assert "1,152" in result.output  # 12 nodes × 96 hours
+
+
+def _bytes_changed(src: Path, dst: Path, name: str, change: Callable[[bytes], bytes]) -> Path:
+    shutil.copytree(src, dst)
+    (dst / name).write_bytes(change((dst / name).read_bytes()))
+    return dst
+
+
+def _in_line(line: int, at: int, inserted: bytes) -> Callable[[bytes], bytes]:
+    """Insert ``inserted`` ``at`` bytes into file line ``line`` (1-based)."""
+
+    def change(raw: bytes) -> bytes:
+        lines = raw.split(b"\n")
+        lines[line - 1] = lines[line - 1][:at] + inserted + lines[line - 1][at:]
+        return b"\n".join(lines)
+
+    return change
+
+
+NODE_ID_AT = len("2026-06-01T00:00:00+08:00,0,")  # a generation row's node_id, after its timestamp and hour
+
+CONTROL_CASES = {
+    "NUL in a node id": (GEN, _in_line(2, NODE_ID_AT, b"\x00\x00"), r"line 2: NUL byte \(0x00\) at character 29"),
+    "NUL in the header": (GEN, _in_line(1, 0, b"\x00"), r"line 1: NUL byte \(0x00\) at character 1"),
+    "NUL run in a value": (
+        "market_liquidity.csv",
+        _in_line(7, 30, b"\x00" * 8),
+        r"line 7: NUL byte \(0x00\) at character 31",
+    ),
+    "escape character": ("p2p_trades.csv", _in_line(3, 4, b"\x1b[0m"), r"line 3: control character 0x1b"),
+    "NUL after CRLF lines": (
+        GEN,
+        lambda raw: _in_line(4, 2, b"\x00")(raw).replace(b"\n", b"\r\n"),
+        r"line 4: NUL byte \(0x00\) at character 3",
+    ),
+}
+
+
+@pytest.mark.parametrize("case", sorted(CONTROL_CASES))
+def test_control_characters_are_named_at_their_line(tiny_dataset, tmp_path, case):
+    name, change, message = CONTROL_CASES[case]
+    data = _bytes_changed(tiny_dataset, tmp_path / "ds", name, change)
+    with pytest.raises(DatasetError, match=rf"{name}: {message}"):
+        load_raw_dataset(data)
+    check = CliRunner().invoke(app, ["data", "check", str(data)])
+    text = check.output.strip()
+    assert check.exit_code == 2, text
+    assert len(text.splitlines()) == 1 and "\x00" not in text and "\x1b" not in text, repr(text)
+    assert name in text and "line " in text and "not in urban_energy_nodes.csv" not in text, repr(text)
+
+
+def test_tabs_and_quoted_newlines_are_not_control_characters(tiny_dataset, tmp_path):
+    data = _mutated(tiny_dataset, tmp_path / "ds", "urban_energy_nodes.csv", lambda f: f.assign(note="a\tb\nc"))
+    load_raw_dataset(data)  # no error

@@ -37,7 +37,10 @@ GOVERNANCE: Any = None
 
 
 def governance_options(
-    *, only: Collection[str] | None = None, fixed: Mapping[str, Any] | None = None
+    *,
+    only: Collection[str] | None = None,
+    fixed: Mapping[str, Any] | None = None,
+    unset: Mapping[str, str] | None = None,
 ) -> Callable[[Callable], Callable]:
     """Decorator: replace the command's ``governance`` parameter with the request's options.
 
@@ -47,8 +50,11 @@ def governance_options(
         The fields the command offers as options (default: every field not in ``fixed``).
     fixed : mapping, optional
         Field values the command sets itself (e.g. ``bench-llm``'s ``planner="llm"``).
+    unset : mapping, optional
+        Fields whose option defaults to None, which the command resolves itself, each with the
+        sentence its help adds on that default (e.g. ``bench-llm``'s ``llm_backend``).
     """
-    fixed = dict(fixed or {})
+    fixed, unset = dict(fixed or {}), dict(unset or {})
     hints = typing.get_type_hints(GovernanceRequest)
     offered = [f for f in fields(GovernanceRequest) if (only is None or f.name in only) and f.name not in fixed]
 
@@ -61,8 +67,11 @@ def governance_options(
                 continue
             for f in offered:
                 decls = f.metadata.get("param_decls", (flag_of(f.name),))  # e.g. an on/off pair of flags
-                option = typer.Option(f.default, *decls, help=f.metadata["help"], rich_help_panel=PANEL)
-                parameters.append(inspect.Parameter(f.name, parameter.kind, default=option, annotation=hints[f.name]))
+                default, help, annotation = f.default, f.metadata["help"], hints[f.name]
+                if f.name in unset:
+                    default, help, annotation = None, f"{help} {unset[f.name]}", annotation | None
+                option = typer.Option(default, *decls, help=help, rich_help_panel=PANEL)
+                parameters.append(inspect.Parameter(f.name, parameter.kind, default=option, annotation=annotation))
 
         @functools.wraps(func)
         def command(*args: Any, **kwargs: Any) -> Any:

@@ -2,12 +2,17 @@
 
 from __future__ import annotations
 
+import contextlib
+import os
 import time
+from collections.abc import Iterator, Mapping
+from dataclasses import replace
 
 import typer
 from rich.table import Table
 
 from ..governance.request import GovernanceRequest
+from ..llm.client import BASE_URL_VARS
 from ..llm.serving import local_server
 from . import agentic as agentic_cli
 from . import app
@@ -35,6 +40,29 @@ def _spec(model: str | None, port: int, parallel: int, threads: int | None, deco
         decoding=decoding,
         requantize=local_server.file_type_for(model),
     )
+
+
+def _port_message(port: int, problem: str) -> str:
+    return f"port {port} on 127.0.0.1 {problem} (choose another with --port)"
+
+
+def _check_port(port: int) -> None:
+    problem = local_server.port_problem(port)
+    if problem is not None:
+        raise CliError(_port_message(port, problem))
+
+
+@contextlib.contextmanager
+def _port_named(port: int) -> Iterator[None]:
+    """A port the server found taken as it started (another process took it after the check),
+    named with the option that picks another; a port picked free (``--port 0``) as the library says."""
+    try:
+        yield
+    except local_server.PortInUseError as error:
+        if not port or error.port != port:
+            raise
+        problem = local_server.port_problem(port) or "is already in use"
+        raise CliError(_port_message(port, problem)) from None
 
 
 @llm_app.command("serve")
@@ -67,10 +95,12 @@ def serve(
     Waits until the server answers, then prints its base URL and the flags that point
     evaluate/paper at it ([bold]--llm-api chat-json-object[/bold]).
     """
+    if port:
+        _check_port(port)  # before the model is looked up or loaded
     spec = _spec(model, port, parallel, threads, decoding)
     err_console.print(f"starting llama-cpp-python's server with {spec.model_path} ...")
     try:
-        with local_server.LocalServer(spec) as server:
+        with _port_named(port), local_server.LocalServer(spec) as server:
             console.print(server.base_url, highlight=False)
             err_console.print(
                 f"model '{spec.model_name}' ready; use --llm-base-url {server.base_url} --llm-api "
@@ -86,6 +116,43 @@ def serve(
         err_console.print("server stopped")
 
 
+BENCH_BACKEND_HELP = (
+    "bench-llm's default: remote when an endpoint is given (--llm-base-url, $SOLARCHAIN_LLM_BASE_URL, "
+    "$OPENAI_BASE_URL) or --llm-api/--llm-model name a remote API or model, else local (when installed)."
+)
+
+
+def bench_backend(request: GovernanceRequest, *, environ: Mapping[str, str] | None = None) -> str:
+    """The backend ``bench-llm`` measures: ``--llm-backend`` when given; else remote when an endpoint
+    is (``--llm-base-url`` or its environment variables), or when the options name a remote model
+    or API; else the local model, when installed (llama-cpp-python and the model package, or a
+    GGUF file given with ``--llm-model``).
+
+    Raises
+    ------
+    CliError
+        None given and none of the two available: says how to get either.
+    """
+    if request.llm_backend is not None:
+        return request.llm_backend
+    env = os.environ if environ is None else environ
+    if request.llm_base_url is not None or any(env.get(name) for name in BASE_URL_VARS):
+        return "remote"
+    if request.llm_api is not None and request.llm_api != local_server.LOCAL_API:
+        return "remote"  # an API only a remote server speaks
+    if request.llm_threads is not None or request.llm_decoding is not None:
+        return "local"  # options of the local server (which say what is missing, if anything)
+    if local_server.local_model_available(request.llm_model):
+        return "local"
+    if request.llm_model is not None and not local_server.is_local_model(request.llm_model):
+        return "remote"  # a remote model by name, on the default endpoint
+    raise CliError(
+        "no model to measure: install the local one (pip install 'solarchain-eval[llm]': llama-cpp-python and "
+        "the default model) or give an endpoint (--llm-base-url URL or $SOLARCHAIN_LLM_BASE_URL, with --llm-api "
+        "and --llm-model)"
+    )
+
+
 @app.command("bench-llm")
 @reports_errors
 @agentic_cli.governance_options(
@@ -97,7 +164,8 @@ def serve(
         "llm_cache": None,
         "llm_cache_mode": "off",
         "diagnostics": None,
-    }
+    },
+    unset={"llm_backend": BENCH_BACKEND_HELP},
 )
 def bench_llm(
     calls: int = typer.Option(
@@ -113,7 +181,8 @@ def bench_llm(
 ) -> None:
     """Median and p90 latency per planner and auditor call, tokens/s and schema validity.
 
-    With --llm-backend local it also prints the server's CPU seconds per call (steadier than
+    Without an endpoint (--llm-base-url, $SOLARCHAIN_LLM_BASE_URL) it measures the local model,
+    when installed (--llm-backend local). With --llm-backend local it also prints the server's CPU seconds per call (steadier than
     latency on a shared machine) and shows what the model answered in a calm and in a risky
     situation, i.e. whether its decisions respond to the risk signals. Nothing is cached.
     Targets for the default local model on 2 cores: auditor call <= 1 s median, planner call
@@ -122,6 +191,10 @@ def bench_llm(
     from ..llm import StructuredLLM
     from ..perf.llm_bench import run_llm_bench
 
+    backend = bench_backend(governance)
+    if governance.llm_backend is None and backend == "local":
+        err_console.print("no endpoint given: measuring the local model (--llm-backend local)")
+    governance = replace(governance, llm_backend=backend)
     options = agentic_cli.resolve(governance)
     assert options is not None and options.llm is not None
     with agentic_cli.serving(governance, options) as server:

