@@ -46,7 +46,7 @@ def bench(
     Measures (a) one env through gym.make with random actions, resets included, (b) the native
     vector env at --num-envs sub-environments, (c) evaluating 1,620 baseline episodes with output
     files. Each figure is repeated; median and best are shown (shared machines are noisy).
-    Current figures and the machine behind them: docs/performance.md.
+    Measured figures: docs/performance.md.
     """
     from ..data.default import resolve_data_dir
     from ..perf import env_bench as measure

@@ -40,8 +40,7 @@ def bench_train(
     a trivial env with the same spaces, then estimate the paper preset's wall time (300,000 steps,
     18 models, 54 evaluation units in 4 settings) on --workers workers by simulating the grid scheduler.
 
-    Targets (2 cores): PPO >= 800, DQN >= 800, SAC >= 85 steps/s; paper preset <= 3.5 h with 2 workers.
-    With --backend jax: SAC >= 3x SB3's steps/s, and the paper preset <= 45 min on 2 CPU cores.
+    Measured figures: docs/performance.md.
     """
     if backend not in ("sb3", "jax"):
         raise CliError(f"unknown backend '{backend}' (choose from sb3, jax)")

@@ -185,8 +185,7 @@ def bench_llm(
     when installed (--llm-backend local). With --llm-backend local it also prints the server's CPU seconds per call (steadier than
     latency on a shared machine) and shows what the model answered in a calm and in a risky
     situation, i.e. whether its decisions respond to the risk signals. Nothing is cached.
-    Targets for the default local model on 2 cores: auditor call <= 1 s median, planner call
-    <= 3 s median.
+    Measured figures: docs/performance.md.
     """
     from ..llm import StructuredLLM
     from ..perf.llm_bench import run_llm_bench

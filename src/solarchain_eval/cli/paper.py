@@ -181,7 +181,7 @@ def paper(
     ray_address: str | None = typer.Option(
         None,
         "--ray-address",
-        help="Run units as Ray tasks: auto, ray://host:port, or local (needs the ray extra: pip install solarchain-eval[ray]).",
+        help="Run units as Ray tasks: auto, ray://host:port, or local (needs the ray extra: pip install -e '.[ray]').",
     ),
     episode_seeds: EpisodeSeeds = typer.Option(
         EpisodeSeeds.paper,

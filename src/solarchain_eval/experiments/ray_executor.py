@@ -39,7 +39,9 @@ def _import_ray() -> Any:
     try:
         import ray
     except ImportError:
-        raise RayUnavailableError.about("{opt_ray_address} needs ray: pip install 'solarchain-eval[ray]'") from None
+        raise RayUnavailableError.about(
+            "{opt_ray_address} needs ray: pip install -e '.[ray]' in a clone of the repository"
+        ) from None
     return ray
 
 

@@ -58,7 +58,7 @@ class GovernanceRequest:
         "remote",
         "remote: the endpoint of --llm-base-url. local: start llama-cpp-python's server with --llm-model "
         "(default: the bundled SmolLM2-135M-Instruct; or a GGUF path) on 127.0.0.1 for the run and stop it after; "
-        "no key or network needed (needs solarchain-eval\\[llm]). See docs/llm.md.",
+        "no key or network needed (needs the llm extra). See docs/llm.md.",
     )
     planner: str | None = _option(None, f"Planner: {' | '.join(PLANNER_KINDS)} (default rule).")
     auditor: str | None = _option(None, f"Auditor: {' | '.join(AUDITOR_KINDS)} (default rule).")

@@ -248,7 +248,7 @@ def train(
 
         if importlib.util.find_spec("tensorboard") is None:
             raise TrainingError.about(
-                "{opt_tensorboard_dir} needs the tensorboard package: pip install 'solarchain-eval[tensorboard]'"
+                "{opt_tensorboard_dir} needs the tensorboard package: pip install -e '.[tensorboard]' in a clone of the repository"
             )
 
     set_torch_threads(spec.torch_threads)

