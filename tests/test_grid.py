@@ -242,7 +242,7 @@ def test_failing_unit_stops_the_run_or_is_recorded_with_keep_going(tiny_dataset,
 
 
 def test_smoke_preset_through_a_local_ray_instance(smoke_root, tiny_dataset, tmp_path):
-    ray = pytest.importorskip("ray", reason="ray is not installed (pip install 'solarchain-eval[ray]')")
+    ray = pytest.importorskip("ray", reason="ray is not installed (pip install -e '.[ray]')")
     ray.init(num_cpus=2, include_dashboard=False, log_to_driver=False)
     try:
         root = tmp_path / "ray"

@@ -18,8 +18,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
-pytest.importorskip("gymnax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
+pytest.importorskip("jax", reason="the JAX backend is optional: pip install -e '.[jax]'")
+pytest.importorskip("gymnax", reason="the JAX backend is optional: pip install -e '.[jax]'")
 
 NUM_ENVS, EPISODES = 4, 2
 

@@ -23,8 +23,8 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
-pytest.importorskip("gymnax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
+pytest.importorskip("jax", reason="the JAX backend is optional: pip install -e '.[jax]'")
+pytest.importorskip("gymnax", reason="the JAX backend is optional: pip install -e '.[jax]'")
 
 #: Fractions in [0, 1] whose natural scale is 1 (see the module docstring).
 UNIT_SCALE = {"drawdown", "token_drawdown", "physics_violation_rate", "cost"}

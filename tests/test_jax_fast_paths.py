@@ -12,8 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
-pytest.importorskip("gymnax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
+pytest.importorskip("jax", reason="the JAX backend is optional: pip install -e '.[jax]'")
+pytest.importorskip("gymnax", reason="the JAX backend is optional: pip install -e '.[jax]'")
 
 
 def special_actions(rng: np.random.Generator, n: int) -> np.ndarray:

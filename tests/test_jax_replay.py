@@ -6,8 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
-pytest.importorskip("rejax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
+pytest.importorskip("jax", reason="the JAX backend is optional: pip install -e '.[jax]'")
+pytest.importorskip("rejax", reason="the JAX backend is optional: pip install -e '.[jax]'")
 
 import jax  # noqa: E402
 import jax.numpy as jnp  # noqa: E402

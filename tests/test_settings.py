@@ -60,3 +60,22 @@ def test_single_episode_std_is_undefined_in_records_and_report():
     assert mean == -1.5 and math.isnan(std)
     (two,) = summarize(pd.concat([frame, frame.assign(episode=1, cumulative_reward=-2.5)]))
     assert two["metrics"]["cumulative_reward"]["std"] == pd.Series([-1.5, -2.5]).std(ddof=1)
+
+
+def test_a_registered_setting_runs_through_the_grid_under_its_name(monkeypatch, tiny_dataset, tmp_path):
+    """A setting added with register_setting is evaluated (its records carry its name), not refused."""
+    from solarchain_eval.evaluation.runner import EvaluationSpec as Spec
+    from solarchain_eval.experiments.grid import GridSpec
+    from solarchain_eval.experiments.paper import run_paper
+
+    monkeypatch.setitem(KNOWN_SETTINGS, "stress", KNOWN_SETTINGS["main"])  # removed again after the test
+    register_setting(Setting("stress", True, False, "main", "Stress", "RL stress", ("static",)))
+    spec = GridSpec.from_preset(
+        "smoke", episodes=2, seeds=(7,), settings=("stress",), policies=("static",), data_dir=tiny_dataset
+    )
+    outcome = run_paper(spec, tmp_path / "root")
+    assert outcome.complete and [u.name for u in outcome.units] == ["eval/static-stress-7"]
+    metrics = pd.read_csv(tmp_path / "root" / "combined" / "stress" / "metrics.csv")
+    assert set(metrics["setting"]) == {"stress"} and len(metrics) == 2
+    with pytest.raises(ValueError, match="no_physics_penalty=True"):
+        Spec(policies=["static"], setting_label="stress")  # the stress reward drops the physics penalty

@@ -212,7 +212,7 @@ def test_a_sweep_trains_and_evaluates_learned_policies_inside_each_point(tmp_pat
 
 
 def test_a_sweep_through_ray_ships_each_points_dataset(tmp_path):
-    ray = pytest.importorskip("ray", reason="ray is not installed (pip install 'solarchain-eval[ray]')")
+    ray = pytest.importorskip("ray", reason="ray is not installed (pip install -e '.[ray]')")
     from solarchain_eval.experiments.sweep import run_sweep
 
     sweep = load_sweep(_write(tmp_path, TINY.replace("seeds: [7, 8]", "seeds: [7]")))

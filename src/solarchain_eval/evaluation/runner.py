@@ -34,9 +34,7 @@ from .inflight import run_in_flight
 from .records import METADATA_FILE, write_records
 from .rollout import EpisodeResult, run_policy
 from .rundir import RunDirWriter, kill_point
-from .settings import (
-    setting_name,
-)
+from .settings import KNOWN_SETTINGS, setting_name
 
 
 @dataclass
@@ -45,7 +43,9 @@ class EvaluationSpec:
 
     ``policies`` are names (built with ``make_policy``) or ready :class:`Policy` objects.
     With ``agentic`` set, every policy is wrapped by the Planner/Auditor layer and the
-    setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``).
+    setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``). ``setting_label`` names a
+    setting added with :func:`~solarchain_eval.evaluation.settings.register_setting` instead; its
+    reward and governance must agree with ``no_physics_penalty`` and ``agentic``.
     """
 
     policies: Sequence[str | Policy]
@@ -59,9 +59,25 @@ class EvaluationSpec:
     agentic: AgenticOptions | None = None
     #: Episodes in flight (threads; see :mod:`.inflight`). The results do not depend on it.
     concurrency: int = 1
+    #: A registered setting's name for the records (None: the paper's setting of this reward and governance).
+    setting_label: str | None = None
+
+    def __post_init__(self) -> None:
+        if self.setting_label is None:
+            return
+        known = KNOWN_SETTINGS.get(self.setting_label)
+        if known is None:
+            raise ValueError(f"unknown setting {self.setting_label!r} (registered: {', '.join(KNOWN_SETTINGS)})")
+        if (known.no_physics_penalty, known.agentic) != (self.no_physics_penalty, self.agentic is not None):
+            raise ValueError(
+                f"setting {self.setting_label!r} has no_physics_penalty={known.no_physics_penalty} and "
+                f"agentic={known.agentic}; the evaluation asks for {self.no_physics_penalty} and {self.agentic is not None}"
+            )
 
     @property
     def setting(self) -> str:
+        if self.setting_label is not None:
+            return self.setting_label
         return setting_name(agentic=self.agentic is not None, no_physics_penalty=self.no_physics_penalty)
 
 

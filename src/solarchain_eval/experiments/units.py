@@ -219,6 +219,7 @@ def _evaluate_unit(task: UnitTask) -> None:
         models=dict(task.model_paths),
         episode_seeds=EPISODE_SEED_RULES[task.episode_seed_protocol],
         agentic=task.agentic,  # the Planner/Auditor layer in the agentic settings
+        setting_label=unit.setting,
     )
     if spec.setting != unit.setting:
         raise ValueError(f"unit {unit.name}: the task evaluates setting {spec.setting!r}")
