@@ -84,3 +84,22 @@ def test_weather_not_covering_the_window_is_rejected(tmp_path, paper_weather):
     weather = read_weather_cache(paper_weather, PAPER_CITIES)
     with pytest.raises(WeatherError, match="Beijing.*first gap at 2026-05-01"):
         _build(weather, tmp_path, end="2026-05-03")
+
+
+def test_data_build_names_the_papers_weather_and_dataset(tmp_path, paper_weather):
+    """The CLI says when the weather is the paper's payload (by sha256) and the CSVs the published ones."""
+    from typer.testing import CliRunner
+
+    from solarchain_eval.cli import app
+    from solarchain_eval.data.published import PAPER_WEATHER_SHA256
+
+    assert sha256_file(paper_weather) == PAPER_WEATHER_SHA256
+    paper = CliRunner().invoke(
+        app, ["data", "build", "--out", str(tmp_path / "p"), "--weather-cache", str(paper_weather)]
+    )
+    assert paper.exit_code == 0, paper.output
+    assert "the paper's cached Open-Meteo payload" in paper.output
+    assert "byte-identical to the paper's published dataset" in paper.output
+    other = CliRunner().invoke(app, ["data", "build", "--out", str(tmp_path / "s"), "--weather", "synthetic"])
+    assert other.exit_code == 0, other.output
+    assert "Open-Meteo payload" not in other.output and "byte-identical" not in other.output

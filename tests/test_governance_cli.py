@@ -10,8 +10,8 @@ import pytest
 from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
+from solarchain_eval.report.audit_quality import audit_quality, ratio_interval
 from solarchain_eval.report.build import build_report
-from solarchain_eval.report.governance import audit_quality, ratio_interval
 from solarchain_eval.report.tables.model import ReportTable, Skipped
 
 

@@ -42,7 +42,7 @@ REPORT_DERIVED = {
     "audit_step_delta",
     "city_hour_liquidity",
     "city_hour_reward",
-    # audit-quality quantities report/governance.py derives from governance_diagnostics.csv
+    # audit-quality quantities report/audit_quality.py derives from governance_diagnostics.csv
     "delta_artificial_liquidity",
     "delta_reward",
     "false_alarm_rate",

@@ -27,7 +27,6 @@ from ..config import BenchmarkConfig
 from .checkpoints import ACTION_MODES, TRAIN_CONFIG_FILE, read_train_config, trained_algo
 
 JAX_MODEL_FILE = "jax_model.msgpack"
-JAX_BACKEND = "jax"
 
 
 def jax_model_path(name: str, models: dict[str, Path]) -> Path | None:

@@ -21,7 +21,7 @@ from ..data.cities import (
 )
 from ..data.fdia import FdiaError, FdiaScenario, parse_severity
 from ..data.files import DATASET_FILES, MANIFEST_FILE
-from ..data.published import matches_published
+from ..data.published import PAPER_WEATHER_SHA256, matches_published
 from ..data.sources import Weather, WeatherSource, choose_weather
 from ..data.weather import WeatherError
 from . import app
@@ -188,6 +188,8 @@ def _show_build(result, out: Path, source: str, seed: int, n_cities: int) -> Non
     say(f"weather: {source}; seed {seed}; {result.manifest['hours']} hours; {n_cities} cities", err=False)
     fdia = result.manifest["fdia"]
     say(f"false data: {fdia['injected_records']:,} records, {fdia['pattern']}, rate {fdia['rate']}", err=False)
+    if result.manifest.get("weather_sha256") == PAPER_WEATHER_SHA256:
+        say("weather: the paper's cached Open-Meteo payload (sha256 matches)", err=False)
     if matches_published({name: info["sha256"] for name, info in files.items()}):
         say("byte-identical to the paper's published dataset", style="bold green", err=False)
 

@@ -69,10 +69,6 @@ class FdiaScenario:
         if self.burst_hours < 1:
             raise FdiaError(f"fdia burst hours must be at least 1, got {self.burst_hours}")
 
-    @property
-    def is_paper_default(self) -> bool:
-        return self.rate == FDIA_FRACTION and self.severity is None and self.pattern == "uniform"
-
     def describe(self) -> dict[str, Any]:
         """The scenario as recorded in ``manifest.json``."""
         out: dict[str, Any] = {

@@ -81,10 +81,6 @@ class GridSpec:
     #: Per-setting policy lists ((setting, policies), ...) that override ``policies`` there.
     policies_by_setting: tuple[tuple[str, tuple[str, ...]], ...] = ()
 
-    @property
-    def has_agentic(self) -> bool:
-        return any(KNOWN_SETTINGS[s].agentic for s in self.settings)
-
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         listed = KNOWN_SETTINGS[setting].policies
         chosen = dict(self.policies_by_setting).get(setting)

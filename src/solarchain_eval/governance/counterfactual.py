@@ -21,7 +21,6 @@ bit for bit.
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 from ..market.actions import ActionCodec
@@ -29,7 +28,6 @@ from ..market.dynamics import StepOutcome
 from ..records_schema import DIAGNOSTIC_NAMES, DIAGNOSTIC_OUTCOMES, DIAGNOSTIC_ROLES, DIAGNOSTIC_STEP_COLUMNS, names
 
 Action = tuple[float, float, float]
-Evaluator = Callable[[Action], StepOutcome]
 
 #: The three evaluated actions, as column prefixes (records_schema.DIAGNOSTIC_ROLES).
 ACTION_ROLES = tuple(DIAGNOSTIC_ROLES)

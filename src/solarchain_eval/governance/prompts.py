@@ -15,8 +15,6 @@ from __future__ import annotations
 import json
 from typing import Any
 
-PROMPT_VERSION = 3  # 3: one system prompt for both roles, the role named in the user message
-
 #: The start both system prompts share: a server that keeps the previous request's tokens
 #: (llama.cpp's prompt cache, vLLM's prefix caching, OpenAI's prompt caching) re-reads only what
 #: follows it when planner and auditor calls alternate.

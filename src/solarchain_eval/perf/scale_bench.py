@@ -22,10 +22,8 @@ from ..data.files import GENERATION_FILE
 from ..protocol import PAPER_SEED
 from .env_bench import single_env_steps_per_s, vector_env_steps_per_s
 
+
 #: The issue's grid: 50, 500 and 5,000 nodes, over 5 and 50 cities.
-DEFAULT_SCALES = ((5, 10), (5, 100), (5, 1000), (50, 1), (50, 10), (50, 100))
-
-
 @dataclass(frozen=True)
 class ScaleResult:
     cities: int

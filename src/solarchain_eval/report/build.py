@@ -9,11 +9,10 @@ from pathlib import Path
 from ..common.atomic_files import atomic_write_text
 from ..experiments.layout import REPORT_DIR
 from .figures import FigureFile, build_figures
-from .figures.heatmap import HEATMAPS
 from .html import render_html
 from .loading import ReportData, load_report_data
 from .options import ReportOptions
-from .tables import TABLE_BUILDERS, ReportTable, Skipped, build_tables, overlap_warning, to_csv, to_latex, to_markdown
+from .tables import ReportTable, Skipped, build_tables, overlap_warning, to_csv, to_latex, to_markdown
 
 FORMATS = ("md", "tex", "csv", "html")
 TABLE_FORMATS = {"md": to_markdown, "tex": to_latex, "csv": to_csv}
@@ -128,8 +127,3 @@ def build_report(
     if "html" in formats:
         outcome.files.append(atomic_write_text(out / INDEX_FILE, render_html(data, tables, drawn, outcome.warnings)))
     return outcome
-
-
-#: Every table and figure key the report knows (for docs and tests).
-TABLE_KEYS = tuple(builder.__name__ for builder in TABLE_BUILDERS)
-HEATMAP_KEYS = tuple(spec[0] for spec in HEATMAPS)

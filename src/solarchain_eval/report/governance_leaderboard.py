@@ -18,7 +18,7 @@ import pandas as pd
 from ..common.atomic_files import atomic_write_csv, atomic_write_text
 from ..experiments.governance import CombinationRun, leaderboard_frames
 from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
-from .governance import audit_quality, step_frame
+from .audit_quality import audit_quality, step_frame
 from .statistics import DEFAULT_RESAMPLES
 from .tables.governance import quality_table, rank
 from .tables.model import to_markdown

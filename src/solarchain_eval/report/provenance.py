@@ -87,8 +87,3 @@ def run_records(data: ReportData) -> list[dict[str, Any]]:
     return [
         {"unit": name, **{k: meta[k] for k in RUN_FIELDS if k in meta}} for name, meta in data.unit_metadata.items()
     ]
-
-
-def metadata_dump(data: ReportData) -> str:
-    """The run's metadata file as indented JSON (``{}`` when absent)."""
-    return json.dumps(data.metadata, indent=2, sort_keys=True, default=str)

@@ -6,7 +6,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from ..governance import audit_quality, step_frame
+from ..audit_quality import audit_quality, step_frame
 from ..loading import ReportData
 from ..options import ReportOptions
 from ..tables.governance import NO_DIAGNOSTICS

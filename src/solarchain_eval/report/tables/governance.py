@@ -1,6 +1,6 @@
 """Governance diagnostics tables: audit quality per planner/auditor (docs/governance.md).
 
-:func:`quality_table` renders any frame of :func:`~solarchain_eval.report.governance.audit_quality`
+:func:`quality_table` renders any frame of :func:`~solarchain_eval.report.audit_quality.audit_quality`
 rows (the leaderboard of ``solarchain-eval governance`` and the report's section);
 :func:`governance_diagnostics` is the report's table builder.
 """
@@ -10,7 +10,7 @@ from __future__ import annotations
 import pandas as pd
 
 from ...governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
-from ..governance import audit_quality
+from ..audit_quality import audit_quality
 from ..loading import ReportData
 from ..naming import AGENTIC_REWARD_LABELS, policy_label, setting_label
 from ..options import ReportOptions
@@ -31,11 +31,6 @@ def _ci(name: str, digits: int):
 
 def _plain(name: str, digits: int):
     return lambda row: fixed(row[name], digits)
-
-
-def component_label(kind: str, model: str | None = None) -> str:
-    """A planner/auditor kind as the tables print it (``llm:MODEL`` when the model is known)."""
-    return f"llm:{model}" if kind == "llm" and model else str(kind)
 
 
 def rank(quality: pd.DataFrame) -> pd.DataFrame:
