@@ -96,3 +96,20 @@ def test_cli_reports_config_errors_with_exit_status_2(tmp_path):
     assert "unknown key 'seeed'" in result.output
     result = CliRunner().invoke(app, ["evaluate", "--config", str(tmp_path / "nope.yaml")])
     assert result.exit_code == 2 and "config file not found" in result.output
+
+
+def test_evaluate_reads_its_defaults_from_the_evaluation_section(tmp_path, tiny_dataset):
+    """evaluation.episodes and evaluation.policies are honoured; the options win when given."""
+    import pandas as pd
+
+    path = tmp_path / "eval.yaml"
+    path.write_text("evaluation:\n  episodes: 2\n  policies: [myopic]\n")
+    args = ["evaluate", "--config", str(path), "--data", str(tiny_dataset), "--seeds", "5"]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "a")])
+    assert result.exit_code == 0, result.output
+    metrics = pd.read_csv(tmp_path / "a" / "metrics.csv")
+    assert list(metrics["policy"]) == ["myopic", "myopic"] and list(metrics["episode"]) == [0, 1]
+    result = CliRunner().invoke(app, [*args, "--episodes", "1", "--policies", "static", "--out", str(tmp_path / "b")])
+    assert result.exit_code == 0, result.output
+    metrics = pd.read_csv(tmp_path / "b" / "metrics.csv")
+    assert list(metrics["policy"]) == ["static"] and list(metrics["episode"]) == [0]
