@@ -24,7 +24,6 @@ from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from ..governance.request import GovernanceRequest
 from ..llm.errors import LLMConfigError
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
-from ..report.governance_leaderboard import governance_leaderboard, write_governance_leaderboard
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
@@ -242,6 +241,8 @@ def governance(
                 on_combination=lambda c, s: say(f"{s}: {c.planner_label} planner, {c.auditor_label} auditor"),
                 command=invoked_command(),
             )
+        from ..report.governance_leaderboard import governance_leaderboard, write_governance_leaderboard
+
         board = governance_leaderboard(runs, threshold=unsafe_threshold, resamples=resamples)
         files = write_governance_leaderboard(board, writer.staging)
         metadata = {
