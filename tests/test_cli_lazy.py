@@ -46,3 +46,20 @@ def test_listed_help_matches_each_command():
         assert " ".join(command.help.split("\n\n")[0].split()) == first_paragraph, name
         callback = command.callback if command.callback is not None else next(iter(command.commands.values())).callback
         assert callback.__module__ == f"solarchain_eval.cli.{module}", name
+
+
+def test_report_help_imports_no_heavy_module():
+    code = (
+        "import sys\nsys.argv = ['solarchain-eval', 'report', '--help']\nfrom solarchain_eval.cli import main\n"
+        "try:\n    main()\nexcept SystemExit:\n    pass"
+    )
+    assert [m for m in loaded_after(code) if m in ("pandas", "scipy", "matplotlib")] == []
+
+
+def test_report_exports_resolve_lazily_to_their_one_definition():
+    import solarchain_eval.report as report
+    from solarchain_eval.report import build, loading, options
+
+    assert set(report.__all__) == set(report._EXPORTS)
+    assert report.build_report is build.build_report and report.ReportDataError is loading.ReportDataError
+    assert report.FORMATS is options.FORMATS

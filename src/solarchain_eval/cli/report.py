@@ -8,11 +8,15 @@ import typer
 from rich.table import Table
 from rich.text import Text
 
-from ..report import FORMATS, ReportDataError, ReportOptions, build_report, parse_formats
-from ..report.figures import FigureFile
-from ..report.options import CLUSTER_UNITS
-from ..report.statistics import DEFAULT_RESAMPLES, DEFAULT_SEED
-from ..report.tables import ReportTable
+from ..report.options import (
+    CLUSTER_UNITS,
+    DEFAULT_RESAMPLES,
+    DEFAULT_SEED,
+    FORMATS,
+    ReportDataError,
+    ReportOptions,
+    parse_formats,
+)
 from . import app
 from .common import CliError, cli_error, console, err_console, register_user_error, reports_errors, say
 
@@ -82,6 +86,10 @@ def report(
         case_policy=case_policy,
         case_setting=case_setting,
     )
+    from ..report.build import build_report
+    from ..report.figures import FigureFile
+    from ..report.tables import ReportTable
+
     with err_console.status("building the report..."):
         outcome = build_report(
             root, out, formats=chosen, options=options, figures=figures, allow_unverified=allow_unverified

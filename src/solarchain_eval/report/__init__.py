@@ -3,13 +3,27 @@
 ``build_report(root)`` reads a run directory or a paper root (see
 :mod:`solarchain_eval.experiments.layout`) and writes ``root/report/``: ``tables/<key>.{md,tex,csv}``,
 ``figures/<key>.{png,svg}``, ``report.md`` and a self-contained ``index.html``.
+
+The names below load their modules on first use (PEP 562), so importing a light submodule
+(:mod:`.options`) does not pull in pandas, scipy and matplotlib.
 """
 
 from __future__ import annotations
 
-from .build import FORMATS, ReportOutcome, build_report, parse_formats
-from .loading import ReportData, ReportDataError, load_report_data
-from .options import ReportOptions
+import importlib
+from typing import TYPE_CHECKING, Any
+
+#: Public name -> the submodule that defines it.
+_EXPORTS = {
+    "FORMATS": "options",
+    "ReportDataError": "options",
+    "ReportOptions": "options",
+    "parse_formats": "options",
+    "ReportData": "loading",
+    "load_report_data": "loading",
+    "ReportOutcome": "build",
+    "build_report": "build",
+}
 
 __all__ = [
     "FORMATS",
@@ -21,3 +35,17 @@ __all__ = [
     "load_report_data",
     "parse_formats",
 ]
+
+if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ resolves them
+    from .build import ReportOutcome, build_report
+    from .loading import ReportData, load_report_data
+    from .options import FORMATS, ReportDataError, ReportOptions, parse_formats
+
+
+def __getattr__(name: str) -> Any:
+    module = _EXPORTS.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
+    globals()[name] = value  # resolved once
+    return value

@@ -11,10 +11,11 @@ from ..experiments.layout import REPORT_DIR
 from .figures import FigureFile, build_figures
 from .html import render_html
 from .loading import ReportData, load_report_data
+from .options import FORMATS as FORMATS
 from .options import ReportOptions
+from .options import parse_formats as parse_formats
 from .tables import ReportTable, Skipped, build_tables, overlap_warning, to_csv, to_latex, to_markdown
 
-FORMATS = ("md", "tex", "csv", "html")
 TABLE_FORMATS = {"md": to_markdown, "tex": to_latex, "csv": to_csv}
 INDEX_FILE = "index.html"
 MARKDOWN_FILE = "report.md"
@@ -30,15 +31,6 @@ class ReportOutcome:
     figures: list[FigureFile | Skipped]
     files: list[Path] = field(default_factory=list)
     warnings: list[str] = field(default_factory=list)
-
-
-def parse_formats(text: str) -> tuple[str, ...]:
-    """``"md,tex"`` -> ("md", "tex"); raises ValueError on an unknown format."""
-    formats = tuple(dict.fromkeys(part.strip().lower() for part in text.split(",") if part.strip()))
-    unknown = [f for f in formats if f not in FORMATS]
-    if unknown or not formats:
-        raise ValueError(f"unknown report format(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(FORMATS)}")
-    return formats
 
 
 def _remove_stale(

@@ -15,7 +15,6 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from ..common.errors import NamesOptions
 from ..common.redaction import redact_command
 from ..evaluation.records import DIAGNOSTICS_FILE, SUMMARY_FILE
 from ..evaluation.rundir import verify_files, verify_run_dir
@@ -34,6 +33,7 @@ from ..experiments.layout import (
 )
 from ..records_schema import EPISODE_KEYS, METRIC_NAMES, upgrade_columns
 from .naming import SETTINGS
+from .options import ReportDataError as ReportDataError
 
 #: Keys of one agentic log step that the report reads (the agentic contract has more).
 LOG_KEYS = (
@@ -79,10 +79,6 @@ DIAGNOSTICS_REQUIRED = (
 )
 #: Rollout identity: one row per (setting, policy, run seed, episode).
 ROLLOUT_KEY = ["setting", "policy", "run_seed", "episode"]
-
-
-class ReportDataError(NamesOptions, ValueError):
-    """The run's files are missing, malformed or inconsistent (the message names file, column, row)."""
 
 
 @dataclass

@@ -1,14 +1,37 @@
-"""Options shared by the report's tables, figures and page."""
+"""Options shared by the report's tables, figures and page, with their defaults and choices.
+
+Light on purpose (no pandas, scipy or matplotlib): the ``report`` command's ``--help`` reads it.
+"""
 
 from __future__ import annotations
 
 from dataclasses import dataclass
 from typing import Literal
 
-from .statistics import DEFAULT_CONFIDENCE, DEFAULT_RESAMPLES, DEFAULT_SEED
+from ..common.errors import NamesOptions
+from ..protocol import PAPER_SEED
 
+#: Resamples per bootstrap interval (rliable's examples use 2,000).
+DEFAULT_RESAMPLES = 2000
+DEFAULT_CONFIDENCE = 0.95
+DEFAULT_SEED = PAPER_SEED  # the bootstrap's seed
 #: Units the bootstrap may resample: start days (the default, the coarsest) or episode seeds.
 CLUSTER_UNITS = ("start_hour", "episode_seed")
+#: Output formats of the tables (``md``, ``tex``, ``csv``) and the page (``html``).
+FORMATS = ("md", "tex", "csv", "html")
+
+
+class ReportDataError(NamesOptions, ValueError):
+    """The run's files are missing, malformed or inconsistent (the message names file, column, row)."""
+
+
+def parse_formats(text: str) -> tuple[str, ...]:
+    """``"md,tex"`` -> ("md", "tex"); raises ValueError on an unknown format."""
+    formats = tuple(dict.fromkeys(part.strip().lower() for part in text.split(",") if part.strip()))
+    unknown = [f for f in formats if f not in FORMATS]
+    if unknown or not formats:
+        raise ValueError(f"unknown report format(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(FORMATS)}")
+    return formats
 
 
 @dataclass(frozen=True)

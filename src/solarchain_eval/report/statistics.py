@@ -19,13 +19,11 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
-from ..protocol import PAPER_SEED
+from .options import DEFAULT_CONFIDENCE as DEFAULT_CONFIDENCE
+from .options import DEFAULT_RESAMPLES as DEFAULT_RESAMPLES
+from .options import DEFAULT_SEED as DEFAULT_SEED
 
 ArrayLike = Sequence[float] | np.ndarray | pd.Series
-#: Resamples per bootstrap interval (rliable's examples use 2,000).
-DEFAULT_RESAMPLES = 2000
-DEFAULT_CONFIDENCE = 0.95
-DEFAULT_SEED = PAPER_SEED  # the bootstrap's seed
 
 
 @dataclass(frozen=True)
