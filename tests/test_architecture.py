@@ -48,9 +48,7 @@ def _module_name(path: Path) -> str:
 
 def _imports(path: Path, *, top_level_only: bool) -> set[str]:
     """First-party modules ``path`` imports (relative to the package), at module level or anywhere."""
-    module = _module_name(path)
-    package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
-    package = [p for p in package if p]
+    package = _package_of(_module_name(path), path)
     tree = ast.parse(path.read_text(encoding="utf-8"))
     nodes = tree.body if top_level_only else list(ast.walk(tree))
     if top_level_only:  # statements of the module body, including inside if/try blocks
@@ -65,12 +63,8 @@ def _imports(path: Path, *, top_level_only: bool) -> set[str]:
     found: set[str] = set()
     for node in nodes:
         if isinstance(node, ast.ImportFrom):
-            if node.level:
-                base = package[: len(package) - (node.level - 1)] if node.level > 1 else package
-                target = ".".join([*base, *([node.module] if node.module else [])])
-            elif node.module and node.module.startswith("solarchain_eval"):
-                target = node.module.removeprefix("solarchain_eval").lstrip(".")
-            else:
+            target = _from_target(node, package)
+            if target is None:
                 continue
             for alias in node.names:  # `from . import x` may name a submodule
                 sub = f"{target}.{alias.name}" if target else alias.name
@@ -80,6 +74,21 @@ def _imports(path: Path, *, top_level_only: bool) -> set[str]:
                 if alias.name.startswith("solarchain_eval"):
                     found.add(alias.name.removeprefix("solarchain_eval").lstrip("."))
     return found
+
+
+def _package_of(module: str, path: Path) -> list[str]:
+    """The package a module's relative imports start from (the module itself for an ``__init__``)."""
+    return [p for p in (module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]) if p]
+
+
+def _from_target(node: ast.ImportFrom, package: list[str]) -> str | None:
+    """The first-party module a ``from ... import`` names (relative to the package), or None."""
+    if node.level:
+        base = package[: len(package) - (node.level - 1)] if node.level > 1 else package
+        return ".".join([*base, *([node.module] if node.module else [])])
+    if node.module and node.module.startswith("solarchain_eval"):
+        return node.module.removeprefix("solarchain_eval").lstrip(".")
+    return None
 
 
 def _exists(module: str) -> bool:
@@ -181,12 +190,11 @@ def test_generic_layers_reach_the_market_only_through_its_interface(wing):
     for module, path in MODULES.items():
         if _wing(module) != wing:
             continue
-        package = module.split(".") if path.name == "__init__.py" else module.split(".")[:-1]
+        package = _package_of(module, path)
         for node in ast.walk(ast.parse(path.read_text(encoding="utf-8"))):
-            if isinstance(node, ast.ImportFrom) and node.level and node.module:
-                base = package[: len(package) - (node.level - 1)] if node.level > 1 else package
-                target = ".".join([*base, node.module])
-                if _wing(target) in ("data", "market"):
+            if isinstance(node, ast.ImportFrom):
+                target = _from_target(node, package)
+                if target is not None and _wing(target) in ("data", "market"):
                     named |= {f"{target}.{alias.name}" for alias in node.names}
     assert named <= DOMAIN_INTERFACE[wing], (
         f"{wing} names {sorted(named - DOMAIN_INTERFACE[wing])} outside the interface"

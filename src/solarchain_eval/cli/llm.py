@@ -42,27 +42,16 @@ def _spec(model: str | None, port: int, parallel: int, threads: int | None, deco
     )
 
 
-def _port_message(port: int, problem: str) -> str:
-    return f"port {port} on 127.0.0.1 {problem} (choose another with --port)"
-
-
-def _check_port(port: int) -> None:
-    problem = local_server.port_problem(port)
-    if problem is not None:
-        raise CliError(_port_message(port, problem))
-
-
 @contextlib.contextmanager
 def _port_named(port: int) -> Iterator[None]:
-    """A port the server found taken as it started (another process took it after the check),
-    named with the option that picks another; a port picked free (``--port 0``) as the library says."""
+    """A taken ``--port`` named with the option that picks another; a port picked free
+    (``--port 0``) is reported as the library says."""
     try:
         yield
     except local_server.PortInUseError as error:
         if not port or error.port != port:
             raise
-        problem = local_server.port_problem(port) or "is already in use"
-        raise CliError(_port_message(port, problem)) from None
+        raise CliError(f"port {port} on 127.0.0.1 {error.problem} (choose another with --port)") from None
 
 
 @llm_app.command("serve")
@@ -96,7 +85,8 @@ def serve(
     evaluate/paper at it ([bold]--llm-api chat-json-object[/bold]).
     """
     if port:
-        _check_port(port)  # before the model is looked up or loaded
+        with _port_named(port):
+            local_server.check_port(port)  # before the model is looked up or loaded
     spec = _spec(model, port, parallel, threads, decoding)
     err_console.print(f"starting llama-cpp-python's server with {spec.model_path} ...")
     try:

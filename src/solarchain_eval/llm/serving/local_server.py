@@ -165,10 +165,11 @@ def free_port() -> int:
 
 
 class PortInUseError(LLMError):
-    """The server's port on 127.0.0.1 is held by another process (``port`` says which)."""
+    """The server's port on 127.0.0.1 cannot be listened on (``port`` says which, ``problem`` why)."""
 
     what = "the local model server cannot start"
     port: int | None = None
+    problem: str = "is already in use"
 
 
 def port_problem(port: int) -> str | None:
@@ -194,7 +195,7 @@ def check_port(port: int) -> None:
     if problem is not None:
         by = " by another process" if problem == "is already in use" else ""
         error = PortInUseError(f"port {port} on 127.0.0.1 {problem}{by}")
-        error.port = port
+        error.port, error.problem = port, problem
         raise error
 
 
