@@ -6,6 +6,11 @@ Importing the package registers ``SolarChainEval-v0`` with Gymnasium::
     import solarchain_eval  # noqa: F401  (registers the environment)
 
     env = gym.make("SolarChainEval-v0", data_dir="path/to/dataset")
+
+and gives the door for any agent, :func:`solarchain_eval.evaluate`::
+
+    result = solarchain_eval.evaluate(my_agent)  # the paper's protocol, beside nothing
+    result = solarchain_eval.evaluate([my_agent, "static", "myopic"], episodes=5)
 """
 
 from __future__ import annotations
@@ -16,4 +21,13 @@ from .envs.registration import register_envs
 
 register_envs()
 
-__all__ = ["__version__", "register_envs"]
+__all__ = ["Evaluation", "__version__", "evaluate", "register_envs"]
+
+
+def __getattr__(name: str):
+    # The evaluation API loads on first use, so ``import solarchain_eval`` stays light.
+    if name in ("evaluate", "Evaluation"):
+        from .evaluation import evaluate as module
+
+        return getattr(module, name)
+    raise AttributeError(f"module 'solarchain_eval' has no attribute {name!r}")

@@ -55,3 +55,11 @@ EPISODE_SEED_RULES: dict[str, Callable[[int, int], list[int]]] = {
     "paper": paper_episode_seeds,
     "independent": independent_episode_seeds,
 }
+
+
+def episode_seed_rule_name(rule: Callable[[int, int], list[int]]) -> str:
+    """The name a rule has in :data:`EPISODE_SEED_RULES` (``custom:<function name>`` otherwise)."""
+    for name, known in EPISODE_SEED_RULES.items():
+        if known is rule:
+            return name
+    return f"custom:{getattr(rule, '__name__', type(rule).__name__)}"

@@ -1,4 +1,4 @@
-"""The policy interface used by the evaluation runner."""
+"""The agent interface the evaluation runner drives, and the rule of what an agent may see."""
 
 from __future__ import annotations
 
@@ -6,34 +6,60 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
+#: The public context ``begin_episode`` receives, by keyword: the episode's index in its run, the
+#: run seed, the seed the environment was reset with, and the dataset hour the episode starts at.
+EPISODE_CONTEXT_KEYS = ("episode", "run_seed", "episode_seed", "start_hour")
+
 
 @runtime_checkable
 class Policy(Protocol):
-    """A policy maps observations to actions in the env's action space.
+    """An agent: it maps observations to actions in the environment's action space.
 
-    Required: ``name`` (the ``policy`` column of every record), ``action_mode`` (``"continuous"``:
-    three numbers in [0, 1]; ``"discrete"``: an index into the 125-point grid) and ``act``, which
-    must be deterministic given the policy's state.
+    Required: ``act(observation)``, which must be deterministic given the agent's state. The
+    runner also reads ``name`` (the ``policy`` column of every record; the class name when
+    absent) and ``action_mode`` (``"continuous"``, the default: three numbers in [0, 1];
+    ``"discrete"``: an index into the 125-point grid).
 
     Optional hooks, called by the evaluation runner (:mod:`solarchain_eval.evaluation.rollout`)
-    when the policy has them:
+    when the agent has them:
 
     - ``begin_run(run_seed)``: once per run seed, before its first episode (the Random baseline
       seeds its generator there);
-    - ``begin_episode(*, env, episode, run_seed, episode_seed, start_hour)``: after each reset,
-      before the first ``act`` (the Planner/Auditor wrapper plans the episode there);
-    - ``observe(info)``: after each step, with that step's ``info`` dict;
-    - ``end_episode()``: after the last step; a returned dict is kept in the episode's
-      ``extras`` (the wrapper returns its log rows and agentic metrics).
+    - ``begin_episode(*, episode, run_seed, episode_seed, start_hour)``: after each reset,
+      before the first ``act``, with the episode's public context (:data:`EPISODE_CONTEXT_KEYS`);
+    - ``observe(info)``: after each step, with that step's ``info`` dict (the outcome the market
+      publishes: reward, matched energy, prices, the executed action, ...);
+    - ``end_episode()``: after the last step; a returned dict is kept in the episode's ``extras``;
+    - ``close()``: once, when the evaluation ends (release connections, files).
 
-    A policy may also declare ``stateless = True``: its action depends on the observation only
+    An agent may also declare ``stateless = True``: its action depends on the observation only
     and ``act`` may be called from several threads, so its episodes can run concurrently
     (``evaluate --llm-concurrency``); without it, a run's episodes run in order.
+
+    Fairness: an agent sees observations, the step ``info`` and the public context, never the
+    environment or its hourly table (future hours, price shocks). The only components that get
+    the environment are the benchmark's own *privileged* ones (:func:`is_privileged`).
     """
 
     name: str
     action_mode: str
 
-    def begin_run(self, run_seed: int) -> None: ...
-
     def act(self, observation: np.ndarray) -> Any: ...
+
+
+def is_privileged(policy: Any) -> bool:
+    """Whether the runner hands ``policy`` the environment in ``begin_episode(env=...)``.
+
+    Only the benchmark's own components qualify (the Planner/Auditor wrapper, whose planner
+    reads the episode's hours ahead and whose auditor evaluates counterfactual steps): the class
+    declares ``privileged = True`` *and* is defined inside this package. Their rows are labelled
+    "privileged" in the run's metadata and tables, so they are never mistaken for agents that
+    saw only what the market publishes.
+    """
+    cls = type(policy)
+    return bool(getattr(cls, "privileged", False)) and cls.__module__.startswith("solarchain_eval.")
+
+
+def access_label(policy: Any) -> str:
+    """``"privileged"`` or ``"public"``: what the agent could see (see :func:`is_privileged`)."""
+    return "privileged" if is_privileged(policy) else "public"

@@ -104,6 +104,77 @@ def load_model(name: str, path: Path) -> Any:
         raise ValueError(f"cannot load {path} as a {name.upper()} model: {type(error).__name__}: {error}") from None
 
 
+def check_model_spaces(model: Any, action_mode: str, config: BenchmarkConfig, source: Path | str) -> None:
+    """Refuse a model whose observation or action space does not fit the env (errors name ``source``)."""
+    obs_shape = tuple(model.observation_space.shape or ())
+    if obs_shape != OBSERVATION_SHAPE:
+        raise ValueError(f"{source}: the model observes shape {obs_shape}, the env gives {OBSERVATION_SHAPE}")
+    space = model.action_space
+    if action_mode == "discrete":
+        expected = config.discrete_levels**3
+        if getattr(space, "n", None) != expected:
+            raise ValueError(f"{source}: the model has {getattr(space, 'n', space)} actions, the env {expected}")
+    elif tuple(space.shape or ()) != (3,):
+        raise ValueError(f"{source}: the model's actions have shape {space.shape}, the env expects (3,)")
+
+
+def sb3_algorithm(algo: str) -> type:
+    """The Stable-Baselines3 or sb3-contrib algorithm class named ``algo`` (any case: ``tqc``, ``TQC``)."""
+    import stable_baselines3
+    from stable_baselines3.common.base_class import BaseAlgorithm
+
+    modules: list[Any] = [stable_baselines3]
+    try:
+        import sb3_contrib
+
+        modules.append(sb3_contrib)
+    except ImportError:  # sb3-contrib is a dependency, but a trimmed install may lack it
+        pass
+    found: dict[str, type] = {}
+    for module in modules:
+        for attr in getattr(module, "__all__", dir(module)):
+            value = getattr(module, attr, None)
+            if isinstance(value, type) and issubclass(value, BaseAlgorithm):
+                found.setdefault(attr.lower(), value)
+    cls = found.get(algo.strip().lower())
+    if cls is None:
+        raise ValueError(f"unknown SB3 algorithm {algo!r} (installed: {', '.join(sorted(found))})")
+    return cls
+
+
+def load_sb3_model(algo: str, path: Path | str, config: BenchmarkConfig) -> Any:
+    """Load a model of any SB3 / sb3-contrib algorithm on the CPU and check it fits the env."""
+    path = Path(path)
+    cls = sb3_algorithm(algo)
+    if not path.is_file():
+        raise ValueError(f"no model file {path}")
+    try:
+        model = cls.load(path, device="cpu")
+    except Exception as error:  # SB3 raises many kinds for a wrong or damaged file
+        raise ValueError(f"cannot load {path} as a {cls.__name__} model: {type(error).__name__}: {error}") from None
+    mode = "discrete" if getattr(model.action_space, "n", None) is not None else "continuous"
+    check_model_spaces(model, mode, config, path)
+    return model
+
+
+def load_vecnormalize(path: Path | str) -> Any:
+    """VecNormalize statistics saved by ``VecNormalize.save`` (observations normalised, not updated)."""
+    import pickle
+
+    from stable_baselines3.common.vec_env import VecNormalize
+
+    path = Path(path)
+    try:
+        with path.open("rb") as handle:
+            stats = pickle.load(handle)  # noqa: S301 - the user's own statistics file, as SB3 loads it
+    except Exception as error:  # a missing, truncated or foreign file
+        raise ValueError(f"cannot read VecNormalize statistics from {path}: {type(error).__name__}: {error}") from None
+    if not isinstance(stats, VecNormalize):
+        raise ValueError(f"{path} holds a {type(stats).__name__}, not VecNormalize statistics")
+    stats.training = False
+    return stats
+
+
 @dataclass
 class SB3Policy:
     """A trained model acting with ``model.predict(obs, deterministic=True)``.
@@ -129,20 +200,7 @@ class SB3Policy:
         self._check_spaces()
 
     def _check_spaces(self) -> None:
-        obs_shape = tuple(self.model.observation_space.shape or ())
-        if obs_shape != OBSERVATION_SHAPE:
-            raise ValueError(
-                f"{self.model_path}: the model observes shape {obs_shape}, the env gives {OBSERVATION_SHAPE}"
-            )
-        space = self.model.action_space
-        if self.action_mode == "discrete":
-            expected = self.config.discrete_levels**3
-            if getattr(space, "n", None) != expected:
-                raise ValueError(
-                    f"{self.model_path}: the model has {getattr(space, 'n', space)} actions, the env {expected}"
-                )
-        elif tuple(space.shape or ()) != (3,):
-            raise ValueError(f"{self.model_path}: the model's actions have shape {space.shape}, the env expects (3,)")
+        check_model_spaces(self.model, self.action_mode, self.config, self.model_path)
 
     def begin_run(self, run_seed: int) -> None:
         return None

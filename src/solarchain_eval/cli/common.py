@@ -124,8 +124,9 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
-def results_table(summary: list[dict], title: str) -> Table:
-    """Mean ± sample std per policy and setting, in the paper's main-table layout."""
+def results_table(summary: list[dict], title: str, access: dict[str, str] | None = None) -> Table:
+    """Mean ± sample std per policy and setting, in the paper's main-table layout; policies in
+    ``access`` marked ``"privileged"`` (they saw the environment) are labelled so."""
     table = Table(title=title, title_justify="left")
     for column, justify in (
         ("policy", "left"),
@@ -145,8 +146,9 @@ def results_table(summary: list[dict], title: str) -> Table:
             std = m[name]["std"]  # None for a single episode (undefined, see summarize)
             return f"{m[name]['mean']:.{digits}f} ± " + ("–" if std is None else f"{std:.{digits}f}")
 
+        privileged = (access or {}).get(entry["policy"]) == "privileged"
         table.add_row(
-            entry["policy"],
+            entry["policy"] + (" (privileged)" if privileged else ""),
             entry["setting"],
             str(entry["episodes"]),
             fmt("cumulative_reward", 2),

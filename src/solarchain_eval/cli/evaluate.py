@@ -7,13 +7,15 @@ from pathlib import Path
 
 import typer
 
-from ..agents.registry import known_policies, parse_policy_list
+from ..agents.adapters import AgentError
+from ..agents.registry import known_policies, parse_agents
 from ..agents.sb3 import parse_models
+from ..agents.specs import LLM_AGENT, parse_agent_args
 from ..config import BenchmarkConfig, load_config
 from ..data.default import default_dataset_dir
 from ..evaluation.records import metrics_frame, summarize
 from ..evaluation.rundir import RunDirError, check_target
-from ..evaluation.runner import EvaluationSpec, make_policies, run_evaluation
+from ..evaluation.runner import EvaluationSpec, check_agents, run_evaluation
 from ..governance.request import GovernanceRequest
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
 from . import agentic as agentic_cli
@@ -33,7 +35,7 @@ from .common import (
     show_files,
 )
 
-register_user_error(RunDirError)
+register_user_error(RunDirError, AgentError)
 OVERWRITE = typer.Option(
     False,
     "--overwrite",
@@ -67,10 +69,23 @@ def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> N
             spec, out, on_episode=lambda _r: advance(1), command=invoked_command(), overwrite=overwrite
         )
     summary = summarize(metrics_frame(outcome.results))
-    console.print(results_table(summary, title))
+    console.print(results_table(summary, title, access=outcome.access))
     if spec.agentic is not None:
         console.print(agentic_cli.agentic_table(summary, f"Planner/Auditor ({spec.agentic.label()})"))
     show_files(outcome.files, f"wrote {len(outcome.results)} episodes in {outcome.wall_s:.1f} s to {out}")
+    say(f"protocol {outcome.protocol_id} (equal ids: comparable results; see run_metadata.json 'protocol')", err=False)
+
+
+def _vecnormalize(items: list[str], names: list[str]) -> dict[str | None, Path]:
+    """``--vecnormalize`` values: PATH (the only sb3: agent) or NAME=PATH."""
+    stats: dict[str | None, Path] = {}
+    for item in items:
+        name, sep, path = item.partition("=")
+        if sep and name in names:
+            stats[name] = Path(path)
+        else:
+            stats[None] = Path(item)
+    return stats
 
 
 @app.command("evaluate")
@@ -82,8 +97,23 @@ def evaluate(
     ),
     policies: str | None = typer.Option(
         None,
-        help=f"Comma-separated policies ({', '.join(known_policies())}); "
-        "default: the config's evaluation.policies (static,random,myopic).",
+        help=f"Comma-separated agents: built-in ({', '.join(known_policies())}, {LLM_AGENT}), "
+        "package.module:attr, path/to/file.py:attr, an installed plugin's name, NAME=sb3:ALGO:PATH.zip or "
+        "NAME=http://HOST:PORT/PATH; NAME=spec names the row. Default: the config's evaluation.policies "
+        "(static,random,myopic). See docs/evaluate_your_agent.md.",
+    ),
+    agent_arg: list[str] | None = typer.Option(
+        None,
+        "--agent-arg",
+        metavar="[NAME.]KEY=VALUE",
+        help="An option for agents built from a class or factory (repeatable); VALUE is read as JSON when it is "
+        "JSON. NAME. limits it to one agent.",
+    ),
+    vecnormalize: list[str] | None = typer.Option(
+        None,
+        "--vecnormalize",
+        metavar="[NAME=]PATH",
+        help="VecNormalize statistics (VecNormalize.save) for an sb3: agent; NAME= picks the agent when there are several.",
     ),
     seeds: str = typer.Option(_SEEDS, help="Comma-separated run seeds; episode e of seed s is reset with s + e."),
     episodes: int | None = typer.Option(
@@ -120,14 +150,16 @@ def evaluate(
     if out is not None:
         check_target(out, overwrite=overwrite)  # before any work (checked again under the lock)
     try:
-        names = parse_policy_list(policies) if policies is not None else list(cfg.evaluation.policies)
+        specs = parse_agents(policies if policies is not None else ",".join(cfg.evaluation.policies))
+        named = [s.name for s in specs if s.name is not None]
+        agent_args = parse_agent_args(agent_arg or [], named)
     except ValueError as error:
         raise cli_error(error) from None
     options = agentic_cli.resolve(governance)
     if llm_concurrency > 1 and options is None:
         raise CliError("--llm-concurrency needs --agentic planner_auditor")
     spec = EvaluationSpec(
-        policies=names,
+        policies=[s.text for s in specs],
         run_seeds=parse_seeds(seeds),
         episodes=episodes if episodes is not None else cfg.evaluation.episodes,
         data_dir=data,
@@ -136,9 +168,11 @@ def evaluate(
         models=parse_models(models or []),
         agentic=options,
         concurrency=llm_concurrency,
+        agent_args=agent_args,
+        vecnormalize=_vecnormalize(vecnormalize or [], named),
     )
     try:
-        make_policies(spec)  # fail on unknown names or missing models before any work
+        check_agents(spec)  # unknown names, imports, models, names used twice, action shapes: before any work
     except (ValueError, FileNotFoundError) as error:
         raise cli_error(error) from None
     label = "evaluate" if options is None else f"evaluate-{spec.setting}"

@@ -26,7 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..agents.base import Policy
-from .rollout import EpisodeResult, run_episode
+from .rollout import EpisodeResult, begin_run, run_episode
 
 
 @dataclass(frozen=True)
@@ -117,7 +117,7 @@ def run_in_flight(
         base = base if is_stateless(base) else copy.deepcopy(base)
         policy = wrap(base) if wrap is not None else base
         env = env_for(policy.action_mode)
-        policy.begin_run(task.run_seed)
+        begin_run(policy, task.run_seed)
         out = []
         for episode, seed in task.episodes:
             if stop.is_set():

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..agents.base import Policy
+from ..agents.base import Policy, is_privileged
 from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
 from ..protocol import paper_episode_seeds
 from .metrics import episode_metrics
@@ -50,13 +50,17 @@ def run_episode(
     obs, reset_info = env.reset(seed=episode_seed)
     begin = getattr(policy, "begin_episode", None)
     if begin is not None:
-        begin(
-            env=env,
-            episode=episode,
-            run_seed=run_seed,
-            episode_seed=episode_seed,
-            start_hour=reset_info["episode_start_hour"],
-        )
+        context = {
+            "episode": episode,
+            "run_seed": run_seed,
+            "episode_seed": episode_seed,
+            "start_hour": int(reset_info["episode_start_hour"]),
+        }
+        # Agents get the public context only; the benchmark's privileged components also the env.
+        if is_privileged(policy):
+            begin(env=env, **context)
+        else:
+            begin(**context)
     columns: dict[str, list] = {name: [] for name in STEP_FIELDS}
     appenders = [(columns[name].append, name) for name in STEP_FIELDS]
     city_rewards: list[tuple[float, ...]] = []
@@ -101,6 +105,13 @@ def run_episode(
     return result
 
 
+def begin_run(policy: Policy, run_seed: int) -> None:
+    """Call the agent's optional ``begin_run`` hook."""
+    hook = getattr(policy, "begin_run", None)
+    if hook is not None:
+        hook(run_seed)
+
+
 def run_policy(
     env: SolarChainEnv,
     policy: Policy,
@@ -115,7 +126,7 @@ def run_policy(
     if env.action_mode != policy.action_mode:
         raise ValueError(f"policy '{policy.name}' acts in {policy.action_mode} mode but the env is {env.action_mode}")
     for run_seed in run_seeds:
-        policy.begin_run(run_seed)
+        begin_run(policy, run_seed)
         for episode, seed in enumerate(episode_seeds(run_seed, episodes)):
             result = run_episode(env, policy, episode_seed=seed, setting=setting, run_seed=run_seed, episode=episode)
             if on_episode is not None:

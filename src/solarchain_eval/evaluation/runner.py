@@ -8,6 +8,7 @@ of every other file) last, and the whole directory is published by a rename
 
 from __future__ import annotations
 
+import copy
 import sys
 import time
 import uuid
@@ -16,9 +17,12 @@ from contextlib import ExitStack
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
+from typing import Any
 
-from ..agents.base import Policy
-from ..agents.registry import make_policy
+from ..agents.adapters import UserAgent, as_agent
+from ..agents.base import Policy, access_label
+from ..agents.registry import known_policies, make_agent
+from ..agents.specs import AgentSpecError, check_unique, parse_agent_spec
 from ..common.atomic_files import atomic_write_json, sha256_file
 from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
@@ -27,12 +31,13 @@ from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance as dataset_provenance  # re-exported
 from ..data.table import HourlyTable, load_table
 from ..envs.env import SolarChainEnv
-from ..governance.factory import AgenticOptions, Governance
-from ..protocol import PAPER_EPISODES, PAPER_SEEDS, paper_episode_seeds
+from ..governance.factory import AgenticOptions, Governance, LLMOptions
+from ..protocol import PAPER_EPISODES, PAPER_SEEDS, episode_seed_rule_name, paper_episode_seeds
 from ..records_schema import RECORDS_SCHEMA_VERSION
+from .fingerprint import protocol_fingerprint, protocol_id
 from .inflight import run_in_flight
 from .records import METADATA_FILE, write_records
-from .rollout import EpisodeResult, run_policy
+from .rollout import EpisodeResult, begin_run, run_policy
 from .rundir import RunDirWriter, kill_point
 from .settings import KNOWN_SETTINGS, setting_name
 
@@ -41,7 +46,9 @@ from .settings import KNOWN_SETTINGS, setting_name
 class EvaluationSpec:
     """What to evaluate.
 
-    ``policies`` are names (built with ``make_policy``) or ready :class:`Policy` objects.
+    ``policies`` are agent specs (built-in names such as ``"static"``, ``"pkg.module:attr"``,
+    ``"NAME=http://..."``: :mod:`solarchain_eval.agents.specs`) or agents (objects with ``act``,
+    functions ``observation -> action``, Stable-Baselines3 models). Their names must be unique.
     With ``agentic`` set, every policy is wrapped by the Planner/Auditor layer and the
     setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``). ``setting_label`` names a
     setting added with :func:`~solarchain_eval.evaluation.settings.register_setting` instead; its
@@ -61,6 +68,12 @@ class EvaluationSpec:
     concurrency: int = 1
     #: A registered setting's name for the records (None: the paper's setting of this reward and governance).
     setting_label: str | None = None
+    #: ``--agent-arg`` options for agents built from classes and factories, by agent name (None: all).
+    agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
+    #: VecNormalize statistics for ``sb3:`` agents, by agent name (None: the only one).
+    vecnormalize: dict[str | None, Path] = field(default_factory=dict)
+    #: The endpoint of the ``llm-agent`` baseline (needed when it is among the policies).
+    llm: LLMOptions | None = None
 
     def __post_init__(self) -> None:
         if self.setting_label is None:
@@ -83,25 +96,97 @@ class EvaluationSpec:
 
 @dataclass
 class EvaluationOutcome:
+    """A published run: its directory, episodes, files, wall time and protocol."""
+
     run_dir: Path
     results: list[EpisodeResult]
     files: dict[str, Path]
     wall_s: float
+    #: The protocol fingerprint (:mod:`.fingerprint`) and its short id.
+    protocol: dict[str, Any] = field(default_factory=dict)
+    protocol_id: str = ""
+    #: Policy name -> "public" or "privileged" (what it could see; :func:`~solarchain_eval.agents.base.is_privileged`).
+    access: dict[str, str] = field(default_factory=dict)
 
 
-def make_policies(spec: EvaluationSpec) -> list[Policy]:
-    """The spec's policies, built: names through ``make_policy`` with the spec's config (its reward
-    setting applied) and models, ready policies as they are.
+def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[Policy]:
+    """The spec's agents, built: specs through :func:`~solarchain_eval.agents.registry.make_agent`
+    with the spec's config (its reward setting applied), models and options, ready agents through
+    :func:`~solarchain_eval.agents.adapters.as_agent`.
+
+    Agents built here are closed by ``stack`` when given (their ``close`` hook); agents the caller
+    passed in are the caller's to close.
 
     Raises
     ------
-    ValueError
-        An unknown policy name or a model that cannot be loaded.
+    AgentSpecError
+        A spec that cannot be built, or two agents with one name (their episodes would pool).
     FileNotFoundError
         A learned policy without a trained model (the message lists where it looked).
     """
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
-    return [p if not isinstance(p, str) else make_policy(p, config, spec.models) for p in spec.policies]
+    builtins = known_policies()
+    built: list[Policy] = []
+    for item in spec.policies:
+        if not isinstance(item, str):
+            built.append(as_agent(item))
+            continue
+        parsed = parse_agent_spec(item, builtins)
+        if parsed.kind == "llm":
+            agent = _llm_agent(spec, config, parsed.name)
+        else:
+            agent = make_agent(
+                parsed, config, models=spec.models, agent_args=spec.agent_args, vecnormalize=spec.vecnormalize
+            )
+        close = getattr(agent, "close", None)
+        if stack is not None and close is not None:
+            stack.callback(close)
+        built.append(agent)
+    check_unique([p.name for p in built])
+    return built
+
+
+def check_agents(spec: EvaluationSpec) -> None:
+    """Build the spec's agents and try each user agent's first action, then release them.
+
+    Run before any work so that an import error, a missing model, a name used twice or an
+    action of the wrong shape is reported at once. The first action is taken by a *copy* of the
+    agent (its state is not advanced); agents that cannot be copied (an open connection) are
+    tried on their first real step instead.
+    """
+    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
+    table = load_table(data_dir)
+    with ExitStack() as stack:
+        for agent in make_policies(spec, stack):
+            if isinstance(agent, UserAgent):
+                _try_first_action(agent, config, table, spec)
+
+
+def _try_first_action(agent: UserAgent, config: BenchmarkConfig, table: HourlyTable, spec: EvaluationSpec) -> None:
+    try:
+        trial = copy.deepcopy(agent)
+    except Exception:  # an agent holding a socket, a lock, a model server: tried on its first step
+        return
+    env = SolarChainEnv(config=config, table=table, action_mode=trial.action_mode)
+    run_seed = int(spec.run_seeds[0])
+    (episode_seed,) = spec.episode_seeds(run_seed, 1)
+    obs, info = env.reset(seed=episode_seed)
+    begin_run(trial, run_seed)
+    begin = getattr(trial, "begin_episode", None)
+    if begin is not None:
+        begin(episode=0, run_seed=run_seed, episode_seed=episode_seed, start_hour=int(info["episode_start_hour"]))
+    env.step(trial.act(obs))  # the shell checks the action's shape; the env its value
+
+
+def _llm_agent(spec: EvaluationSpec, config: BenchmarkConfig, name: str | None) -> Policy:
+    from ..governance.llm_agent import open_llm_agent
+
+    if spec.llm is None:
+        raise AgentSpecError.about(
+            "the llm-agent needs a model endpoint: {opt_llm_backend} local, or {opt_llm_api} URL with {opt_llm_model}"
+        )
+    return open_llm_agent(spec.llm, config.market, name=name or "llm-agent")
 
 
 def run_evaluation(
@@ -135,10 +220,10 @@ def run_evaluation(
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
     data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
     table = load_table(data_dir)  # validates before anything is written
-    policies = make_policies(spec)
     setting = spec.setting
 
     with ExitStack() as stack:
+        policies = make_policies(spec, stack)
         writer = stack.enter_context(RunDirWriter(run_dir, overwrite=overwrite, keep=keep))
         governance = stack.enter_context(Governance(spec.agentic, config.market)) if spec.agentic is not None else None
         if spec.concurrency > 1:
@@ -160,11 +245,19 @@ def run_evaluation(
         files = write_records(writer.staging, results, table.cities)
         kill_point("staged")
         wall_s = time.perf_counter() - started
-        metadata = _metadata(spec, config, table, results, files, command, started_at, wall_s, setting)
+        metadata = _metadata(spec, config, table, policies, results, files, command, started_at, wall_s, setting)
         atomic_write_json(writer.staging / METADATA_FILE, metadata)
         writer.publish()
     files = {name: Path(run_dir) / name for name in [*files, METADATA_FILE]}
-    return EvaluationOutcome(run_dir=run_dir, results=results, files=files, wall_s=wall_s)
+    return EvaluationOutcome(
+        run_dir=run_dir,
+        results=results,
+        files=files,
+        wall_s=wall_s,
+        protocol=metadata["protocol"],
+        protocol_id=metadata["protocol_id"],
+        access=metadata["policy_access"],
+    )
 
 
 def _run_sequentially(
@@ -200,6 +293,7 @@ def _metadata(
     spec: EvaluationSpec,
     config: BenchmarkConfig,
     table: HourlyTable,
+    policies: Sequence[Policy],
     results: list[EpisodeResult],
     files: dict[str, Path],
     command: Sequence[str] | None,
@@ -207,6 +301,17 @@ def _metadata(
     wall_s: float,
     setting: str,
 ) -> dict:
+    dataset = dataset_provenance(table)
+    governed = spec.agentic is not None
+    protocol = protocol_fingerprint(
+        dataset_sha256=dataset["files"],
+        run_seeds=spec.run_seeds,
+        episodes=spec.episodes,
+        episode_seed_rule=episode_seed_rule_name(spec.episode_seeds),
+        setting=setting,
+        config=config,
+        action_modes={p.name: p.action_mode for p in policies},
+    )
     return {
         "complete": True,
         "run_id": uuid.uuid4().hex,
@@ -219,14 +324,19 @@ def _metadata(
         "package_versions": package_versions(),
         "setting": setting,
         "records_schema_version": RECORDS_SCHEMA_VERSION,
-        "policies": [p if isinstance(p, str) else p.name for p in spec.policies],
+        "policies": [p.name for p in policies],
+        "policy_specs": [p if isinstance(p, str) else f"<{type(p).__name__}>" for p in spec.policies],
+        # Behind the Planner/Auditor layer every row is privileged: the layer reads hours ahead.
+        "policy_access": {p.name: "privileged" if governed else access_label(p) for p in policies},
+        "protocol": protocol,
+        "protocol_id": protocol_id(protocol),
         "agentic": spec.agentic.describe() if spec.agentic is not None else None,
         "concurrency": int(spec.concurrency),
         "run_seeds": [int(s) for s in spec.run_seeds],
         "episodes": int(spec.episodes),
         "episode_seed_protocol": getattr(spec.episode_seeds, "__name__", "custom"),
         "rows": {"metrics": len(results), "actions": sum(r.n_steps for r in results)},
-        "dataset": dataset_provenance(table),
+        "dataset": dataset,
         "models": {k: str(v) for k, v in spec.models.items()},
         "config": config.model_dump(),
     }

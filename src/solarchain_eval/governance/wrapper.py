@@ -69,6 +69,9 @@ class GovernedPolicy:
     """
 
     action_mode = "continuous"
+    #: The planner reads the episode's hours ahead and the auditor evaluates counterfactual steps:
+    #: the runner hands this wrapper the env (:func:`~solarchain_eval.agents.base.is_privileged`).
+    privileged = True
 
     def __init__(
         self,
@@ -92,7 +95,9 @@ class GovernedPolicy:
     # --- Policy protocol ----------------------------------------------------------------------
     def begin_run(self, run_seed: int) -> None:
         self._run_seed = int(run_seed)
-        self.base.begin_run(run_seed)
+        hook = getattr(self.base, "begin_run", None)
+        if hook is not None:
+            hook(run_seed)
 
     def begin_episode(self, *, env: Any, episode: int, run_seed: int, episode_seed: int, start_hour: int) -> None:
         self._env = env
@@ -116,8 +121,8 @@ class GovernedPolicy:
         self._pending: dict[str, Any] | None = None
         self._planner_retries = int((outcome.llm or {}).get("retries", 0))
         hook = self._base_hooks["begin_episode"]
-        if hook is not None:
-            hook(env=env, episode=episode, run_seed=run_seed, episode_seed=episode_seed, start_hour=start_hour)
+        if hook is not None:  # the base policy gets the public context only, as without the layer
+            hook(episode=episode, run_seed=run_seed, episode_seed=episode_seed, start_hour=start_hour)
 
     def _start_scheduler(self) -> None:
         """The episode's budget and scheduler (plan, overrides, or the auditor's own step choice)."""

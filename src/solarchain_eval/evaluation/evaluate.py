@@ -1,0 +1,208 @@
+"""``solarchain_eval.evaluate``: put any agent through the benchmark's protocol from Python.
+
+::
+
+    import solarchain_eval
+
+    def my_agent(observation):
+        return [0.3, 0.7, 0.05]  # reward ratio, liquidity ratio, burn rate, each in [0, 1]
+
+    result = solarchain_eval.evaluate([my_agent, "static", "myopic"], episodes=5)
+    print(result.summary)
+
+The agents run exactly as the command line's ``evaluate`` runs them (the same runner, records
+and run directory), with the paper's protocol by default: run seeds 20260511-13, 30 episodes
+each, episode e of seed s reset with s + e.
+"""
+
+from __future__ import annotations
+
+import shutil
+import tempfile
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import pandas as pd
+
+from ..agents.specs import AgentSpecError
+from ..config import BenchmarkConfig
+from ..governance.factory import AgenticOptions, LLMOptions
+from ..protocol import PAPER_EPISODES, PAPER_SEEDS
+from .records import metrics_frame, summarize
+from .rollout import EpisodeResult
+from .runner import EvaluationSpec, run_evaluation
+from .settings import KNOWN_SETTINGS, SETTING_MAIN, SETTING_NO_PHYSICS
+
+
+@dataclass
+class Evaluation:
+    """What :func:`evaluate` returns.
+
+    Attributes
+    ----------
+    metrics : pandas.DataFrame
+        One row per episode (the columns of ``metrics.csv``).
+    summary : pandas.DataFrame
+        One row per policy and setting: episodes, and mean and sample std of every metric.
+    run_dir : Path or None
+        The published run directory (``out``), or None when nothing was kept.
+    protocol_id : str
+        The short id of the run's protocol (equal ids: comparable results).
+    protocol : dict
+        The protocol fingerprint the id is derived from.
+    access : dict
+        Policy name -> ``"public"`` or ``"privileged"`` (what the agent could see).
+    wall_s : float
+        Wall time of the evaluation, in seconds.
+    episodes : list of EpisodeResult
+        Every episode with its per-step columns.
+    """
+
+    metrics: pd.DataFrame
+    summary: pd.DataFrame
+    run_dir: Path | None
+    protocol_id: str
+    protocol: dict[str, Any]
+    access: dict[str, str]
+    wall_s: float
+    episodes: list[EpisodeResult] = field(repr=False, default_factory=list)
+
+
+def summary_frame(summary: list[dict[str, Any]]) -> pd.DataFrame:
+    """``summarize``'s entries as a frame: ``policy``, ``setting``, ``episodes``, then
+    ``<metric>_mean`` and ``<metric>_std`` for every metric."""
+    rows = []
+    for entry in summary:
+        row: dict[str, Any] = {"policy": entry["policy"], "setting": entry["setting"], "episodes": entry["episodes"]}
+        for metric, stats in entry["metrics"].items():
+            row[f"{metric}_mean"] = stats["mean"]
+            row[f"{metric}_std"] = stats["std"]
+        rows.append(row)
+    return pd.DataFrame(rows)
+
+
+def _setting_options(
+    setting: str, agentic: AgenticOptions | bool | None
+) -> tuple[bool, AgenticOptions | None, str | None]:
+    """(no physics penalty, Planner/Auditor options, setting label) of the requested setting."""
+    known = KNOWN_SETTINGS.get(setting)
+    if known is None:
+        raise AgentSpecError(f"unknown setting {setting!r} (choose from {', '.join(KNOWN_SETTINGS)})")
+    options = AgenticOptions() if agentic is True else (agentic or None)
+    if options is None and known.agentic:
+        options = AgenticOptions()  # the paper's layer with the rule planner and auditor
+    if options is not None and not known.agentic:
+        if setting not in (SETTING_MAIN, SETTING_NO_PHYSICS):
+            raise AgentSpecError(f"setting {setting!r} runs without the Planner/Auditor layer; drop agentic=")
+        return known.no_physics_penalty, options, None  # the paper's governed counterpart
+    return known.no_physics_penalty, options, setting
+
+
+def evaluate(
+    agent: Any,
+    *,
+    data: str | Path | None = None,
+    seeds: Sequence[int] = PAPER_SEEDS,
+    episodes: int = PAPER_EPISODES,
+    setting: str = SETTING_MAIN,
+    agentic: AgenticOptions | bool | None = None,
+    out: str | Path | None = None,
+    name: str | None = None,
+    config: BenchmarkConfig | None = None,
+    models: dict[str, Path] | None = None,
+    agent_args: dict[str | None, dict[str, Any]] | None = None,
+    llm: LLMOptions | None = None,
+    overwrite: bool = False,
+    on_episode: Callable[[EpisodeResult], None] | None = None,
+) -> Evaluation:
+    """Evaluate one agent, or several beside built-in ones, over run seeds × episodes.
+
+    Parameters
+    ----------
+    agent : agent, spec, or a list of them
+        An object with ``act(observation)`` (optional hooks: ``begin_run``, ``begin_episode``,
+        ``observe``, ``end_episode``, ``close``; attributes ``name``, ``action_mode``,
+        ``stateless``), a function ``observation -> action``, a Stable-Baselines3 model, or a
+        spec string (``"static"``, ``"pkg.module:MyAgent"``, ``"mine=http://127.0.0.1:8000/act"``,
+        see :mod:`solarchain_eval.agents.specs`). A list evaluates each in turn.
+    data : path, optional
+        Dataset directory (default: the embedded default dataset).
+    seeds : sequence of int
+        Run seeds (default: the paper's three).
+    episodes : int
+        Episodes per run seed (default: the paper's 30).
+    setting : str
+        ``"main"`` or ``"no_physics"`` (the reward without the physics penalty); the governed
+        ``"llm"`` / ``"llm_no_physics"`` run every agent behind the Planner/Auditor layer.
+    agentic : AgenticOptions or True, optional
+        Run behind the Planner/Auditor layer with these options (True: the rule planner and
+        auditor); with ``"main"``/``"no_physics"`` it selects ``"llm"``/``"llm_no_physics"``.
+    out : path, optional
+        Publish the run directory there (``metrics.csv``, ``actions.csv``, ..., ``run_metadata.json``
+        with checksums); by default the run is written to a temporary directory and removed.
+    name : str, optional
+        The row name of a single agent (default: its ``name``, class or function name).
+    config : BenchmarkConfig, optional
+    models : dict, optional
+        Trained models for the built-in learned policies (``{"ppo": path}`` or ``{"*": dir}``).
+    agent_args : dict, optional
+        Options for agents given as ``"module:Class"`` specs, by agent name (None: all).
+    llm : LLMOptions, optional
+        The endpoint of the ``"llm-agent"`` baseline.
+    overwrite : bool
+        Replace an existing ``out``.
+    on_episode : callable, optional
+        Called with each finished episode (progress).
+
+    Returns
+    -------
+    Evaluation
+
+    Raises
+    ------
+    AgentSpecError
+        An agent that cannot be used, or two agents with one name.
+    """
+    agents = list(agent) if isinstance(agent, list | tuple) else [agent]
+    if name is not None:
+        if len(agents) != 1:
+            raise AgentSpecError("name= names a single agent; give each of several agents its own name attribute")
+        from ..agents.adapters import as_agent
+
+        agents = [as_agent(agents[0], name=name) if not isinstance(agents[0], str) else f"{name}={agents[0]}"]
+    no_physics_penalty, options, label = _setting_options(setting, agentic)
+    spec = EvaluationSpec(
+        policies=agents,
+        run_seeds=tuple(int(s) for s in seeds),
+        episodes=int(episodes),
+        data_dir=Path(data) if data is not None else None,
+        no_physics_penalty=no_physics_penalty,
+        config=config or BenchmarkConfig(),
+        models=dict(models or {}),
+        agentic=options,
+        setting_label=label,
+        agent_args=dict(agent_args or {}),
+        llm=llm,
+    )
+    scratch = None if out is not None else Path(tempfile.mkdtemp(prefix="solarchain-evaluate-"))
+    target = Path(out) if out is not None else scratch / "run"  # type: ignore[operator]
+    try:
+        outcome = run_evaluation(
+            spec, target, on_episode=on_episode, command=["solarchain_eval.evaluate"], overwrite=overwrite
+        )
+    finally:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+    metrics = metrics_frame(outcome.results)
+    return Evaluation(
+        metrics=metrics,
+        summary=summary_frame(summarize(metrics)),
+        run_dir=outcome.run_dir if out is not None else None,
+        protocol_id=outcome.protocol_id,
+        protocol=outcome.protocol,
+        access=outcome.access,
+        wall_s=outcome.wall_s,
+        episodes=outcome.results,
+    )

@@ -1,0 +1,94 @@
+"""A run's protocol as one comparable value: the fingerprint and its short id.
+
+Two results are comparable when their agents faced the same task: the same dataset (sha256 of
+every CSV), run seeds, episodes per seed, episode-seed rule, setting, task configuration
+(market, reward, episode length, discrete grid), environment version and records schema. The
+fingerprint holds exactly those; :func:`protocol_id` is the first 12 hex digits of the sha256 of
+its canonical JSON. The package version is recorded beside it, not in it: a release that does not
+change the task keeps the id, and a release that changes the dynamics bumps the environment's
+registered version (``SolarChainEval-v0`` -> ``-v1``), which changes the id.
+
+Each agent's action mode is recorded in the fingerprint too (``action_modes``) but not hashed:
+the discrete grid is a fixed decoding of the same continuous market (its size is in the task
+configuration), so a discrete and a continuous agent are ranked on one board, as in the paper.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+from ..config import BenchmarkConfig
+from ..envs.registration import ENV_ID
+from ..records_schema import RECORDS_SCHEMA_VERSION
+
+#: Fields of the fingerprint that the id does not hash (see the module docstring).
+UNHASHED_FIELDS = ("action_modes",)
+#: Configuration fields that decide the task; paths, training budgets and evaluation defaults do not.
+TASK_CONFIG_FIELDS = ("episode_steps", "discrete_levels", "no_physics_penalty", "market", "reward")
+
+
+def canonical_json(value: Any) -> str:
+    """JSON with sorted keys and no whitespace: equal values give equal text."""
+    return json.dumps(value, sort_keys=True, separators=(",", ":"), ensure_ascii=True, allow_nan=False)
+
+
+def sha256_text(text: str) -> str:
+    return hashlib.sha256(text.encode()).hexdigest()
+
+
+def task_config_sha256(config: BenchmarkConfig) -> str:
+    """sha256 of the configuration fields that decide the task (:data:`TASK_CONFIG_FIELDS`)."""
+    return sha256_text(canonical_json(config.model_dump(include=set(TASK_CONFIG_FIELDS))))
+
+
+def protocol_fingerprint(
+    *,
+    dataset_sha256: Mapping[str, str],
+    run_seeds: Sequence[int],
+    episodes: int,
+    episode_seed_rule: str,
+    setting: str,
+    config: BenchmarkConfig,
+    action_modes: Mapping[str, str],
+) -> dict[str, Any]:
+    """The fingerprint ``run_metadata.json`` records under ``protocol``.
+
+    Parameters
+    ----------
+    dataset_sha256 : mapping
+        Dataset CSV name -> sha256 (the run metadata's ``dataset.files``).
+    run_seeds, episodes, episode_seed_rule, setting
+        The evaluation protocol (``episode_seed_rule``: a name in ``protocol.EPISODE_SEED_RULES``).
+    config : BenchmarkConfig
+        The resolved configuration (its reward setting applied).
+    action_modes : mapping
+        Policy name -> ``"continuous"`` or ``"discrete"``.
+    """
+    return {
+        "env": ENV_ID,
+        "records_schema_version": RECORDS_SCHEMA_VERSION,
+        "dataset_sha256": dict(sorted(dataset_sha256.items())),
+        "run_seeds": [int(s) for s in run_seeds],
+        "episodes": int(episodes),
+        "episode_seed_rule": str(episode_seed_rule),
+        "setting": str(setting),
+        "config_sha256": task_config_sha256(config),
+        "action_modes": dict(sorted(action_modes.items())),
+    }
+
+
+def protocol_id(fingerprint: Mapping[str, Any]) -> str:
+    """The short id of a fingerprint: 12 hex digits of the sha256 of its hashed fields."""
+    hashed = {key: value for key, value in fingerprint.items() if key not in UNHASHED_FIELDS}
+    return sha256_text(canonical_json(hashed))[:12]
+
+
+def protocol_difference(first: Mapping[str, Any], second: Mapping[str, Any]) -> str | None:
+    """The first hashed field in which two fingerprints differ (None when their ids agree)."""
+    for key in sorted(set(first) | set(second)):
+        if key not in UNHASHED_FIELDS and first.get(key) != second.get(key):
+            return key
+    return None
