@@ -168,6 +168,25 @@ def test_sb3_model_objects_act_deterministically(tiny_dataset: Path) -> None:
     np.testing.assert_allclose(actions[0], expected, rtol=0, atol=1e-7)
 
 
+def test_recurrent_models_carry_their_state_through_an_episode(tiny_dataset: Path) -> None:
+    from sb3_contrib import RecurrentPPO
+
+    env = SolarChainEnv(config=BenchmarkConfig(), table=load_table(tiny_dataset))
+    model = RecurrentPPO("MlpLstmPolicy", env, seed=0, n_steps=32, batch_size=32, device="cpu")
+    result = solarchain_eval.evaluate(model, data=tiny_dataset, seeds=[SEED], episodes=1, name="lstm")
+    executed = np.column_stack(
+        [np.asarray(result.episodes[0].steps[c]) for c in ("reward_ratio", "liquidity_ratio", "burn_rate")]
+    )
+    obs, _ = env.reset(seed=SEED)
+    state, start, expected = None, np.ones((1,), dtype=bool), []
+    for _ in range(env.episode_steps):
+        action, state = model.predict(obs, state=state, episode_start=start, deterministic=True)
+        start = np.zeros((1,), dtype=bool)
+        expected.append(env.codec.decode(action))
+        obs, *_ = env.step(action)
+    np.testing.assert_allclose(executed, np.array(expected), rtol=0, atol=1e-7)
+
+
 def test_wrong_actions_are_one_line_errors(tiny_dataset: Path) -> None:
     with pytest.raises(AgentError, match=r"agent 'two': act\(\) returned an action of shape \(2,\)"):
         solarchain_eval.evaluate(lambda obs: [0.1, 0.2], name="two", data=tiny_dataset, seeds=[SEED], episodes=1)

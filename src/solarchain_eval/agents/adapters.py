@@ -49,7 +49,7 @@ class SB3ModelAgent:
         else:
             self.action_mode = "continuous"
         # sb3-contrib's recurrent policies take (obs, state, episode_start) and return a new state.
-        self._recurrent = "lstm" in type(getattr(model, "policy", None)).__name__.lower()
+        self._recurrent = hasattr(getattr(model, "policy", None), "lstm_actor")
         self.stateless = not self._recurrent and obs_normalizer is None
         self._state: Any = None
         self._episode_start = np.ones((1,), dtype=bool)
