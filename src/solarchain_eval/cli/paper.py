@@ -109,6 +109,9 @@ def _show_outcome(outcome) -> None:
     for setting in outcome.combined:
         summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
         console.print(results_table(summary, f"setting {setting}"))
+        protocol = outcome.protocols.get(setting, {}).get("protocol_id")
+        if protocol:
+            console.print(f"setting {setting}: protocol {protocol}", soft_wrap=True)
     console.print(
         f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)",
         soft_wrap=True,

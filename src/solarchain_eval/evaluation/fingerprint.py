@@ -92,3 +92,31 @@ def protocol_difference(first: Mapping[str, Any], second: Mapping[str, Any]) -> 
         if key not in UNHASHED_FIELDS and first.get(key) != second.get(key):
             return key
     return None
+
+
+def merge_fingerprints(fingerprints: Sequence[Mapping[str, Any]]) -> dict[str, Any]:
+    """One fingerprint for runs that split one protocol by run seed or policy (a grid's units).
+
+    Run seeds are united (sorted) and action modes merged; every other field must agree.
+
+    Raises
+    ------
+    ValueError
+        Two fingerprints differ in another field (the message names it).
+    """
+    if not fingerprints:
+        raise ValueError("no fingerprints to merge")
+    merged = dict(fingerprints[0])
+    seeds = set(merged["run_seeds"])
+    modes = dict(merged.get("action_modes", {}))
+    for other in fingerprints[1:]:
+        for key in sorted(set(merged) | set(other)):
+            if key not in ("run_seeds", "action_modes") and merged.get(key) != other.get(key):
+                raise ValueError(
+                    f"the runs differ in protocol field '{key}': {merged.get(key)!r} vs {other.get(key)!r}"
+                )
+        seeds.update(other["run_seeds"])
+        modes.update(other.get("action_modes", {}))
+    merged["run_seeds"] = sorted(int(s) for s in seeds)
+    merged["action_modes"] = dict(sorted(modes.items()))
+    return merged

@@ -12,6 +12,7 @@ report after a complete grid.
 from __future__ import annotations
 
 import fcntl
+import json
 import os
 import sys
 import time
@@ -30,6 +31,8 @@ from ..common.versions import git_commit, package_versions
 from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
+from ..evaluation.fingerprint import merge_fingerprints, protocol_id
+from ..evaluation.records import METADATA_FILE
 from ..evaluation.settings import KNOWN_SETTINGS, setting_has_physics_penalty
 from ..protocol import independent_episode_seeds
 from ..training.sb3_trainer import differences
@@ -53,6 +56,8 @@ class PaperOutcome:
     combined: dict[str, dict[str, int]] = field(default_factory=dict)
     complete: bool = False
     wall_s: float = 0.0
+    #: Each combined setting's protocol (see :func:`setting_protocol`).
+    protocols: dict[str, dict[str, Any]] = field(default_factory=dict)
 
 
 def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
@@ -219,10 +224,13 @@ def _executor(ray_address: str | None, root: Path, data_dir: Path, ray_transfer:
 def _combine_and_record(spec: GridSpec, outcome: PaperOutcome, done: set[str], meta: dict, started: float) -> None:
     """Combine every setting whose eval units are all done, then write the final paper metadata."""
     root, units, report = outcome.root, outcome.units, outcome.report
+    protocols: dict[str, dict[str, Any]] = {}
     for setting in spec.settings:
         evals = [u for u in units if u.kind == "eval" and u.setting == setting]
         if all(u.name in done for u in evals):
             outcome.combined[setting] = combine_setting(root, setting, [u.directory(root) for u in evals])
+            protocols[setting] = setting_protocol([u.directory(root) for u in evals])
+    outcome.protocols = protocols
     outcome.complete = all(u.name in done for u in units)
     outcome.wall_s = time.perf_counter() - started
     status = "complete" if outcome.complete else ("stopped" if report.stopped else "incomplete")
@@ -235,10 +243,25 @@ def _combine_and_record(spec: GridSpec, outcome: PaperOutcome, done: set[str], m
             "wall_s": round(outcome.wall_s, 3),
             "units": _unit_table(root, units, report),
             "combined": outcome.combined,
+            # Each combined setting's protocol: the units' fingerprints, their run seeds united.
+            "protocols": protocols,
             "combined_sha256": _combined_sha256(root, outcome.combined),
             "failed_units": [{"unit": r.unit, "error": r.error, "log": r.log} for r in report.failed],
         },
     )
+
+
+def setting_protocol(unit_dirs: list[Path]) -> dict[str, Any]:
+    """``{"protocol": fingerprint, "protocol_id": id}`` of a setting's eval units (empty for units
+    written before runs carried a fingerprint)."""
+    fingerprints = []
+    for directory in unit_dirs:
+        meta = json.loads((Path(directory) / METADATA_FILE).read_text(encoding="utf-8"))
+        if "protocol" not in meta:
+            return {}
+        fingerprints.append(meta["protocol"])
+    merged = merge_fingerprints(fingerprints)
+    return {"protocol": merged, "protocol_id": protocol_id(merged)}
 
 
 def _combined_sha256(root: Path, settings: dict[str, Any]) -> dict[str, dict[str, str]]:
