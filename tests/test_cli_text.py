@@ -147,12 +147,12 @@ def test_first_default_dataset_build_is_announced(tmp_path, monkeypatch, caplog)
     monkeypatch.setattr(default_module, "published_mismatches", lambda hashes: {})
     with caplog.at_level(logging.INFO, logger="solarchain_eval"):
         target = default_dataset_dir()
-        notices = [r for r in caplog.records if "building the default dataset" in r.getMessage()]
+        notices = [r for r in caplog.records if "building the paper's published dataset" in r.getMessage()]
         assert len(notices) == 1 and notices[0].levelno >= logging.WARNING
         assert str(target) in notices[0].getMessage()
         caplog.clear()
         assert default_dataset_dir() == target  # built: no second notice
-        assert not [r for r in caplog.records if "building the default dataset" in r.getMessage()]
+        assert not [r for r in caplog.records if "building the paper's published dataset" in r.getMessage()]
 
 
 def test_table_cells_and_progress_text_are_not_markup():

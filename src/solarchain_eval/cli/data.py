@@ -116,10 +116,10 @@ def build(
     """Build a dataset: nodes, hourly PV generation, false-data injection, market, trades.
 
     Writes the four CSVs and manifest.json (row counts, sha256, seed, weather source and its
-    licence attribution, versions). With the defaults (`data build --out DIR`) the weather is
-    the paper's Open-Meteo payload shipped with the package and the four CSVs are byte-identical
-    to the paper's published dataset. The --fdia-* options choose the attack scenario
-    (docs/dataset.md#attack-scenarios); the manifest records it.
+    licence attribution, versions). With the defaults (data build --out DIR) the weather is the
+    paper's Open-Meteo payload shipped with the package and the four CSVs are byte-identical to
+    the paper's published dataset. The --fdia-* options choose the attack scenario, which the
+    manifest records (docs/dataset.md#attack-scenarios).
     """
     cities = _cities(city)
     scenario = _scenario(fdia_rate, fdia_severity, fdia_pattern.value, fdia_burst_hours)
