@@ -1,9 +1,11 @@
 """Shared fixtures.
 
-The paper's data is read from ``../shared/data`` beside the repository (override with the
-``SOLARCHAIN_SHARED_DATA`` environment variable); tests that need it skip with the reason when
-it is absent. Every test session gets its own cache directory, so nothing is written to the
-user's real cache.
+The paper's published dataset (``published_dir``) is rebuilt once per session from the weather
+payload shipped with the package, into the session's own cache directory (so nothing is written
+to the user's real cache), and checked against the published sha256s. Only the original
+release's per-episode outputs, and the comparisons with the release's own files, are read from
+``../shared/data`` beside the repository (override with the ``SOLARCHAIN_SHARED_DATA``
+environment variable); tests that need them skip with the reason when it is absent.
 
 With ``SOLARCHAIN_STRICT_SKIPS=1`` (set by CI) the session fails when a test skips for any
 reason but a missing optional tool of :data:`ALLOWED_SKIP_REASONS` or the shared data.
@@ -51,18 +53,30 @@ def shared_data_dir() -> Path:
 
 
 @pytest.fixture(scope="session")
-def published_dir() -> Path:
-    path = shared_data_dir() / PUBLISHED
-    if not (path / "spatiotemporal_generation.csv").is_file():
-        pytest.skip(f"the paper's published dataset is not at {path} (set SOLARCHAIN_SHARED_DATA)")
+def shared_data() -> Path:
+    """The paper's release folder (the original release's outputs, the published files); skips without it."""
+    path = shared_data_dir()
+    if not (path / "SHA256SUMS").is_file():
+        pytest.skip(f"the paper's release files are not at {path} (set SOLARCHAIN_SHARED_DATA)")
     return path
 
 
 @pytest.fixture(scope="session")
-def paper_weather() -> Path:
-    path = shared_data_dir() / PAPER_WEATHER
-    if not path.is_file():
-        pytest.skip(f"the paper's cached weather is not at {path} (set SOLARCHAIN_SHARED_DATA)")
+def published_dir(isolated_cache: Path) -> Path:
+    """The paper's published dataset: the embedded default dataset, rebuilt from the packaged weather
+    (once per session, into the session's cache) and checked against the published sha256s."""
+    from solarchain_eval.data.default import default_dataset_dir
+
+    return default_dataset_dir()
+
+
+@pytest.fixture(scope="session")
+def paper_weather(tmp_path_factory: pytest.TempPathFactory) -> Path:
+    """The paper's Open-Meteo payload as a plain JSON file (decompressed from the package, sha256 checked)."""
+    from solarchain_eval.data.published import read_paper_weather_bytes
+
+    path = tmp_path_factory.mktemp("paper-weather") / PAPER_WEATHER
+    path.write_bytes(read_paper_weather_bytes())
     return path
 
 

@@ -133,23 +133,26 @@ def test_server_error_with_markup_is_printed_verbatim(tiny_dataset, tmp_path, mo
 
 def test_first_default_dataset_build_is_announced(tmp_path, monkeypatch, caplog):
     import solarchain_eval.data.build as build_module
-    import solarchain_eval.data.synthetic as synthetic_module
+    import solarchain_eval.data.default as default_module
     from solarchain_eval.data.default import default_dataset_dir
+    from solarchain_eval.data.files import DATASET_FILES
 
     def fake_build(weather, out, **kwargs):
+        for name in DATASET_FILES:
+            (out / name).write_text("")
         (out / "manifest.json").write_text("{}")
 
     monkeypatch.setenv("SOLARCHAIN_CACHE_DIR", str(tmp_path))
     monkeypatch.setattr(build_module, "build_dataset", fake_build)
-    monkeypatch.setattr(synthetic_module, "synthesize_weather", lambda *a, **k: None)
+    monkeypatch.setattr(default_module, "published_mismatches", lambda hashes: {})
     with caplog.at_level(logging.INFO, logger="solarchain_eval"):
         target = default_dataset_dir()
-        notices = [r for r in caplog.records if "building the default dataset" in r.getMessage()]
+        notices = [r for r in caplog.records if "building the paper's published dataset" in r.getMessage()]
         assert len(notices) == 1 and notices[0].levelno >= logging.WARNING
         assert str(target) in notices[0].getMessage()
         caplog.clear()
         assert default_dataset_dir() == target  # built: no second notice
-        assert not [r for r in caplog.records if "building the default dataset" in r.getMessage()]
+        assert not [r for r in caplog.records if "building the paper's published dataset" in r.getMessage()]
 
 
 def test_table_cells_and_progress_text_are_not_markup():

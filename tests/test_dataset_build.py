@@ -43,8 +43,8 @@ def test_build_from_cached_paper_weather_is_byte_identical(tmp_path, paper_weath
     assert {"numpy", "pandas", "pvlib"} <= set(manifest["package_versions"])
 
 
-def test_published_checksums_file_agrees_with_embedded_checksums(published_dir):
-    sums = (published_dir.parent / "SHA256SUMS").read_text().split("\n")
+def test_published_checksums_file_agrees_with_embedded_checksums(shared_data):
+    sums = (shared_data / "SHA256SUMS").read_text().split("\n")
     listed = {line.split()[1].split("/")[-1]: line.split()[0] for line in sums if "published" in line}
     assert listed == PAPER_DATASET_SHA256
 
@@ -98,8 +98,10 @@ def test_data_build_names_the_papers_weather_and_dataset(tmp_path, paper_weather
         app, ["data", "build", "--out", str(tmp_path / "p"), "--weather-cache", str(paper_weather)]
     )
     assert paper.exit_code == 0, paper.output
-    assert "the paper's cached Open-Meteo payload" in paper.output
+    assert "the paper's Open-Meteo payload (sha256 matches)" in paper.output
+    assert "Weather data by Open-Meteo.com (CC BY 4.0" in paper.output
     assert "byte-identical to the paper's published dataset" in paper.output
     other = CliRunner().invoke(app, ["data", "build", "--out", str(tmp_path / "s"), "--weather", "synthetic"])
     assert other.exit_code == 0, other.output
-    assert "Open-Meteo payload" not in other.output and "byte-identical" not in other.output
+    assert "Open-Meteo" not in other.output and "byte-identical" not in other.output
+    assert json.loads((tmp_path / "s" / MANIFEST_FILE).read_text())["weather_attribution"] is None

@@ -1,4 +1,4 @@
-"""Fuzzing the dataset loader with mutations of the published dataset (the tiny one when absent).
+"""Fuzzing the dataset loader with mutations of the published dataset (rebuilt from the packaged weather).
 
 Two families: harmless rewritings (BOM, CRLF, column order, extra columns, the same instants in
 another UTC offset) must give a bit-identical hourly table; corruptions must be refused by
@@ -23,7 +23,6 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 from typer.testing import CliRunner
 
-from conftest import PUBLISHED, shared_data_dir
 from solarchain_eval.cli import app
 from solarchain_eval.data.files import DATASET_FILES, GENERATION_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE
 from solarchain_eval.data.load import load_raw_dataset
@@ -68,9 +67,8 @@ class Source:
 
 
 @pytest.fixture(scope="module")
-def source(tiny_dataset) -> Source:
-    published = shared_data_dir() / PUBLISHED
-    root = published if (published / GENERATION_FILE).is_file() else tiny_dataset
+def source(published_dir) -> Source:
+    root = published_dir
     files = {}
     for name in DATASET_FILES:
         text = (root / name).read_text(encoding="utf-8")

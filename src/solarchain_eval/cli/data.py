@@ -71,11 +71,14 @@ def build(
         "--weather-cache",
         help="A cached weather file in the paper's layout (e.g. the paper's cached Open-Meteo weather).",
     ),
-    weather: WeatherSource = typer.Option(
-        WeatherSource.synthetic,
+    weather: WeatherSource | None = typer.Option(
+        None,
         "--weather",
-        help="Weather source when no --weather-cache is given: 'synthetic' (offline, pvlib clear sky with seeded "
-        "clouds) or 'open-meteo' (live archive API; the payload is cached in the user cache directory).",
+        help="Weather source when no --weather-cache is given: 'paper' (the paper's Open-Meteo payload, shipped with "
+        "the package; the paper's cities and April 2026 only), 'synthetic' (offline, pvlib clear sky with seeded "
+        "clouds) or 'open-meteo' (live archive API; the payload is cached in the user cache directory). "
+        "Default: 'paper' when it covers the cities and dates, else 'synthetic'.",
+        show_default=False,
     ),
     seed: int = typer.Option(DEFAULT_SEED, help="Seed of the build's random stream."),
     start: str = typer.Option(DEFAULT_START, help="First day (local time), YYYY-MM-DD."),
@@ -112,11 +115,11 @@ def build(
 ) -> None:
     """Build a dataset: nodes, hourly PV generation, false-data injection, market, trades.
 
-    Writes the four CSVs and manifest.json (row counts, sha256, seed, weather source,
-    versions). With --weather-cache pointing at the paper's cached weather
-    (open_meteo_weather_2026-04-01_2026-05-01.json) and the defaults, the four CSVs are
-    byte-identical to the paper's published dataset. The --fdia-* options choose the attack
-    scenario (docs/dataset.md#attack-scenarios); the manifest records it.
+    Writes the four CSVs and manifest.json (row counts, sha256, seed, weather source and its
+    licence attribution, versions). With the defaults (data build --out DIR) the weather is the
+    paper's Open-Meteo payload shipped with the package and the four CSVs are byte-identical to
+    the paper's published dataset. The --fdia-* options choose the attack scenario, which the
+    manifest records (docs/dataset.md#attack-scenarios).
     """
     cities = _cities(city)
     scenario = _scenario(fdia_rate, fdia_severity, fdia_pattern.value, fdia_burst_hours)
@@ -189,7 +192,10 @@ def _show_build(result, out: Path, source: str, seed: int, n_cities: int) -> Non
     fdia = result.manifest["fdia"]
     say(f"false data: {fdia['injected_records']:,} records, {fdia['pattern']}, rate {fdia['rate']}", err=False)
     if result.manifest.get("weather_sha256") == PAPER_WEATHER_SHA256:
-        say("weather: the paper's cached Open-Meteo payload (sha256 matches)", err=False)
+        say("weather: the paper's Open-Meteo payload (sha256 matches)", err=False)
+    attribution = result.manifest.get("weather_attribution")
+    if attribution:
+        say(f"{attribution['attribution']} ({attribution['licence']}, {attribution['licence_url']})", err=False)
     if matches_published({name: info["sha256"] for name, info in files.items()}):
         say("byte-identical to the paper's published dataset", style="bold green", err=False)
 

@@ -191,9 +191,10 @@ def run(
 ) -> None:
     """The main job: evaluate the baselines on the embedded default dataset.
 
-    Builds the default dataset offline once (synthetic weather for the paper's cities and month)
-    into the user cache directory and reuses it afterwards; evaluates Static, Random and Myopic
-    with the paper's protocol and prints the results table and the files written.
+    The default dataset is the paper's published dataset: built offline once from the paper's
+    Open-Meteo weather shipped with the package, checked against the published sha256s, into
+    the user cache directory and reused afterwards. Evaluates Static, Random and Myopic with
+    the paper's protocol and prints the results table and the files written.
     """
     cfg = BenchmarkConfig()
     out = out or _default_run_dir(cfg, "baselines")
@@ -206,5 +207,8 @@ def run(
         data_dir=dataset,
         config=cfg,
     )
-    say(f"dataset: {dataset} (synthetic weather, the paper's cities and month)", err=False)
+    say(
+        f"dataset: {dataset} (the paper's published dataset, rebuilt from the packaged weather; sha256s checked)",
+        err=False,
+    )
     _evaluate(spec, out, "baselines on the embedded default dataset", overwrite)

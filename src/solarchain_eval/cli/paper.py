@@ -141,7 +141,7 @@ def paper(
     data: Path | None = typer.Option(
         None,
         "--data",
-        help="Dataset directory (default: the embedded default dataset; the paper's numbers need the published one).",
+        help="Dataset directory (default: the embedded default dataset, which is the paper's published one).",
     ),
     preset: Preset = typer.Option(
         Preset.paper,

@@ -21,7 +21,7 @@ from .cities import City, check_unique_prefixes, factories_for
 from .fdia import FDIA_FRACTION, FDIA_MULTIPLIERS, FdiaScenario, inject_false_data  # noqa: F401
 from .files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE  # noqa: F401
 from .pv import capped_irradiance_wm2, max_power_w, solar_geometry, temperature_factor
-from .weather import CityWeather, WeatherError
+from .weather import CityWeather, WeatherError, weather_attribution
 
 INSTALL_FIRST, INSTALL_LAST = dt.date(2020, 1, 1), dt.date(2024, 5, 31)
 TRADE_MIN_VERIFIED_MW = 0.002
@@ -235,7 +235,8 @@ def build_dataset(
 
     Each file is written atomically and the manifest last, so a directory with a manifest
     is a complete build. ``fdia`` is the false-data injection scenario (default: the paper's,
-    5 % of the records, uniform, the paper's multipliers); the manifest records it.
+    5 % of the records, uniform, the paper's multipliers); the manifest records it, and the
+    weather's licence attribution when it is third-party data (Open-Meteo, CC BY 4.0).
     """
     if nodes_per_city < 1:
         raise ValueError("nodes_per_city must be at least 1")
@@ -275,6 +276,7 @@ def build_dataset(
         "cities": [{"name": c.name, "latitude": c.latitude, "longitude": c.longitude} for c in cities],
         "weather_source": weather_source,
         "weather_sha256": weather_sha256,
+        "weather_attribution": weather_attribution(weather[c.name] for c in cities),
         "hours": int(len(market)),
         "fdia": fdia_entry,
         "package_versions": package_versions(),

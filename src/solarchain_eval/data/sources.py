@@ -1,6 +1,9 @@
-"""Where a dataset build's weather comes from: a cached file, Open-Meteo (with its cache), or the synthetic generator.
+"""Where a dataset build's weather comes from: a cached file, the paper's packaged payload, Open-Meteo
+(with its cache), or the synthetic generator.
 
 :func:`choose_weather` is the one place that decides it, for ``data build`` and any other caller.
+Without a choice, a build of the paper's cities, time zone and month gets the paper's payload
+(shipped with the package) and any other build synthetic weather.
 The Open-Meteo payload is cached in the user cache directory under a name derived from the
 cities and the dates (:func:`open_meteo_cache_path`) and reused unless ``refresh`` is asked for.
 """
@@ -16,12 +19,14 @@ from pathlib import Path
 from ..common.atomic_files import sha256_file
 from .cities import City
 from .default import cache_dir
-from .weather import CityWeather, read_weather_cache, write_weather_cache
+from .published import PAPER_WEATHER_SHA256, PAPER_WEATHER_SOURCE, paper_weather_covers, read_paper_weather
+from .weather import CityWeather, WeatherError, read_weather_cache, write_weather_cache
 
 
 class WeatherSource(StrEnum):
     """Weather source of a build without a cached weather file."""
 
+    paper = "paper"
     synthetic = "synthetic"
     open_meteo = "open-meteo"
 
@@ -37,7 +42,7 @@ class Weather:
     source : str
         The manifest's ``weather_source``.
     sha256 : str or None
-        sha256 of the weather file read or cached (None for synthetic weather).
+        sha256 of the weather JSON read or cached (None for synthetic weather).
     """
 
     payload: Mapping[str, CityWeather]
@@ -59,14 +64,17 @@ def choose_weather(
     seed: int,
     timezone: str,
     weather_cache: Path | None = None,
-    source: WeatherSource | str = WeatherSource.synthetic,
+    source: WeatherSource | str | None = None,
     open_meteo_url: str | None = None,
     refresh: bool = False,
     retries: int = 4,
     on_city: Callable[[str], None] | None = None,
     notify: Callable[[str], None] | None = None,
 ) -> Weather:
-    """The build's weather: ``weather_cache`` if given, else ``source``.
+    """The build's weather: ``weather_cache`` if given, else ``source``, else the default.
+
+    The default is the paper's packaged payload when it covers the build (the paper's cities,
+    time zone and dates in April 2026), synthetic weather otherwise.
 
     Parameters
     ----------
@@ -74,7 +82,9 @@ def choose_weather(
         As for the build (``seed`` drives the synthetic generator).
     weather_cache : path, optional
         A weather file in the paper's layout; wins over ``source``.
-    source : {"synthetic", "open-meteo"}
+    source : {"paper", "synthetic", "open-meteo"}, optional
+        ``paper``: the paper's Open-Meteo payload shipped with the package (its sha256 checked).
+        None: ``paper`` when it covers the build, else ``synthetic``.
     open_meteo_url : str, optional
         Archive endpoint (default: ``$SOLARCHAIN_OPEN_METEO_URL`` or the public API).
     refresh : bool
@@ -91,12 +101,26 @@ def choose_weather(
     ValueError
         Dates the synthetic generator cannot cover.
     WeatherError
-        A weather file or an Open-Meteo answer that cannot be used.
+        A weather file or an Open-Meteo answer that cannot be used, a damaged packaged payload
+        (:class:`~solarchain_eval.data.published.PackagedWeatherError`), or ``paper`` for a build
+        it does not cover.
     """
     say = notify or (lambda _message: None)
     if weather_cache is not None:
         payload = read_weather_cache(weather_cache, cities)
         return Weather(payload, f"cached file {weather_cache.name}", sha256_file(weather_cache))
+    covered = paper_weather_covers(cities, start, end, timezone)
+    if source is None:
+        source = WeatherSource.paper if covered else WeatherSource.synthetic
+        if not covered:
+            say("weather: synthetic (the paper's packaged weather covers its five cities, Asia/Shanghai, April 2026)")
+    if WeatherSource(source) is WeatherSource.paper:
+        if not covered:
+            raise WeatherError(
+                "the paper's weather covers only its five cities, the Asia/Shanghai time zone and dates from "
+                "2026-04-01 to 2026-05-01; use synthetic or Open-Meteo weather for this build"
+            )
+        return Weather(read_paper_weather(cities), PAPER_WEATHER_SOURCE, PAPER_WEATHER_SHA256)
     if WeatherSource(source) is WeatherSource.open_meteo:
         from .open_meteo import SOURCE_NAME, archive_url, fetch_weather
 

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -61,6 +61,32 @@ class CityWeather:
             "temperature_2m_C": list(self.temperature_2m_C),
             "shortwave_radiation_Wm2": list(self.shortwave_radiation_Wm2),
         }
+
+
+#: The CC BY 4.0 attribution of Open-Meteo weather, as a build manifest records it.
+OPEN_METEO_ATTRIBUTION = {
+    "attribution": "Weather data by Open-Meteo.com",
+    "source_url": "https://open-meteo.com/",
+    "licence": "CC BY 4.0",
+    "licence_url": "https://creativecommons.org/licenses/by/4.0/",
+    "changes": (
+        "Hourly temperature_2m and shortwave_radiation of the Historical Weather API, re-laid out per city as "
+        "temperature_2m_C and shortwave_radiation_Wm2 with values unchanged (the paper's payload ships "
+        "xz-compressed). The build caps the irradiance at 1.08 x clear-sky GHI (0 with the sun below the "
+        "horizon) and derives PV power, false-data injection, market aggregates and trades from it."
+    ),
+}
+
+
+def weather_attribution(entries: Iterable[CityWeather]) -> dict[str, str] | None:
+    """The attribution a dataset built from ``entries`` must carry (None without third-party data).
+
+    Open-Meteo weather (CC BY 4.0) is recognised by its ``source`` field, which the archive
+    client and the paper's payload set to the API's name.
+    """
+    if any("open-meteo" in entry.source.lower() for entry in entries):
+        return dict(OPEN_METEO_ATTRIBUTION)
+    return None
 
 
 _FIELDS = ("source", "latitude", "longitude", "timezone", "time", "temperature_2m_C", "shortwave_radiation_Wm2")
@@ -114,18 +140,26 @@ def read_weather_cache(path: str | Path, cities: Sequence[City]) -> dict[str, Ci
     cache = Path(path)
     if not cache.is_file():
         raise WeatherError(f"weather cache not found: {cache}")
+    return parse_weather_json(cache.read_text(encoding="utf-8"), str(cache), cities)
+
+
+def parse_weather_json(text: str, where: str, cities: Sequence[City]) -> dict[str, CityWeather]:
+    """Parse a payload in the cached layout and return the entries of ``cities`` (validated).
+
+    ``where`` names the payload in error messages.
+    """
     try:
-        payload = json.loads(cache.read_text(encoding="utf-8"))
+        payload = json.loads(text)
     except json.JSONDecodeError as error:
-        raise WeatherError(f"{cache} is not valid JSON: {error}") from None
+        raise WeatherError(f"{where} is not valid JSON: {error}") from None
     if not isinstance(payload, dict):
-        raise WeatherError(f"{cache}: the top level must map city names to weather objects")
+        raise WeatherError(f"{where}: the top level must map city names to weather objects")
     absent = [city.name for city in cities if city.name not in payload]
     if absent:
         raise WeatherError(
-            f"{cache}: no weather for {', '.join(absent)} (the file has {', '.join(payload) or 'no cities'})"
+            f"{where}: no weather for {', '.join(absent)} (the file has {', '.join(payload) or 'no cities'})"
         )
-    return {city.name: city_weather_from_json(payload[city.name], f"{cache} [{city.name}]") for city in cities}
+    return {city.name: city_weather_from_json(payload[city.name], f"{where} [{city.name}]") for city in cities}
 
 
 def write_weather_cache(path: str | Path, weather: Mapping[str, CityWeather]) -> Path:
