@@ -17,6 +17,10 @@ from dataclasses import dataclass
 import numpy as np
 import pandas as pd
 
+from ..evaluation.settings import setting_is_agentic
+from ..market.baselines import BASELINES
+from .loading import ReportData
+from .naming import llm_record
 from .options import ReportOptions
 from .paper_reference import Ref
 from .statistics import Interval, cluster_bootstrap, mean_std, paired_deltas
@@ -24,6 +28,8 @@ from .statistics import Interval, cluster_bootstrap, mean_std, paired_deltas
 #: The identity columns every estimate keeps for its rows.
 KEYS = ("policy", "run_seed", "episode_seed", "start_hour")
 Statistic = Callable[[np.ndarray], np.ndarray]
+#: The verdict and the run column of a published number the run has no estimate for.
+NOT_IN_RUN = "not in run"
 
 
 @dataclass(frozen=True)
@@ -84,21 +90,30 @@ class RunEstimates:
 
     def __init__(self, metrics: pd.DataFrame) -> None:
         self.metrics = metrics
+        self._settings = {str(s): frame for s, frame in metrics.groupby("setting", sort=False)}
+        self._pairs: dict[tuple[str, str], pd.DataFrame] = {}
+        self._found: dict[Ref, Estimate | None] = {}
 
     def _rows(self, setting: str, policies: tuple[str, ...], columns: list[str]) -> pd.DataFrame | None:
-        if any(c not in self.metrics.columns for c in columns):
+        frame = self._settings.get(setting)
+        if frame is None or any(c not in frame.columns for c in columns):
             return None
-        rows = self.metrics[(self.metrics["setting"] == setting) & self.metrics["policy"].isin(policies)]
+        rows = frame[frame["policy"].isin(policies)]
         if set(rows["policy"]) != set(policies) or rows[columns].isna().all(axis=None):
             return None  # a pooled row needs every policy it pools
         return rows[[*KEYS, *columns]].reset_index(drop=True)
 
     def get(self, ref: Ref) -> Estimate | None:
-        """The estimate of ``ref``; None when the run lacks its rollouts or columns.
+        """The estimate of ``ref``; None when the run lacks its rollouts or columns (computed once per ref).
 
         Statistics: ``mean`` (a paired delta when ``ref.base_setting`` is set) and ``pooled``
         (revisions per audit, pooled over episodes).
         """
+        if ref not in self._found:
+            self._found[ref] = self._estimate(ref)
+        return self._found[ref]
+
+    def _estimate(self, ref: Ref) -> Estimate | None:
         if ref.statistic == "pooled":
             return self._pooled_rate(ref)
         if ref.statistic != "mean":
@@ -126,15 +141,73 @@ class RunEstimates:
 
         return Estimate(rows, statistic)
 
+    def _paired_frame(self, base: str, treated: str) -> pd.DataFrame:
+        """Matched ``treated - base`` deltas of every numeric metric column (computed once per pair)."""
+        if (base, treated) not in self._pairs:
+            both = self.metrics[self.metrics["setting"].isin([base, treated])]
+            columns = [
+                c
+                for c in both.columns
+                if c not in (*KEYS, "setting", "episode") and pd.api.types.is_numeric_dtype(both[c])
+            ]
+            self._pairs[(base, treated)] = paired_deltas(both, base, treated, columns).frame
+        return self._pairs[(base, treated)]
+
     def _paired(self, ref: Ref) -> Estimate | None:
         assert ref.base_setting is not None
-        if ref.metric not in self.metrics.columns:
+        if ref.base_setting not in self._settings or ref.setting not in self._settings:
             return None
-        both = self.metrics[self.metrics["policy"].isin(ref.policies)]
-        frame = paired_deltas(both, ref.base_setting, ref.setting, [ref.metric]).frame
-        if set(frame["policy"]) != set(ref.policies):
+        frame = self._paired_frame(ref.base_setting, ref.setting)
+        if ref.metric not in frame.columns:
             return None
-        return Estimate(frame[[*KEYS, ref.metric]], _weighted_mean(frame[ref.metric].to_numpy(dtype=float)))
+        frame = frame[frame["policy"].isin(ref.policies)]
+        if set(frame["policy"]) != set(ref.policies) or frame[ref.metric].isna().all():
+            return None
+        frame = frame[[*KEYS, ref.metric]].reset_index(drop=True)
+        return Estimate(frame, _weighted_mean(frame[ref.metric].to_numpy(dtype=float)))
 
 
-__all__ = ["KEYS", "Estimate", "RunEstimates", "difference"]
+def stand_in(data: ReportData) -> str | None:
+    """What stands in for the paper's hosted LLM in the run's agentic rows, or None when nothing does.
+
+    E.g. "rule planner, rule auditor" or "local model SmolLM2-135M-Instruct"; a run without the
+    ``planner``/``auditor`` columns says "planner/auditor not recorded".
+    """
+    agentic = data.metrics[data.metrics["setting"].map(setting_is_agentic)]
+    if agentic.empty:
+        return None
+    if not {"planner", "auditor"} <= set(agentic.columns):
+        return "planner/auditor not recorded"
+    parts = [
+        f"{kind} {role}"
+        for role in ("planner", "auditor")
+        for kind in sorted(set(agentic[role].dropna().astype(str)))
+        if kind != "llm"
+    ]
+    llm = llm_record(data.metadata)
+    uses_llm = (agentic[["planner", "auditor"]].astype(str) == "llm").any(axis=None)
+    if uses_llm and llm is not None and llm.get("decoding") is not None:
+        parts.append(f"local model {llm['model']}")
+    return ", ".join(parts) or None
+
+
+def is_agentic(ref: Ref) -> bool:
+    """Whether the quantity involves a setting behind the Planner/Auditor layer."""
+    return setting_is_agentic(ref.setting) or (ref.base_setting is not None and setting_is_agentic(ref.base_setting))
+
+
+def is_deterministic(ref: Ref) -> bool:
+    """Rule baselines without the layer: the same data and protocol give the same digits."""
+    return all(p in BASELINES for p in ref.policies) and not is_agentic(ref)
+
+
+__all__ = [
+    "KEYS",
+    "NOT_IN_RUN",
+    "Estimate",
+    "RunEstimates",
+    "difference",
+    "is_agentic",
+    "is_deterministic",
+    "stand_in",
+]

@@ -116,6 +116,11 @@ def paper_values() -> pd.DataFrame:
     "step"), ``report_column``, ``unit`` ("percent" for percentages in the text) and
     ``context`` (the text around a number stated in the text).
     """
+    return _values_frame().copy()
+
+
+@cache
+def _values_frame() -> pd.DataFrame:
     # object columns keep None as None (a text dtype would turn it into NaN)
     frame = pd.DataFrame(list(_values_by_id().values()), dtype=object)
     frame["value"] = frame["value"].astype(float)
