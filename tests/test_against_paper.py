@@ -219,7 +219,9 @@ def test_every_finding_holds_on_a_paper_like_llm_run():
 def test_findings_flip_are_stand_ins_or_are_not_in_run():
     metrics = paper_like()
     main = metrics["setting"] == "main"
-    metrics.loc[main & (metrics["policy"] == "sac"), "cumulative_reward"] -= 1.0  # SAC -23.26: below PPO and Myopic (-23.08)
+    metrics.loc[main & (metrics["policy"] == "sac"), "cumulative_reward"] -= (
+        1.0  # SAC -23.26: below PPO and Myopic (-23.08)
+    )
     table = findings(metrics, kind="run")
     assert table.loc["sac_highest_reward", "verdict"] == "flips"
     assert table.loc["ppo_sac_beat_every_heuristic", "verdict"] == "flips"
