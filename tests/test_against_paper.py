@@ -31,7 +31,7 @@ from solarchain_eval.report.against_paper import (
 )
 from solarchain_eval.report.loading import ReportData
 from solarchain_eval.report.options import ReportOptions
-from solarchain_eval.report.paper_reference import paper_value, table_values
+from solarchain_eval.report.paper_reference import paper_value, printed_row, table_values
 
 SEEDS = (1, 2, 3)
 EPISODES = 6
@@ -59,6 +59,11 @@ def keys() -> pd.DataFrame:
             "start_hour": [24 * ((s + e) % 5) for s, e in pairs],
         }
     )
+
+
+def printed(policy: str) -> str:
+    """The paper's cumulative-reward cell of a main-table row, as the report prints it ("mean ± std")."""
+    return printed_row(MAIN_TABLE, (policy,))[0].replace(" $\\pm$ ", " ± ")
 
 
 def delta(table: str, row: str, column: str) -> float:
@@ -132,7 +137,7 @@ def test_the_paper_like_run_reproduces_every_baseline_cell_and_lands_inside_ever
     assert len(main) == 30
     baselines = main.loc[["Static", "Random", "Myopic"]]
     assert set(baselines["verdict"]) == {"equal"}
-    assert baselines.loc[("Static", "Cumulative Reward"), "run"] == "-23.38 ± 0.80"
+    assert baselines.loc[("Static", "Cumulative Reward"), "run"] == printed("Static")
     assert set(main.loc[["PPO", "SAC", "DQN"]]["verdict"]) == {"inside"}
     ablation = rule_run.loc["tab:physics-ablation-deltas"]
     assert set(ablation.loc[["RL / PPO", "RL / SAC", "RL / DQN"]]["verdict"]) == {"inside"}
@@ -255,7 +260,7 @@ def test_the_baseline_table_of_run_equals_the_paper_and_reports_a_differing_digi
     comparison = main_table_against_paper(metrics)
     assert list(comparison.rows["policy"]) == ["static", "random", "myopic"]  # learned rows are left out
     assert (comparison.equal_cells, comparison.cells, comparison.all_equal) == (15, 15, True)
-    assert comparison.rows.loc[0, "cumulative_reward_paper"] == "-23.38 ± 0.80"
+    assert comparison.rows.loc[0, "cumulative_reward_paper"] == printed("Static")
     metrics = metrics.copy()
     metrics.loc[metrics["policy"] == "myopic", "artificial_liquidity_MWh"] *= 1.01
     changed = main_table_against_paper(metrics)
@@ -277,7 +282,7 @@ def test_run_prints_the_paper_beside_the_baselines(tmp_path):
     result = CliRunner().invoke(app, ["run", "--out", str(tmp_path / "run"), "--episodes", "1", "--seeds", "7"])
     assert result.exit_code == 0, result.output
     assert "against the paper's main table" in result.output
-    assert "-23.38 ±" in result.output  # the paper's Static reward, beside ours
+    assert printed("Static").split(" ±")[0] + " ±" in result.output  # the paper's Static reward, beside ours
     assert "15 of 15 cells differ from the paper's main table" in result.output
     assert "(the paper's protocol is 3 seeds × 30 episodes)" in result.output
 

@@ -20,6 +20,7 @@ from solarchain_eval.report.paper_reference import (
     paper_tables,
     paper_value,
     paper_values,
+    printed_row,
     ref_of,
 )
 
@@ -95,6 +96,14 @@ def test_every_stored_table_value_equals_the_printed_number(tex):
         wrong = {k: (v, printed.get(k)) for k, v in ours.items() if printed.get(k) != v}
         assert not wrong, f"{table.label}: stored vs printed {wrong}"
         assert set(ours) == set(printed), f"{table.label}: numbers not stored: {sorted(set(printed) - set(ours))}"
+
+
+def test_printed_rows_reassemble_the_papers_rows(tex):
+    for table in paper_tables():
+        _, rows = tabular(tex, table.label)
+        width = len(table.label_columns)
+        for row in rows:
+            assert printed_row(table.label, tuple(row[:width])) == row[width:], (table.label, row[:width])
 
 
 def test_every_result_table_of_the_paper_is_stored(tex):

@@ -201,6 +201,33 @@ def table_values(label: str, part: str | None = None) -> pd.DataFrame:
     return (frame if part is None else frame[frame["part"] == part]).reset_index(drop=True)
 
 
+#: How the paper prints a cell of several numbers, by its parts.
+_CELL_FORMS = {
+    ("mean", "std"): "{mean} $\\pm$ {std}",
+    ("mean", "p05", "p95"): "{mean} ({p05}--{p95})",
+    ("min", "max"): "{min}--{max}",
+    ("value",): "{value}",
+}
+
+
+def printed_row(label: str, row: tuple[str, ...]) -> list[str]:
+    """The data cells of one row of a table as the paper's LaTeX prints them (e.g. ``-23.38 $\\pm$ 0.80``).
+
+    ``row`` is the row's label cells, e.g. ``("Static",)`` or ``("RL", "PPO")``.
+    """
+    table = next(t for t in paper_tables() if t.label == label)
+    values = table_values(label)
+    values = values[values["row"] == tuple(row)]
+    if values.empty:
+        raise KeyError(f"{label} has no row {row!r}")
+    cells = []
+    for column in table.columns:
+        parts = values[values["column"] == column]
+        printed = dict(zip(parts["part"], parts["printed"], strict=True))
+        cells.append(_CELL_FORMS[tuple(printed)].format(**printed))
+    return cells
+
+
 def paper_findings_values(finding: Finding) -> dict[Ref, float]:
     """The paper's number for each quantity a finding compares (from the cells it names)."""
     out: dict[Ref, float] = {}
@@ -225,6 +252,7 @@ __all__ = [
     "paper_tables",
     "paper_value",
     "paper_values",
+    "printed_row",
     "ref_of",
     "table_values",
 ]
