@@ -63,7 +63,7 @@ def _not_better(finding: Finding, found: dict[Ref, Estimate], options: ReportOpt
             low = interval.low if sign > 0 else -interval.high  # the difference's low end, better direction
             holds_all &= not low > 0
             shown.append(
-                f"{policy_label(p)} − {policy_label(other)} {fixed(interval.estimate, digits)} "
+                f"{policy_label(p)} - {policy_label(other)} {fixed(interval.estimate, digits)} "
                 f"[{fixed(interval.low, digits)}, {fixed(interval.high, digits)}]"
             )
     return holds_all, "; ".join(shown)

@@ -124,7 +124,7 @@ class _Checker:
         decimals = max(a["decimals"], b["decimals"])
         paper_delta = round(a["value"] - b["value"], decimals)
         names = [policy_label(r["policy"]) if "+" not in r["policy"] else _pooled_label(r["policy"]) for r in (a, b)]
-        where = dict(table=a["table"], row=f"{names[0]} − {names[1]}", column=_metric_header(a["metric"]))
+        where = dict(table=a["table"], row=f"{names[0]} - {names[1]}", column=_metric_header(a["metric"]))
         where |= dict(paper=fixed(paper_delta, decimals), paper_value=paper_delta, decimals=decimals)
         first, second = self.estimates.get(ref_of(minuend_id)), self.estimates.get(ref_of(subtrahend_id))
         if first is None or second is None:

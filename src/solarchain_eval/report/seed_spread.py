@@ -213,7 +213,7 @@ def seed_spread_table(data: ReportData, options: ReportOptions) -> ReportTable |
         title=title,
         caption=(
             "Main setting. Between-seed SD: sample SD of the per-training-seed means; between-episode SD: pooled "
-            "within-seed SD of the rollouts; episode noise SD: between-episode SD / √episodes per seed, what "
+            "within-seed SD of the rollouts; episode noise SD: between-episode SD / sqrt(episodes per seed), what "
             "episode noise alone would give the seed means; ratio: between-seed SD / episode noise SD (well above "
             "1: the training seed moves the row)."
         ),
