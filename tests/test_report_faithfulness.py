@@ -11,26 +11,26 @@ from pathlib import Path
 
 import pytest
 
+from solarchain_eval.common.atomic_files import read_csv_exact
 from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
 from solarchain_eval.report import ReportOptions, build_report
+from solarchain_eval.report.against_paper import main_table_against_paper
+from solarchain_eval.report.paper_reference import printed_row
 
-# tab:main-performance, the paper's Static/Random/Myopic rows (Markdown rendering of the LaTeX).
-PAPER_MAIN_ROWS = (
-    "| Static | -23.38 ± 0.80 | 0.514 ± 0.099 | 0.4874 ± 0.0166 | 0.0140 ± 0.0020 | 0.1803 ± 0.0419 |",
-    "| Random | -25.46 ± 0.91 | 0.480 ± 0.093 | 0.4771 ± 0.0172 | 0.0148 ± 0.0023 | 0.1137 ± 0.0297 |",
-    "| Myopic | -23.08 ± 0.80 | 0.456 ± 0.088 | 0.4779 ± 0.0168 | 0.0144 ± 0.0023 | 0.1009 ± 0.0235 |",
-)
-PAPER_MAIN_LATEX = (
-    r"Static & -23.38 $\pm$ 0.80 & 0.514 $\pm$ 0.099 & 0.4874 $\pm$ 0.0166 & 0.0140 $\pm$ 0.0020 & 0.1803 $\pm$ 0.0419 \\",
-    r"Random & -25.46 $\pm$ 0.91 & 0.480 $\pm$ 0.093 & 0.4771 $\pm$ 0.0172 & 0.0148 $\pm$ 0.0023 & 0.1137 $\pm$ 0.0297 \\",
-    r"Myopic & -23.08 $\pm$ 0.80 & 0.456 $\pm$ 0.088 & 0.4779 $\pm$ 0.0168 & 0.0144 $\pm$ 0.0023 & 0.1009 $\pm$ 0.0235 \\",
-)
-# tab:app-main-detail, the baselines' rows (the paper sorts them by name; the report keeps its one order).
-PAPER_DETAIL_LATEX = (
-    r"Static & 90 & -23.38 & -24.86 & -21.65 & 0.514 & 0.4874 & 0.4527--0.5218 & 0.1803 \\",
-    r"Random & 90 & -25.46 & -27.34 & -23.28 & 0.480 & 0.4771 & 0.4395--0.5147 & 0.1137 \\",
-    r"Myopic & 90 & -23.08 & -24.60 & -21.39 & 0.456 & 0.4779 & 0.4434--0.5136 & 0.1009 \\",
-)
+BASELINE_ROWS = ("Static", "Random", "Myopic")
+
+
+def latex_rows(label: str) -> list[str]:
+    """The paper's baseline rows of a table as its LaTeX prints them (from the stored paper values)."""
+    return [" & ".join([name, *printed_row(label, (name,))]) + " \\\\" for name in BASELINE_ROWS]
+
+
+def markdown_rows(label: str) -> list[str]:
+    """The same rows as the report's Markdown renders them ("±", "–")."""
+    cells = [[name, *printed_row(label, (name,))] for name in BASELINE_ROWS]
+    return ["| " + " | ".join(c.replace(" $\\pm$ ", " ± ").replace("--", "–") for c in row) + " |" for row in cells]
+
+
 OPTIONS = ReportOptions(n_resamples=300)
 
 
@@ -51,9 +51,11 @@ def report_dir(baseline_run: Path) -> Path:
 def test_main_performance_equals_the_paper(report_dir: Path):
     markdown = (report_dir / "tables" / "main_performance.md").read_text(encoding="utf-8")
     table_rows = [line for line in markdown.splitlines() if line.startswith("| ") and "±" in line]
-    assert tuple(table_rows) == PAPER_MAIN_ROWS
+    assert table_rows == markdown_rows("tab:main-performance")
     latex = (report_dir / "tables" / "main_performance.tex").read_text(encoding="utf-8")
-    assert [line for line in latex.splitlines() if "$\\pm$" in line and line.endswith("\\\\")] == list(PAPER_MAIN_LATEX)
+    assert [line for line in latex.splitlines() if "$\\pm$" in line and line.endswith("\\\\")] == latex_rows(
+        "tab:main-performance"
+    )
     assert "\\toprule" in latex and "\\label{tab:main-performance}" in latex
     assert "n = 90 rollouts per row, behind them 32 distinct episode seeds and 21 distinct start days" in markdown
 
@@ -61,7 +63,20 @@ def test_main_performance_equals_the_paper(report_dir: Path):
 def test_main_detail_equals_the_paper(report_dir: Path):
     latex = (report_dir / "tables" / "main_detail.tex").read_text(encoding="utf-8")
     rows = [line for line in latex.splitlines() if line.endswith("\\\\") and " & 90 & " in line]
-    assert rows == list(PAPER_DETAIL_LATEX)
+    assert rows == latex_rows("tab:app-main-detail")
+
+
+def test_the_run_commands_table_equals_the_paper_on_the_published_data(baseline_run: Path):
+    comparison = main_table_against_paper(read_csv_exact(baseline_run / "metrics.csv"))
+    assert (comparison.equal_cells, comparison.cells) == (15, 15)
+
+
+def test_the_check_against_the_paper_finds_every_baseline_cell_equal(baseline_run: Path, tmp_path: Path):
+    outcome = build_report(baseline_run, tmp_path / "report", options=OPTIONS, figures=False, against="paper")
+    main = next(t for t in outcome.against if t.key == "against_paper_main").data
+    baselines = main[main["row"].isin(BASELINE_ROWS)]
+    assert len(baselines) == 15 and set(baselines["verdict"]) == {"equal"}
+    assert set(main.loc[~main["row"].isin(BASELINE_ROWS), "verdict"]) == {"not in run"}
 
 
 def test_tables_not_supported_by_baselines_are_explained(report_dir: Path):

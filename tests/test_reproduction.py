@@ -14,6 +14,7 @@ from solarchain_eval.common.atomic_files import read_csv_exact
 from solarchain_eval.envs.env import SolarChainEnv
 from solarchain_eval.evaluation.metrics import METRIC_NAMES
 from solarchain_eval.evaluation.rollout import run_policy
+from solarchain_eval.report.paper_reference import paper_tables, printed_row
 
 SEEDS = (20260511, 20260512, 20260513)
 
@@ -31,18 +32,11 @@ ORIGINAL_FIRST_EPISODE_NO_PHYSICS = {
     "myopic": (0.312613980958257, 0.10087548958974203, 3.1997499949161785),
 }
 
-# The paper's Table (main benchmark performance): mean ± sample std over the 90 rollouts.
-PAPER_MAIN_TABLE = {
-    "static": ("-23.38 ± 0.80", "0.514 ± 0.099", "0.4874 ± 0.0166", "0.0140 ± 0.0020", "0.1803 ± 0.0419"),
-    "random": ("-25.46 ± 0.91", "0.480 ± 0.093", "0.4771 ± 0.0172", "0.0148 ± 0.0023", "0.1137 ± 0.0297"),
-    "myopic": ("-23.08 ± 0.80", "0.456 ± 0.088", "0.4779 ± 0.0168", "0.0144 ± 0.0023", "0.1009 ± 0.0235"),
-}
-# The paper's appendix (main-setting detail): reward min, max and violation range.
-PAPER_DETAIL = {
-    "static": ("-24.86", "-21.65", "0.4527--0.5218"),
-    "random": ("-27.34", "-23.28", "0.4395--0.5147"),
-    "myopic": ("-24.60", "-21.39", "0.4434--0.5136"),
-}
+
+def paper_cells(label: str, policy: str) -> dict[str, str]:
+    """The paper's printed cells of a baseline's row, by column header (from the stored paper values)."""
+    table = next(t for t in paper_tables() if t.label == label)
+    return dict(zip(table.columns, printed_row(label, (policy.capitalize(),)), strict=True))
 
 
 @pytest.fixture(scope="module")
@@ -107,23 +101,26 @@ def test_no_physics_setting_matches_the_original_release_bit_for_bit(episodes):
 
 
 def test_paper_main_table_baseline_rows(episodes):
+    """Mean ± sample std over the 90 rollouts, and the appendix's reward min, max and violation range."""
     frame = pd.DataFrame([{"policy": p, **m} for p, s, e, m in episodes[False]])
-    for policy, expected in PAPER_MAIN_TABLE.items():
+    for policy in ("static", "random", "myopic"):
         group = frame[frame["policy"] == policy]
         assert len(group) == 90
 
         def cell(column: str, digits: int, group=group) -> str:
             mean, std = group[column].mean(), group[column].std(ddof=1)
-            return f"{mean:.{digits}f} ± {std:.{digits}f}"
+            return f"{mean:.{digits}f} $\\pm$ {std:.{digits}f}"
 
-        got = (
-            cell("cumulative_reward", 2),
-            cell("episode_volume", 3),
-            cell("physics_violation_rate", 4),
-            cell("mean_slippage", 4),
-            cell("artificial_liquidity_MWh", 4),
-        )
-        assert got == expected, policy
+        got = {
+            "Cumulative Reward": cell("cumulative_reward", 2),
+            "Trading Volume": cell("episode_volume", 3),
+            "Physics Violation Rate": cell("physics_violation_rate", 4),
+            "Mean Slippage": cell("mean_slippage", 4),
+            "Artificial Liquidity": cell("artificial_liquidity_MWh", 4),
+        }
+        assert got == paper_cells("tab:main-performance", policy), policy
         reward, violation = group["cumulative_reward"], group["physics_violation_rate"]
-        detail = (f"{reward.min():.2f}", f"{reward.max():.2f}", f"{violation.min():.4f}--{violation.max():.4f}")
-        assert detail == PAPER_DETAIL[policy], policy
+        detail = paper_cells("tab:app-main-detail", policy)
+        assert f"{reward.min():.2f}" == detail["Reward Min"], policy
+        assert f"{reward.max():.2f}" == detail["Reward Max"], policy
+        assert f"{violation.min():.4f}--{violation.max():.4f}" == detail["Violation Range"], policy

@@ -160,6 +160,44 @@ def results_table(summary: list[dict], title: str, access: dict[str, str] | None
     return table
 
 
+#: The main table's metrics and their short headers (the paper's column order).
+PAPER_COLUMNS = {
+    "cumulative_reward": "reward",
+    "episode_volume": "volume",
+    "physics_violation_rate": "violation",
+    "mean_slippage": "slippage",
+    "artificial_liquidity_MWh": "art. liquidity",
+}
+
+
+def paper_results_table(comparison, title: str) -> tuple[Table, str]:
+    """The baselines' main table beside the paper's published cells, and a line on whether they agree.
+
+    ``comparison`` is a :class:`~solarchain_eval.report.against_paper.BaselineComparison`: per
+    policy and metric the run's "mean ± std" at the paper's decimals and the paper's.
+    """
+    table = Table(title=title, title_justify="left")
+    table.add_column("policy")
+    table.add_column("episodes", justify="right")
+    for header in PAPER_COLUMNS.values():
+        table.add_column(header, justify="right")
+        table.add_column("paper", justify="right", style="dim")
+    for row in comparison.rows.to_dict("records"):
+        cells = [row["policy"], str(row["episodes"])]
+        for name in PAPER_COLUMNS:
+            ours = Text(row[name], style="" if row[f"{name}_equal"] else "bold red")
+            cells += [ours, row[f"{name}_paper"]]
+        table.add_row(*cells)
+    if comparison.all_equal:
+        line = f"every printed digit equals the paper's main table ({comparison.cells} of {comparison.cells} cells)"
+    else:
+        line = (
+            f"{comparison.cells - comparison.equal_cells} of {comparison.cells} cells differ from the paper's "
+            "main table (in red)"
+        )
+    return table, line
+
+
 def say(message: str, *, style: str | None = None, err: bool = True) -> None:
     """Print one plain-text line (no markup); long paths are never broken by rich's wrapping."""
     (err_console if err else console).print(Text(message, style=style or ""), soft_wrap=True)

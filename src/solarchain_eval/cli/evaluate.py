@@ -194,8 +194,14 @@ def run(
     The default dataset is the paper's published dataset: built offline once from the paper's
     Open-Meteo weather shipped with the package, checked against the published sha256s, into
     the user cache directory and reused afterwards. Evaluates Static, Random and Myopic with
-    the paper's protocol and prints the results table and the files written.
+    the paper's protocol and prints the results table, the files written, and the main table
+    beside the paper's published values.
     """
+    from ..common.atomic_files import read_csv_exact
+    from ..evaluation.records import METRICS_FILE
+    from ..report.against_paper import main_table_against_paper
+    from .common import paper_results_table
+
     cfg = BenchmarkConfig()
     out = out or _default_run_dir(cfg, "baselines")
     check_target(out, overwrite=overwrite)
@@ -211,4 +217,13 @@ def run(
         f"dataset: {dataset} (the paper's published dataset, rebuilt from the packaged weather; sha256s checked)",
         err=False,
     )
-    _evaluate(spec, out, "baselines on the embedded default dataset", overwrite)
+    _evaluate(spec, out, "baselines on the paper's dataset", overwrite)
+    comparison = main_table_against_paper(read_csv_exact(out / METRICS_FILE))
+    table, line = paper_results_table(comparison, "against the paper's main table (its published values)")
+    console.print(table)
+    protocol = (
+        ""
+        if (list(spec.run_seeds), spec.episodes) == (list(PAPER_SEEDS), PAPER_EPISODES)
+        else (f" (the paper's protocol is {len(PAPER_SEEDS)} seeds × {PAPER_EPISODES} episodes)")
+    )
+    say(line + protocol, err=False)

@@ -9,6 +9,7 @@ from rich.table import Table
 from rich.text import Text
 
 from ..report.options import (
+    AGAINST_CHOICES,
     CLUSTER_UNITS,
     DEFAULT_RESAMPLES,
     DEFAULT_SEED,
@@ -28,6 +29,22 @@ def _case(text: str) -> tuple[str, str]:
     if not policy or not setting:
         raise CliError(f"--case must be POLICY:SETTING (e.g. ppo:llm_no_physics), got '{text}'")
     return policy.strip().lower(), setting.strip()
+
+
+def _print_check(table) -> None:
+    """One against-paper table on the console (its cells as the files print them), or why it is missing."""
+    from ..report.tables import ReportTable
+
+    if not isinstance(table, ReportTable):
+        say(f"{table.title}: skipped: {table.reason}", err=False)
+        return
+    shown = Table(title=table.title, title_justify="left")
+    for column in table.columns:
+        shown.add_column(column.header, overflow="fold")
+    for row in table.cells():
+        shown.add_row(*row)
+    console.print(shown)
+    say(table.basis, err=False)
 
 
 @app.command("report")
@@ -65,6 +82,14 @@ def report(
         "--allow-unverified",
         help="Report files that their run metadata does not vouch for (sha256 mismatch, no metadata, left-overs), with a warning each.",
     ),
+    against: str | None = typer.Option(
+        None,
+        "--against",
+        metavar="paper",
+        help="Check the run against the paper's published values: each cell beside the run's mean and "
+        "interval with a verdict (equal, inside, outside, stand-in, not in run), the paper's findings "
+        "(holds, flips) and the training-seed spread; printed and written as tables and a page section.",
+    ),
 ) -> None:
     """Regenerate the paper's tables (Markdown, LaTeX booktabs, CSV) and figures (PNG, SVG) from a
     run, with cluster-bootstrap statistics, and write a self-contained ROOT/report/index.html.
@@ -77,6 +102,8 @@ def report(
         raise cli_error(error) from None
     if cluster_by not in CLUSTER_UNITS:
         raise CliError(f"--cluster-by must be one of {', '.join(CLUSTER_UNITS)}, got '{cluster_by}'")
+    if against is not None and against not in AGAINST_CHOICES:
+        raise CliError(f"--against must be one of {', '.join(AGAINST_CHOICES)}, got '{against}'")
     case_policy, case_setting = _case(case)
     options = ReportOptions(
         n_resamples=resamples,
@@ -92,7 +119,13 @@ def report(
 
     with err_console.status("building the report..."):
         outcome = build_report(
-            root, out, formats=chosen, options=options, figures=figures, allow_unverified=allow_unverified
+            root,
+            out,
+            formats=chosen,
+            options=options,
+            figures=figures,
+            allow_unverified=allow_unverified,
+            against=against,
         )
     summary = Table(title=f"report for {root}", title_justify="left")
     summary.add_column("kind")
@@ -104,6 +137,8 @@ def report(
         status = Text("written", style="green") if made else Text.assemble(("skipped", "yellow"), f": {item.reason}")
         summary.add_row(kind, item.key, status)
     console.print(summary)
+    for table in outcome.against:
+        _print_check(table)
     for warning in outcome.warnings:
         err_console.print(Text.assemble(("warning:", "yellow"), f" {warning}"), soft_wrap=True)
     say(f"wrote {len(outcome.files)} files to {outcome.out_dir}", err=False)

@@ -159,13 +159,28 @@ def _run_metadata(data: ReportData) -> str:
     return "\n".join(parts) + "\n"
 
 
+def _against(tables: Sequence[ReportTable | Skipped]) -> str:
+    """The against-paper section: the published values beside the run's, with verdicts."""
+    if not tables:
+        return ""
+    return (
+        '<h2 id="against-paper">Checking the run against the paper</h2>\n'
+        "<p>Each published value of the paper beside the run's estimate, with a verdict; the paper's findings "
+        "checked on the run; and how much the learned rows depend on the training seeds.</p>\n"
+        + "".join(to_html(t) for t in tables if isinstance(t, ReportTable))
+        + _skipped([t for t in tables if isinstance(t, Skipped)], "Checks")
+    )
+
+
 def render_html(
     data: ReportData,
     tables: Sequence[ReportTable | Skipped],
     figures: Sequence[FigureFile | Skipped],
     warnings: Sequence[str],
+    against: Sequence[ReportTable | Skipped] = (),
 ) -> str:
-    """The whole page as one string (deterministic for the same inputs)."""
+    """The whole page as one string (deterministic for the same inputs); ``against``: the
+    against-paper tables, shown in their own section when given."""
     made_tables = [t for t in tables if isinstance(t, ReportTable)]
     made_figures = [f for f in figures if isinstance(f, FigureFile)]
     toc = "".join(f'<li><a href="#{_escape(t.key)}">{_escape(t.title)}</a></li>' for t in made_tables)
@@ -176,13 +191,16 @@ def render_html(
         f"{len(data.actions)} step rows, {len(data.city_hour)} city-hour rows, {len(data.logs)} agentic log steps.</p>",
         *[f'<div class="warning"><strong>Warning.</strong> {_escape(w)}</div>' for w in warnings],
         "<h2>Contents</h2>",
-        f'<ul><li><a href="#overview">Overview</a></li>{toc}<li><a href="#figures">Figures</a></li>'
+        f'<ul><li><a href="#overview">Overview</a></li>{toc}'
+        + ('<li><a href="#against-paper">Checking the run against the paper</a></li>' if against else "")
+        + '<li><a href="#figures">Figures</a></li>'
         '<li><a href="#provenance">Dataset provenance</a></li><li><a href="#metadata">Run metadata</a></li></ul>',
         '<h2 id="overview">Overview</h2>',
         _overview(data),
         "<h2>Tables</h2>",
         *[to_html(t) for t in made_tables],
         _skipped([t for t in tables if isinstance(t, Skipped)], "Tables"),
+        _against(against),
         '<h2 id="figures">Figures</h2>',
         '<div class="figures">' + "".join(_img(f) for f in made_figures) + "</div>",
         _skipped([f for f in figures if isinstance(f, Skipped)], "Figures"),

@@ -62,6 +62,7 @@ __all__ = [
     "paper_order",
     "learned_order",
     "governance_layer",
+    "llm_record",
 ]
 
 
@@ -98,14 +99,23 @@ def learned_order(policies: Iterable[str]) -> list[str]:
     return known + sorted(learned - set(known))
 
 
-def _llm_model(metadata: Mapping[str, Any]) -> str | None:
-    """The LLM model recorded in run or paper metadata (``agentic.llm.model``), if any."""
+def llm_record(metadata: Mapping[str, Any]) -> Mapping[str, Any] | None:
+    """The LLM settings recorded in run or paper metadata (``agentic.llm``: model, api, ...), if any.
+
+    A ``decoding`` entry marks the local model server (``--llm-backend local``).
+    """
     for holder in (metadata, metadata.get("grid") or {}, metadata.get("identity") or {}):
         agentic = holder.get("agentic") if isinstance(holder, Mapping) else None
         llm = agentic.get("llm") if isinstance(agentic, Mapping) else None
         if isinstance(llm, Mapping) and llm.get("model"):
-            return str(llm["model"])
+            return llm
     return None
+
+
+def _llm_model(metadata: Mapping[str, Any]) -> str | None:
+    """The LLM model recorded in run or paper metadata (``agentic.llm.model``), if any."""
+    llm = llm_record(metadata)
+    return str(llm["model"]) if llm is not None else None
 
 
 def governance_layer(metrics: Any, metadata: Mapping[str, Any]) -> str:

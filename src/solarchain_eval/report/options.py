@@ -19,6 +19,8 @@ DEFAULT_SEED = PAPER_SEED  # the bootstrap's seed
 CLUSTER_UNITS = ("start_hour", "episode_seed")
 #: Output formats of the tables (``md``, ``tex``, ``csv``) and the page (``html``).
 FORMATS = ("md", "tex", "csv", "html")
+#: What a run can be checked against (``report --against``): the paper's published values.
+AGAINST_CHOICES = ("paper",)
 
 
 class ReportDataError(NamesOptions, ValueError):
