@@ -17,10 +17,10 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..common.atomic_files import sha256_file
 from ..common.errors import NamesOptions
 from ..config import BenchmarkConfig
-from ..data.files import DATASET_FILES
+from ..data.provenance import dataset_provenance
+from ..data.table import load_table
 from .fingerprint import protocol_fingerprint, protocol_id
 from .records import METADATA_FILE, metrics_frame
 from .rollout import EpisodeResult
@@ -101,16 +101,18 @@ def check_protocol(metadata: Mapping[str, Any], config: BenchmarkConfig) -> list
 
 
 def dataset_problem(data_dir: Path, recorded: Mapping[str, str]) -> str | None:
-    """Why ``data_dir`` is not the recorded dataset (None: every CSV has the recorded sha256)."""
-    for name in DATASET_FILES:
+    """Why ``data_dir`` is not the recorded dataset (None: the same CSVs, each with the recorded sha256)."""
+    try:
+        found = dataset_provenance(load_table(data_dir))["files"]
+    except (ValueError, OSError) as error:  # no dataset there, or a broken one
+        return f"{data_dir} is not a readable dataset ({str(error).splitlines()[0]})"
+    for name in sorted(set(recorded) | set(found)):
         path = Path(data_dir) / name
-        if name not in recorded:
-            if path.is_file():
-                return f"{path} is not part of the recorded dataset"
-            continue
-        if not path.is_file():
+        if name not in found:
             return f"{path} is missing"
-        if sha256_file(path) != recorded[name]:
+        if name not in recorded:
+            return f"{path} is not part of the recorded dataset"
+        if found[name] != recorded[name]:
             return f"{path} does not have the recorded sha256"
     return None
 
