@@ -19,7 +19,7 @@ from fake_openai import FakeOpenAI
 from solarchain_eval.cli import app
 from solarchain_eval.common.atomic_files import sha256_file
 from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
-from solarchain_eval.evaluation.verify import VerifyOptions, choose_episodes, default_seed, verify_run
+from solarchain_eval.evaluation.verify import VerifyOptions, choose_episodes, default_seed, replay_plan, verify_run
 from solarchain_eval.evaluation.verify_checks import same_cell
 
 RUN_SEED = 5
@@ -42,6 +42,13 @@ class MyAgent:
         self._t += 1
         k = self._t % 7
         return np.array([0.1 + 0.1 * (k % 3), 0.5, 0.02 * k * self.scale], dtype=np.float32)
+
+
+class CarryAgent(MyAgent):
+    name = "carry"
+
+    def begin_run(self, run_seed):
+        pass  # carries its state from one run seed to the next too
 """
 
 
@@ -50,10 +57,15 @@ def invoke(*args: str):
 
 
 @pytest.fixture(scope="module")
-def agent_spec(tmp_path_factory) -> str:
+def agent_file(tmp_path_factory) -> Path:
     path = tmp_path_factory.mktemp("agent") / "my_agent.py"
     path.write_text(AGENT_SOURCE)
-    return f"mine={path}:MyAgent"
+    return path
+
+
+@pytest.fixture(scope="module")
+def agent_spec(agent_file) -> str:
+    return f"mine={agent_file}:MyAgent"
 
 
 @pytest.fixture(scope="module")
@@ -164,6 +176,29 @@ def test_stateful_agents_replay_the_earlier_episodes_in_order(run, agent_spec, p
     assert result.exit_code == 0, result.output
     assert f"{policy}: verified (1 episode; 2 earlier episode(s) replayed in order)" in lines(result.output)
     assert "static: verified (1 episode)" in lines(result.output)
+
+
+@pytest.mark.parametrize("concurrency", [1, 2])
+def test_state_carried_across_run_seeds_is_replayed_as_the_run_ran(tiny_dataset, agent_file, tmp_path, concurrency):
+    # In order (1), one agent runs every run seed; in flight (2), each run seed has its own copy.
+    out = tmp_path / "run"
+    spec = f"{agent_file}:CarryAgent"
+    evaluation = EvaluationSpec([spec], run_seeds=[5, 6], episodes=2, data_dir=tiny_dataset, concurrency=concurrency)
+    run_evaluation(evaluation, out)
+    seed = next(s for s in range(100) if choose_episodes([5, 6], 2, 1, s) == [(6, 1)])
+    (result,) = verify_run(out, VerifyOptions(episodes=1, seed=seed, agents=(spec,))).policies
+    assert (result.status, result.episodes, result.replayed) == ("verified", 1, 3 if concurrency == 1 else 1)
+
+
+def test_replay_plan_runs_what_the_state_needs():
+    chosen = [(5, 1), (7, 0)]
+    assert replay_plan(chosen, [5, 6, 7], 3, stateless=True, carry_over=True) == [(5, [1]), (7, [0])]
+    assert replay_plan(chosen, [5, 6, 7], 3, stateless=False, carry_over=False) == [(5, [0, 1]), (7, [0])]
+    assert replay_plan(chosen, [5, 6, 7], 3, stateless=False, carry_over=True) == [
+        (5, [0, 1, 2]),
+        (6, [0, 1, 2]),
+        (7, [0]),
+    ]
 
 
 def test_episode_choice_is_seeded_by_seed_or_the_run_id(run):
@@ -284,3 +319,18 @@ def test_paper_root_verifies_each_finished_unit(tiny_dataset, tmp_path):
     assert out[4] == "  static: verified (2 episodes)" and out[-1] == "combined files: checksums match"
     forge_cell(root / "units" / "eval" / f"static-main-{RUN_SEED}", "static", 1, "final_liquidity", "1.5")
     assert invoke("verify", root, "--episodes", 2).exit_code == 1
+
+
+@pytest.mark.slow  # trains a tiny PPO model
+def test_learned_policy_is_rebuilt_from_its_recorded_model(tiny_dataset, tmp_path):
+    from solarchain_eval.training.sb3_trainer import TrainSpec, train
+
+    model = train(TrainSpec(algo="ppo", seed=5, timesteps=100, data_dir=tiny_dataset), tmp_path / "ppo").model_path
+    out = tmp_path / "run"
+    assert invoke("evaluate", "--data", tiny_dataset, "--policies", "ppo", "--models", f"ppo={model}",
+                  "--seeds", RUN_SEED, "--episodes", 2, "--out", out).exit_code == 0  # fmt: skip
+    result = invoke("verify", out, "--episodes", 2)
+    assert result.exit_code == 0 and lines(result.output)[0] == "ppo: verified (2 episodes)", result.output
+    model.rename(tmp_path / "elsewhere.zip")
+    gone = invoke("verify", out)
+    assert lines(gone.output)[0].startswith("ppo: cannot rebuild (") and str(model) in gone.output

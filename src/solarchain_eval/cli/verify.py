@@ -22,7 +22,7 @@ def verify(
     episodes: int = typer.Option(
         DEFAULT_VERIFY_EPISODES, "--episodes", min=1, help="Episodes re-run per policy, chosen at random."
     ),
-    agent: list[str] | None = typer.Option(
+    agents: list[str] | None = typer.Option(
         None,
         "--agent",
         metavar="SPEC",
@@ -61,13 +61,13 @@ def verify(
     A paper grid root verifies each finished eval unit and the combined files.
     """
     try:
-        specs = [parse_agent_spec(text, known_policies()) for text in agent or []]
+        specs = [parse_agent_spec(text, known_policies()) for text in agents or []]
         agent_args = parse_agent_args(agent_arg or [], [s.name for s in specs if s.name is not None])
     except ValueError as error:
         raise cli_error(error) from None
     options = VerifyOptions(
         episodes=episodes,
-        agents=tuple(agent or ()),
+        agents=tuple(agents or ()),
         agent_args=agent_args,
         llm_cache=llm_cache,
         seed=seed,

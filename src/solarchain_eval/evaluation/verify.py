@@ -10,8 +10,8 @@ episode's ``metrics.csv`` row, cell by cell, with the recorded one as the CSV wr
 Policies are rebuilt from what the run records: built-ins by name, learned ones from the
 recorded models, user agents only from specs the caller gives (``agents``, matched by name;
 the run's metadata never decides what code runs). An agent that is not ``stateless`` (the
-Random baseline draws from one generator across a run's episodes) has the episodes of a run
-seed replayed in order, from a freshly built agent, up to the last one chosen.
+Random baseline draws from one generator across a run's episodes) has the episodes before each
+chosen one replayed in order, as the run ran them (:func:`replay_plan`).
 """
 
 from __future__ import annotations
@@ -169,10 +169,35 @@ class _Rerun:
     config: BenchmarkConfig
     table: HourlyTable
     setting: str
+    run_seeds: list[int]
     episodes: int
     episode_seeds: Callable[[int, int], list[int]]
+    #: One agent carried through all run seeds (the run was evaluated in order), else one per run seed.
+    carry_over: bool
     governance: Governance | None
     recorded: dict[tuple[str, int, int], dict[str, str]]
+
+
+def replay_plan(
+    chosen: Sequence[tuple[int, int]], run_seeds: Sequence[int], episodes: int, *, stateless: bool, carry_over: bool
+) -> list[tuple[int, list[int]]]:
+    """The episodes to run, by run seed in protocol order, so that each chosen one is run in the
+    state the agent had when it was recorded.
+
+    A stateless agent runs just the chosen episodes. Any other one runs its run seed's episodes
+    in order up to the last one chosen; with ``carry_over`` (a run evaluated in order, one agent
+    through all its run seeds) every earlier run seed's episodes first, as the runner did.
+    """
+    by_seed: dict[int, list[int]] = {}
+    for run_seed, episode in chosen:
+        by_seed.setdefault(int(run_seed), []).append(int(episode))
+    if stateless:
+        return [(s, sorted(w)) for s, w in by_seed.items()]
+    if not carry_over:
+        return [(s, list(range(max(w) + 1))) for s, w in by_seed.items()]
+    seeds = [int(s) for s in run_seeds]
+    last = max(seeds.index(s) for s in by_seed)
+    return [(s, list(range(max(by_seed[s]) + 1 if i == last else episodes))) for i, s in enumerate(seeds[: last + 1])]
 
 
 def rerun_policy(
@@ -182,30 +207,28 @@ def rerun_policy(
     chosen: Sequence[tuple[int, int]],
     rerun: _Rerun,
 ) -> PolicyVerification:
-    """Re-run ``chosen`` episodes of one policy and compare them with the recorded rows.
+    """Re-run ``chosen`` episodes of one policy (:func:`replay_plan`) and compare them with the recorded rows.
 
-    ``base`` is a freshly built agent and ``build`` builds another. A stateless agent runs just
-    the chosen episodes; any other one is built afresh per run seed (``base`` for the first) and
-    runs that seed's episodes in order up to the last one chosen, the others uncompared.
+    ``base`` is a freshly built agent and ``build`` builds another: a stateful agent of a run
+    that ran each run seed on its own agent (``--llm-concurrency``) gets a fresh one per run seed.
     """
     stateless = is_stateless(base)
+    plan = replay_plan(chosen, rerun.run_seeds, rerun.episodes, stateless=stateless, carry_over=rerun.carry_over)
+    wanted = set(chosen)
     compared = replayed = 0
-    by_seed: dict[int, list[int]] = {}
-    for run_seed, episode in chosen:
-        by_seed.setdefault(run_seed, []).append(episode)
     env: SolarChainEnv | None = None
-    for index, (run_seed, wanted) in enumerate(by_seed.items()):
-        agent = base if stateless or index == 0 else build()
+    for index, (run_seed, episodes) in enumerate(plan):
+        agent = base if stateless or rerun.carry_over or index == 0 else build()
         policy = rerun.governance.wrap(agent) if rerun.governance is not None else agent
         if env is None:
             env = SolarChainEnv(config=rerun.config, table=rerun.table, action_mode=policy.action_mode)
         seeds = rerun.episode_seeds(run_seed, rerun.episodes)
         begin_run(policy, run_seed)
-        for episode in wanted if stateless else range(max(wanted) + 1):
+        for episode in episodes:
             result = run_episode(
                 env, policy, episode_seed=seeds[episode], setting=rerun.setting, run_seed=run_seed, episode=episode
             )
-            if episode not in wanted:
+            if (run_seed, episode) not in wanted:
                 replayed += 1
                 continue
             recorded = rerun.recorded.get((name, run_seed, episode))
@@ -263,9 +286,14 @@ def _given_builders(
         try:
             name = build().name
         except (ValueError, OSError) as error:  # AgentSpecError, a model that cannot load, a missing file
-            raise VerifyError(f"--agent {text}: {error}") from None
+            raise VerifyError.about("{opt_agents} {text}: {error}", text=text, error=error) from None
         if name not in names:
-            raise VerifyError(f"--agent {text} builds agent {name!r}; the run's policies are {', '.join(names)}")
+            raise VerifyError.about(
+                "{opt_agents} {text} builds agent {name!r}; the run's policies are {names}",
+                text=text,
+                name=name,
+                names=", ".join(names),
+            )
         given[name] = build
     return given
 
@@ -362,13 +390,17 @@ def _verify_policies(
         config=config,
         table=load_table(data_dir),
         setting=str(metadata.get("setting")),
+        run_seeds=[int(x) for x in metadata.get("run_seeds") or []],
         episodes=int(metadata.get("episodes") or 0),
         episode_seeds=rule,
         governance=governance,
         recorded=read_recorded_rows(metrics_path),
+        # The runner drives one agent through every run seed, unless episodes ran in flight
+        # (a private copy per run seed, :mod:`.inflight`).
+        carry_over=int(metadata.get("concurrency", 1)) <= 1,
     )
     seed = options.seed if options.seed is not None else default_seed(str(metadata.get("run_id", "")))
-    chosen = choose_episodes(metadata.get("run_seeds") or [], rerun.episodes, options.episodes, seed)
+    chosen = choose_episodes(rerun.run_seeds, rerun.episodes, options.episodes, seed)
     modes = protocol.get("action_modes") or {}
     results = []
     for name, text in zip(names, specs, strict=True):
