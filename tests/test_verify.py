@@ -159,7 +159,7 @@ def test_changed_missing_and_extra_files_fail_the_checksum_step(run, agent_spec)
 def test_user_agent_needs_its_spec_and_agent_args(run, agent_spec):
     without = invoke("verify", run)
     assert without.exit_code == 0, without.output
-    assert f"mine: cannot rebuild (a user agent ({agent_spec}); pass --agent SPEC to rebuild it)" in lines(
+    assert f"mine: cannot rebuild (a user agent ({agent_spec}); pass its spec with --agent to rebuild it)" in lines(
         without.output
     )
     # The agent's options reach it: another scale is another agent, caught on its first episode.
@@ -334,3 +334,24 @@ def test_learned_policy_is_rebuilt_from_its_recorded_model(tiny_dataset, tmp_pat
     model.rename(tmp_path / "elsewhere.zip")
     gone = invoke("verify", out)
     assert lines(gone.output)[0].startswith("ppo: cannot rebuild (") and str(model) in gone.output
+
+
+def test_agentic_options_are_rebuilt_from_their_record(tmp_path):
+    from solarchain_eval.governance.controls import SchedulerControls
+    from solarchain_eval.governance.factory import AgenticOptions, LLMOptions
+    from solarchain_eval.llm.client import LLMSettings
+
+    for options in (
+        AgenticOptions(),
+        AgenticOptions(planner="calibrated-rule", target_audit_rate=0.3, diagnostics=False),
+        AgenticOptions(auditor="random", random_audit_rate={"static": 0.25}, random_seed=4,
+                       random_audit_counts={("static", 5, 1): 3}, controls=SchedulerControls("hard", 4, 2)),
+        AgenticOptions(auditor="oracle", oracle_reward_loss=0.5),
+    ):  # fmt: skip
+        assert AgenticOptions.from_record(json.loads(json.dumps(options.describe()))) == options
+    settings = LLMSettings(api="chat", model="m", base_url="http://127.0.0.1:9/v1", temperature=0.0, seed=3)
+    llm = AgenticOptions(planner="llm", llm=LLMOptions(settings, tmp_path, "record"))
+    with pytest.raises(Exception, match="llm_cache"):
+        AgenticOptions.from_record(llm.describe())
+    rebuilt = AgenticOptions.from_record(json.loads(json.dumps(llm.describe())), llm_cache=tmp_path)
+    assert rebuilt.llm == LLMOptions(settings, tmp_path, "replay") and rebuilt.planner == "llm"

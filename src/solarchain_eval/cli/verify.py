@@ -25,7 +25,7 @@ def verify(
     agents: list[str] | None = typer.Option(
         None,
         "--agent",
-        metavar="SPEC",
+        metavar="AGENT",
         help="The code of one of the run's user agents (the grammar of evaluate --policies; repeatable), "
         "matched to the run's policies by name. User agents are never rebuilt from the run's own record.",
     ),

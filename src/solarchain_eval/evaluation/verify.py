@@ -1,4 +1,5 @@
-"""Verify a run directory: its files against their sha256, then a sample of episodes re-run.
+"""Verify a run directory: its files against their sha256, then a sample of episodes re-run
+(docs/comparing_results.md#verifying-a-run).
 
 :func:`verify_run` checks every file of the run against the sha256 recorded in
 ``run_metadata.json`` (missing, extra and changed files, each named), checks that the recorded
@@ -259,16 +260,16 @@ def _recorded_builder(
 ) -> Callable[[], Policy] | str:
     """How to rebuild a policy from its recorded spec, or why it cannot be rebuilt."""
     if text.startswith("<"):
-        return f"an agent object {text} passed from Python; pass --agent NAME=SPEC"
+        return f"an agent object {text} passed from Python; pass its spec with --agent NAME=module:attr"
     try:
         parsed = parse_agent_spec(text, known_policies())
     except AgentSpecError as error:
-        return f"recorded spec {text!r}: {error}; pass --agent NAME=SPEC"
+        return f"recorded spec {text!r}: {error}; pass its spec with --agent"
     if parsed.kind == "builtin":
         return _builder(text, config, models, options, stack)
     if parsed.kind == "llm":
         return "the llm-agent's endpoint is not recorded in the run"
-    return f"a user agent ({text}); pass --agent SPEC to rebuild it"
+    return f"a user agent ({text}); pass its spec with --agent to rebuild it"
 
 
 def _given_builders(
