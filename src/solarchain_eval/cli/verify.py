@@ -58,7 +58,8 @@ def verify(
     checksum result and the protocol id. Exit status 0 when every rebuilt policy verifies and the
     checksums match, 1 on any difference or checksum failure, 2 for unusable arguments.
 
-    A paper grid root verifies each finished eval unit and the combined files.
+    A paper grid root verifies each finished eval unit and the combined files. See
+    docs/comparing_results.md#verifying-a-run.
     """
     try:
         specs = [parse_agent_spec(text, known_policies()) for text in agents or []]
