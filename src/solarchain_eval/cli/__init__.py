@@ -34,6 +34,10 @@ COMMANDS = {
         "compare",
         "Compare two runs of the same episodes: mean(OTHER) - mean(BASE) per policy, setting and metric.",
     ),
+    "verify": (
+        "verify",
+        "Verify a run: its files against their sha256, then a sample of episodes re-run bit for bit.",
+    ),
     "bench": ("bench", "Throughput of the single env, the vector env and the evaluation runner."),
     "bench-train": (
         "bench_train",

@@ -47,6 +47,15 @@ def eval_unit_dir(root: Path, policy: str, setting: str, seed: int) -> Path:
     return Path(root) / UNITS_DIR / "eval" / f"{policy}-{setting}-{seed}"
 
 
+def eval_unit_dirs(root: Path) -> list[Path]:
+    """The eval unit directories of a paper root, finished or not, in name order."""
+    units = Path(root) / UNITS_DIR / "eval"
+    if not units.is_dir():
+        return []
+    # Dot-names are staging folders and locks of run directories being written.
+    return [unit for unit in sorted(units.iterdir()) if unit.is_dir() and not unit.name.startswith(".")]
+
+
 def combined_dir(root: Path, setting: str) -> Path:
     return Path(root) / COMBINED_DIR / setting
 
@@ -87,6 +96,7 @@ __all__ = [
     "train_unit_dir",
     "seed_model_dir",
     "eval_unit_dir",
+    "eval_unit_dirs",
     "combined_dir",
     "is_done",
     "is_paper_root",

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from collections.abc import Mapping
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, fields
 from pathlib import Path
 from typing import Any
 
@@ -113,6 +113,47 @@ class AgenticOptions:
         if self.auditor == "oracle":
             described["oracle_reward_loss"] = self.oracle_reward_loss
         return described
+
+    @classmethod
+    def from_record(cls, record: Mapping[str, Any], *, llm_cache: Path | None = None) -> AgenticOptions:
+        """The options a run's metadata describes (the inverse of :meth:`describe`).
+
+        LLM components are rebuilt to *replay* their calls from the record/replay cache
+        ``llm_cache`` (no endpoint, no key); without it they cannot be rebuilt.
+
+        Raises
+        ------
+        LLMConfigError
+            An unknown planner, auditor or trigger set, or LLM components without ``llm_cache``.
+        """
+        llm: LLMOptions | None = None
+        described_llm = record.get("llm")
+        if isinstance(described_llm, Mapping):
+            if llm_cache is None:
+                raise LLMConfigError.about("the run's LLM calls can only be replayed: pass {opt_llm_cache} DIR")
+            names = {f.name for f in fields(LLMSettings)} - {"api_key"}
+            settings = LLMSettings(**{k: v for k, v in described_llm.items() if k in names})
+            llm = LLMOptions(settings=settings, cache_dir=Path(llm_cache), cache_mode="replay")
+        controls = record.get("controls") or {}
+        rate = record.get("random_audit_rate")
+        counts = record.get("random_audit_counts") or None
+        if counts is not None:  # "policy/run seed/episode" -> n (policy names hold no "/")
+            counts = {
+                (key.rsplit("/", 2)[0], int(key.rsplit("/", 2)[1]), int(key.rsplit("/", 2)[2])): int(n)
+                for key, n in counts.items()
+            }
+        return cls(
+            planner=str(record.get("planner", "rule")),
+            auditor=str(record.get("auditor", "rule")),
+            llm=llm,
+            controls=SchedulerControls(**controls),
+            diagnostics=bool(record.get("diagnostics", True)),
+            target_audit_rate=float(record.get("target_audit_rate", DEFAULT_TARGET_AUDIT_RATE)),
+            random_audit_rate=dict(rate) if isinstance(rate, Mapping) else rate,
+            random_seed=int(record.get("random_seed", 0)),
+            random_audit_counts=counts,
+            oracle_reward_loss=float(record.get("oracle_reward_loss", DEFAULT_ORACLE_REWARD_LOSS)),
+        )
 
     def label(self) -> str:
         """What ran, e.g. "rule planner, oracle auditor" or "rule planner, llm:gpt-4o auditor"."""

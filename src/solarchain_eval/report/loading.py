@@ -26,7 +26,7 @@ from ..experiments.layout import (
     METADATA_FILE,
     METRICS_FILE,
     PAPER_METADATA_FILE,
-    UNITS_DIR,
+    eval_unit_dirs,
     is_done,
     is_paper_root,
     run_table_paths,
@@ -259,16 +259,8 @@ def _redacted(metadata: dict[str, Any]) -> dict[str, Any]:
     return metadata
 
 
-def _eval_units(root: Path) -> list[Path]:
-    units = root / UNITS_DIR / "eval"
-    if not units.is_dir():
-        return []
-    # Dot-names are staging folders and locks of run directories being written.
-    return [unit for unit in sorted(units.iterdir()) if unit.is_dir() and not unit.name.startswith(".")]
-
-
 def _unit_metadata(root: Path) -> dict[str, dict[str, Any]]:
-    return {unit.name: _redacted(_read_json(unit / METADATA_FILE)) for unit in _eval_units(root)}
+    return {unit.name: _redacted(_read_json(unit / METADATA_FILE)) for unit in eval_unit_dirs(root)}
 
 
 def verify_report_inputs(root: Path, kind: str) -> list[str]:
@@ -280,11 +272,17 @@ def verify_report_inputs(root: Path, kind: str) -> list[str]:
     """
     if kind == "run":
         return verify_run_dir(root)
-    problems = [p for unit in _eval_units(root) if is_done(unit) for p in verify_run_dir(unit)]
-    meta_path = root / PAPER_METADATA_FILE
+    problems = [p for unit in eval_unit_dirs(root) if is_done(unit) for p in verify_run_dir(unit)]
+    return problems + verify_combined(root)
+
+
+def verify_combined(root: Path) -> list[str]:
+    """Problems of a paper root's combined files against ``paper_metadata.json``'s ``combined_sha256``."""
+    meta_path = Path(root) / PAPER_METADATA_FILE
     recorded = _read_json(meta_path).get("combined_sha256") or {}
     names = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, DIAGNOSTICS_FILE, SUMMARY_FILE)
-    for folder in sorted(p for p in (root / COMBINED_DIR).glob("*") if p.is_dir()):
+    problems = []
+    for folder in sorted(p for p in (Path(root) / COMBINED_DIR).glob("*") if p.is_dir()):
         problems += verify_files(folder, recorded.get(folder.name), meta_path, names)
     return problems
 

@@ -1,0 +1,115 @@
+"""``solarchain-eval verify``: check a run's files, then re-run a sample of its episodes."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+
+from ..agents.registry import known_policies
+from ..agents.specs import parse_agent_args, parse_agent_spec
+from ..evaluation.verify import DEFAULT_VERIFY_EPISODES, RunVerification, VerifyError, VerifyOptions, verify_run
+from . import app
+from .common import CliError, cli_error, register_user_error, reports_errors, say
+
+register_user_error(VerifyError)
+
+
+@app.command("verify")
+@reports_errors
+def verify(
+    run: Path = typer.Argument(..., metavar="RUN", help="A run directory (evaluate --out) or a paper grid root."),
+    episodes: int = typer.Option(
+        DEFAULT_VERIFY_EPISODES, "--episodes", min=1, help="Episodes re-run per policy, chosen at random."
+    ),
+    agents: list[str] | None = typer.Option(
+        None,
+        "--agent",
+        metavar="AGENT",
+        help="The code of one of the run's user agents (the grammar of evaluate --policies; repeatable), "
+        "matched to the run's policies by name. User agents are never rebuilt from the run's own record.",
+    ),
+    agent_arg: list[str] | None = typer.Option(
+        None,
+        "--agent-arg",
+        metavar="[NAME.]KEY=VALUE",
+        help="An option for agents given with --agent (repeatable), as in evaluate.",
+    ),
+    llm_cache: Path | None = typer.Option(
+        None, "--llm-cache", help="The record/replay cache the run's LLM calls are replayed from (replay mode)."
+    ),
+    seed: int | None = typer.Option(
+        None, "--seed", help="Seed of the episode choice (default: derived from the run's run_id, so reproducible)."
+    ),
+    data_dir: Path | None = typer.Option(
+        None,
+        "--data",
+        help="The run's dataset, when the recorded data_dir moved or changed; its CSVs must have the recorded sha256.",
+    ),
+) -> None:
+    """Verify a run: its files against their sha256, then a sample of episodes re-run bit for bit.
+
+    Checks every file of RUN against the sha256 in run_metadata.json (missing, extra and changed
+    files are named) and the recorded protocol fingerprint against its id, then re-runs --episodes
+    randomly chosen episodes of every policy it can rebuild -- built-ins by name, learned policies
+    from the recorded models, user agents from --agent -- with the run's dataset, configuration,
+    setting and Planner/Auditor options, and compares each episode's metrics.csv row cell by cell.
+    Prints one line per policy (verified / differs / cannot rebuild) and a final line with the
+    checksum result and the protocol id. Exit status 0 when every rebuilt policy verifies and the
+    checksums match, 1 on any difference or checksum failure, 2 for unusable arguments.
+
+    A paper grid root verifies each finished eval unit and the combined files. See
+    docs/comparing_results.md#verifying-a-run.
+    """
+    try:
+        specs = [parse_agent_spec(text, known_policies()) for text in agents or []]
+        agent_args = parse_agent_args(agent_arg or [], [s.name for s in specs if s.name is not None])
+    except ValueError as error:
+        raise cli_error(error) from None
+    options = VerifyOptions(
+        episodes=episodes,
+        agents=tuple(agents or ()),
+        agent_args=agent_args,
+        llm_cache=llm_cache,
+        seed=seed,
+        data_dir=data_dir,
+    )
+    from ..experiments.layout import is_paper_root
+
+    ok = _verify_grid(run, options) if run.is_dir() and is_paper_root(run) else _show(verify_run(run, options))
+    if not ok:
+        raise typer.Exit(1)
+
+
+def _show(result: RunVerification, indent: str = "") -> bool:
+    for line in result.lines():
+        say(indent + line, err=False)
+    return result.ok
+
+
+def _verify_grid(root: Path, options: VerifyOptions) -> bool:
+    """Each finished eval unit of a paper root, then its combined files."""
+    from dataclasses import replace
+
+    from ..experiments.layout import DONE_MARKER, eval_unit_dirs, is_done
+    from ..experiments.units import UNIT_FILE, UNIT_LOG
+    from ..report.loading import verify_combined
+
+    if options.agents:
+        raise CliError("--agent applies to a single run directory (a grid's units hold built-in policies)")
+    units = eval_unit_dirs(root)
+    if not units:
+        raise CliError(f"{root}: a paper root without eval units (nothing to verify)")
+    unit_options = replace(options, grid_files=(UNIT_FILE, UNIT_LOG, DONE_MARKER))
+    ok = True
+    for unit in units:
+        say(f"{unit.relative_to(root)}:", err=False)
+        if not is_done(unit):
+            say("  not finished (no DONE marker): skipped", err=False)
+            continue
+        ok = _show(verify_run(unit, unit_options), indent="  ") and ok
+    combined = verify_combined(root)
+    for problem in combined:
+        say(f"checksum: {problem}", err=False)
+    say(f"combined files: {'checksums match' if not combined else 'checksums FAIL'}", err=False)
+    return ok and not combined

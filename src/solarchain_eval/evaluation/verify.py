@@ -1,0 +1,425 @@
+"""Verify a run directory: its files against their sha256, then a sample of episodes re-run
+(docs/comparing_results.md#verifying-a-run).
+
+:func:`verify_run` checks every file of the run against the sha256 recorded in
+``run_metadata.json`` (missing, extra and changed files, each named), checks that the recorded
+protocol fingerprint agrees with the metadata and with its id, then re-runs ``episodes``
+seeded-random episodes of every policy it can rebuild under the run's recorded protocol (dataset,
+configuration, setting, episode-seed rule, Planner/Auditor options) and compares each re-run
+episode's ``metrics.csv`` row, cell by cell, with the recorded one as the CSV writer writes it.
+
+Policies are rebuilt from what the run records: built-ins by name, learned ones from the
+recorded models, user agents only from specs the caller gives (``agents``, matched by name;
+the run's metadata never decides what code runs). An agent that is not ``stateless`` (the
+Random baseline draws from one generator across a run's episodes) has the episodes before each
+chosen one replayed in order, as the run ran them (:func:`replay_plan`).
+"""
+
+from __future__ import annotations
+
+import hashlib
+from collections.abc import Callable, Mapping, Sequence
+from contextlib import ExitStack
+from dataclasses import dataclass, field
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..agents.base import Policy
+from ..agents.registry import known_policies
+from ..agents.specs import AgentSpecError, parse_agent_spec
+from ..config import BenchmarkConfig
+from ..data.table import HourlyTable, load_table
+from ..envs.env import SolarChainEnv
+from ..governance.factory import AgenticOptions, Governance
+from ..llm.errors import LLMError
+from ..protocol import EPISODE_SEED_RULES
+from .inflight import is_stateless
+from .records import METRICS_FILE
+from .rollout import begin_run, run_episode
+from .runner import EvaluationSpec, make_policies
+from .verify_checks import (
+    Difference,
+    VerifyError,
+    check_checksums,
+    check_protocol,
+    first_difference,
+    read_metadata,
+    read_recorded_rows,
+    resolve_dataset,
+    written_row,
+)
+
+#: Episodes re-run per policy by default.
+DEFAULT_VERIFY_EPISODES = 3
+VERIFIED, DIFFERS, CANNOT_REBUILD = "verified", "differs", "cannot rebuild"
+
+
+@dataclass(frozen=True)
+class VerifyOptions:
+    """What :func:`verify_run` re-runs and with what.
+
+    Attributes
+    ----------
+    episodes : int
+        Episodes re-run per policy (all of the run's when it has fewer).
+    agents : sequence of str
+        Agent specs (the grammar of ``--policies``) for the run's user agents, matched by name.
+    agent_args : dict
+        ``--agent-arg`` options for those agents, by agent name (None: every agent).
+    llm_cache : Path, optional
+        The record/replay cache the run's LLM calls are replayed from.
+    seed : int, optional
+        Seed of the episode choice (default: derived from the run's ``run_id``).
+    data_dir : Path, optional
+        A dataset directory to use instead of the recorded one; its CSVs must have the recorded sha256.
+    grid_files : tuple of str
+        Files a grid keeps in a unit beside the run's own (not vouched for, not extra).
+    """
+
+    episodes: int = DEFAULT_VERIFY_EPISODES
+    agents: Sequence[str] = ()
+    agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
+    llm_cache: Path | None = None
+    seed: int | None = None
+    data_dir: Path | None = None
+    grid_files: tuple[str, ...] = ()
+
+
+@dataclass(frozen=True)
+class PolicyVerification:
+    """The outcome for one policy: ``status`` is ``verified``, ``differs`` or ``cannot rebuild``.
+
+    ``episodes`` counts the episodes compared, ``replayed`` the earlier episodes re-run only to
+    bring a stateful agent to the state it had (not compared).
+    """
+
+    policy: str
+    status: str
+    episodes: int = 0
+    replayed: int = 0
+    difference: Difference | None = None
+    reason: str = ""
+
+    def line(self) -> str:
+        if self.status == VERIFIED:
+            replayed = f"; {self.replayed} earlier episode(s) replayed in order" if self.replayed else ""
+            return f"{self.policy}: verified ({self.episodes} episode{'' if self.episodes == 1 else 's'}{replayed})"
+        if self.status == DIFFERS:
+            d = self.difference
+            if d is None:
+                return f"{self.policy}: differs: {self.reason}"
+            return (
+                f"{self.policy}: differs: episode {d.episode} of run seed {d.run_seed}, metric {d.metric}: "
+                f"recorded {d.recorded}, re-run {d.rerun}"
+            )
+        return f"{self.policy}: cannot rebuild ({self.reason})"
+
+
+@dataclass(frozen=True)
+class RunVerification:
+    """Everything :func:`verify_run` found about one run directory."""
+
+    run_dir: Path
+    checksum_problems: tuple[str, ...]
+    protocol_id: str
+    protocol_problems: tuple[str, ...]
+    policies: tuple[PolicyVerification, ...]
+    files_checked: int = 0
+
+    @property
+    def ok(self) -> bool:
+        """Checksums and protocol agree and no rebuilt policy differs."""
+        problems = self.checksum_problems or self.protocol_problems
+        return not problems and all(p.status != DIFFERS for p in self.policies)
+
+    def lines(self) -> list[str]:
+        """One line per policy, one per problem, then the checksum result and protocol id."""
+        out = [p.line() for p in self.policies]
+        out += [f"checksum: {problem}" for problem in self.checksum_problems]
+        out += [f"protocol: {problem}" for problem in self.protocol_problems]
+        checksums = (
+            f"checksums match ({self.files_checked} files)"
+            if not self.checksum_problems
+            else f"checksums FAIL ({len(self.checksum_problems)} problem(s))"
+        )
+        protocol = "" if not self.protocol_problems else " (inconsistent with the metadata)"
+        out.append(f"{checksums}; protocol {self.protocol_id or '(none recorded)'}{protocol}")
+        return out
+
+
+def default_seed(run_id: str) -> int:
+    """The episode choice's seed of a run: the first 64 bits of the sha256 of its ``run_id``."""
+    return int(hashlib.sha256(str(run_id).encode()).hexdigest()[:16], 16)
+
+
+def choose_episodes(run_seeds: Sequence[int], episodes: int, k: int, seed: int) -> list[tuple[int, int]]:
+    """``k`` distinct (run seed, episode) pairs drawn with ``numpy.random.default_rng(seed)``, in protocol order."""
+    pairs = [(int(s), e) for s in run_seeds for e in range(episodes)]
+    if k >= len(pairs):
+        return pairs
+    chosen = np.random.default_rng(seed).choice(len(pairs), size=k, replace=False)
+    return [pairs[i] for i in sorted(int(i) for i in chosen)]
+
+
+@dataclass
+class _Rerun:
+    """What one policy's re-run needs (the run's protocol, rebuilt)."""
+
+    config: BenchmarkConfig
+    table: HourlyTable
+    setting: str
+    run_seeds: list[int]
+    episodes: int
+    episode_seeds: Callable[[int, int], list[int]]
+    #: One agent carried through all run seeds (the run was evaluated in order), else one per run seed.
+    carry_over: bool
+    governance: Governance | None
+    recorded: dict[tuple[str, int, int], dict[str, str]]
+
+
+def replay_plan(
+    chosen: Sequence[tuple[int, int]], run_seeds: Sequence[int], episodes: int, *, stateless: bool, carry_over: bool
+) -> list[tuple[int, list[int]]]:
+    """The episodes to run, by run seed in protocol order, so that each chosen one is run in the
+    state the agent had when it was recorded.
+
+    A stateless agent runs just the chosen episodes. Any other one runs its run seed's episodes
+    in order up to the last one chosen; with ``carry_over`` (a run evaluated in order, one agent
+    through all its run seeds) every earlier run seed's episodes first, as the runner did.
+    """
+    by_seed: dict[int, list[int]] = {}
+    for run_seed, episode in chosen:
+        by_seed.setdefault(int(run_seed), []).append(int(episode))
+    if stateless:
+        return [(s, sorted(w)) for s, w in by_seed.items()]
+    if not carry_over:
+        return [(s, list(range(max(w) + 1))) for s, w in by_seed.items()]
+    seeds = [int(s) for s in run_seeds]
+    last = max(seeds.index(s) for s in by_seed)
+    return [(s, list(range(max(by_seed[s]) + 1 if i == last else episodes))) for i, s in enumerate(seeds[: last + 1])]
+
+
+def rerun_policy(
+    name: str,
+    base: Policy,
+    build: Callable[[], Policy],
+    chosen: Sequence[tuple[int, int]],
+    rerun: _Rerun,
+) -> PolicyVerification:
+    """Re-run ``chosen`` episodes of one policy (:func:`replay_plan`) and compare them with the recorded rows.
+
+    ``base`` is a freshly built agent and ``build`` builds another: a stateful agent of a run
+    that ran each run seed on its own agent (``--llm-concurrency``) gets a fresh one per run seed.
+    """
+    stateless = is_stateless(base)
+    plan = replay_plan(chosen, rerun.run_seeds, rerun.episodes, stateless=stateless, carry_over=rerun.carry_over)
+    wanted = set(chosen)
+    compared = replayed = 0
+    env: SolarChainEnv | None = None
+    for index, (run_seed, episodes) in enumerate(plan):
+        agent = base if stateless or rerun.carry_over or index == 0 else build()
+        policy = rerun.governance.wrap(agent) if rerun.governance is not None else agent
+        if env is None:
+            env = SolarChainEnv(config=rerun.config, table=rerun.table, action_mode=policy.action_mode)
+        seeds = rerun.episode_seeds(run_seed, rerun.episodes)
+        begin_run(policy, run_seed)
+        for episode in episodes:
+            result = run_episode(
+                env, policy, episode_seed=seeds[episode], setting=rerun.setting, run_seed=run_seed, episode=episode
+            )
+            if (run_seed, episode) not in wanted:
+                replayed += 1
+                continue
+            recorded = rerun.recorded.get((name, run_seed, episode))
+            if recorded is None:
+                missing = Difference(run_seed, episode, "(row)", f"(none in {METRICS_FILE})", "(an episode)")
+                return PolicyVerification(name, DIFFERS, compared, replayed, missing)
+            difference = first_difference(recorded, written_row(result), run_seed, episode)
+            if difference is not None:
+                return PolicyVerification(name, DIFFERS, compared, replayed, difference)
+            compared += 1
+    return PolicyVerification(name, VERIFIED, compared, replayed)
+
+
+def _builder(text: str, config: BenchmarkConfig, models: dict[str, Path], options: VerifyOptions, stack: ExitStack):
+    """A function building the agent of spec ``text`` as the evaluation runner builds it."""
+    spec = EvaluationSpec(
+        policies=[text],
+        config=config,
+        no_physics_penalty=config.no_physics_penalty,
+        models=models,
+        agent_args=options.agent_args,
+    )
+    return lambda: make_policies(spec, stack)[0]
+
+
+def _recorded_builder(
+    text: str, config: BenchmarkConfig, models: dict[str, Path], options: VerifyOptions, stack: ExitStack
+) -> Callable[[], Policy] | str:
+    """How to rebuild a policy from its recorded spec, or why it cannot be rebuilt."""
+    if text.startswith("<"):
+        return f"an agent object {text} passed from Python; pass its spec with --agent NAME=module:attr"
+    try:
+        parsed = parse_agent_spec(text, known_policies())
+    except AgentSpecError as error:
+        return f"recorded spec {text!r}: {error}; pass its spec with --agent"
+    if parsed.kind == "builtin":
+        return _builder(text, config, models, options, stack)
+    if parsed.kind == "llm":
+        return "the llm-agent's endpoint is not recorded in the run"
+    return f"a user agent ({text}); pass its spec with --agent to rebuild it"
+
+
+def _given_builders(
+    metadata: Mapping[str, Any],
+    config: BenchmarkConfig,
+    models: dict[str, Path],
+    options: VerifyOptions,
+    stack: ExitStack,
+) -> dict[str, Callable[[], Policy]]:
+    """The builders of the agents given with ``--agent``, by the name they build (checked before any work)."""
+    names = list(metadata.get("policies") or [])
+    given: dict[str, Callable[[], Policy]] = {}
+    for text in options.agents:
+        build = _builder(text, config, models, options, stack)
+        try:
+            name = build().name
+        except (ValueError, OSError) as error:  # AgentSpecError, a model that cannot load, a missing file
+            raise VerifyError.about("{opt_agents} {text}: {error}", text=text, error=error) from None
+        if name not in names:
+            raise VerifyError.about(
+                "{opt_agents} {text} builds agent {name!r}; the run's policies are {names}",
+                text=text,
+                name=name,
+                names=", ".join(names),
+            )
+        given[name] = build
+    return given
+
+
+def _agentic(metadata: Mapping[str, Any], options: VerifyOptions) -> AgenticOptions | str | None:
+    """The recorded Planner/Auditor options (None: not governed), or why they cannot be rebuilt."""
+    record = metadata.get("agentic")
+    if record is None:
+        return None
+    if record.get("llm") is not None and options.llm_cache is None:
+        return "LLM calls; pass --llm-cache"
+    try:
+        return AgenticOptions.from_record(record, llm_cache=options.llm_cache)
+    except (LLMError, TypeError, ValueError) as error:
+        return f"the recorded Planner/Auditor options: {error}"
+
+
+def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerification:
+    """Check ``run_dir``'s files and protocol, then re-run a sample of its episodes (module docstring).
+
+    Raises
+    ------
+    VerifyError
+        No run directory or metadata, or options that cannot be used (a ``data_dir`` that is
+        not the run's dataset, an ``agents`` spec that cannot be built or names no policy of the run).
+    """
+    options = options or VerifyOptions()
+    if options.episodes < 1:
+        raise VerifyError.about("{opt_episodes} must be at least 1, got {n}", n=options.episodes)
+    run_dir = Path(run_dir)
+    metadata = read_metadata(run_dir)
+    checksums = check_checksums(run_dir, metadata, options.grid_files)
+    files_checked = len(metadata.get("files") or {})
+    names = [str(n) for n in metadata.get("policies") or []]
+    try:
+        config = BenchmarkConfig.model_validate(metadata.get("config") or {})
+    except ValueError as error:
+        why = f"the recorded config is invalid: {str(error).splitlines()[0]}"
+        cannot = tuple(PolicyVerification(n, CANNOT_REBUILD, reason=why) for n in names)
+        return RunVerification(
+            run_dir, tuple(checksums), str(metadata.get("protocol_id") or ""), (why,), cannot, files_checked
+        )
+    protocol = check_protocol(metadata, config)
+    data_dir, no_data = resolve_dataset(metadata, options.data_dir)
+    with ExitStack() as stack:
+        models = {str(k): Path(v) for k, v in (metadata.get("models") or {}).items()}
+        given = _given_builders(metadata, config, models, options, stack)
+        results = _verify_policies(run_dir, metadata, config, data_dir, no_data, given, models, options, stack)
+    return RunVerification(
+        run_dir,
+        tuple(checksums),
+        str(metadata.get("protocol_id") or ""),
+        tuple(protocol),
+        tuple(results),
+        files_checked,
+    )
+
+
+def _verify_policies(
+    run_dir: Path,
+    metadata: Mapping[str, Any],
+    config: BenchmarkConfig,
+    data_dir: Path | None,
+    no_data: str,
+    given: dict[str, Callable[[], Policy]],
+    models: dict[str, Path],
+    options: VerifyOptions,
+    stack: ExitStack,
+) -> list[PolicyVerification]:
+    names = [str(n) for n in metadata.get("policies") or []]
+    specs = [str(s) for s in metadata.get("policy_specs") or []]
+    protocol = metadata.get("protocol") or {}
+    rule = EPISODE_SEED_RULES.get(str(protocol.get("episode_seed_rule")))
+    agentic = _agentic(metadata, options)
+    metrics_path = run_dir / METRICS_FILE
+    common = (
+        no_data
+        or (
+            f"the episode-seed rule {protocol.get('episode_seed_rule')!r} is not one of this version's"
+            if rule is None
+            else ""
+        )
+        or (agentic if isinstance(agentic, str) else "")
+        or ("" if metrics_path.is_file() else f"{metrics_path} is missing")
+        or (
+            "" if len(specs) == len(names) else "run_metadata.json lists policies and policy_specs of different lengths"
+        )
+    )
+    if common:
+        return [PolicyVerification(n, CANNOT_REBUILD, reason=common) for n in names]
+    assert data_dir is not None and rule is not None and not isinstance(agentic, str)
+    governance = stack.enter_context(Governance(agentic, config.market)) if agentic is not None else None
+    rerun = _Rerun(
+        config=config,
+        table=load_table(data_dir),
+        setting=str(metadata.get("setting")),
+        run_seeds=[int(x) for x in metadata.get("run_seeds") or []],
+        episodes=int(metadata.get("episodes") or 0),
+        episode_seeds=rule,
+        governance=governance,
+        recorded=read_recorded_rows(metrics_path),
+        # The runner drives one agent through every run seed, unless episodes ran in flight
+        # (a private copy per run seed, :mod:`.inflight`).
+        carry_over=int(metadata.get("concurrency", 1)) <= 1,
+    )
+    seed = options.seed if options.seed is not None else default_seed(str(metadata.get("run_id", "")))
+    chosen = choose_episodes(rerun.run_seeds, rerun.episodes, options.episodes, seed)
+    modes = protocol.get("action_modes") or {}
+    results = []
+    for name, text in zip(names, specs, strict=True):
+        build = given.get(name) or _recorded_builder(text, config, models, options, stack)
+        if isinstance(build, str):
+            results.append(PolicyVerification(name, CANNOT_REBUILD, reason=build))
+            continue
+        try:
+            base = build()
+        except (ValueError, OSError) as error:  # a spec or model that cannot be built now
+            results.append(PolicyVerification(name, CANNOT_REBUILD, reason=str(error)))
+            continue
+        if modes.get(name, base.action_mode) != base.action_mode:
+            why = f"action mode: recorded {modes[name]}, re-run {base.action_mode}"
+            results.append(PolicyVerification(name, DIFFERS, reason=why))
+            continue
+        try:
+            results.append(rerun_policy(name, base, build, chosen, rerun))
+        except LLMError as error:  # a replayed call missing from the cache, for one
+            results.append(PolicyVerification(name, CANNOT_REBUILD, reason=f"LLM replay: {error}"))
+    return results
