@@ -39,7 +39,7 @@ from .adapters import AgentError, is_observation_function
 ENTRY_POINT_GROUP = "solarchain_eval.agents"
 #: The built-in LLM agent (built by the evaluation runner, which owns the model endpoint).
 LLM_AGENT = "llm-agent"
-SPEC_KINDS = ("builtin", "llm", "python", "file", "plugin", "sb3", "http")
+AGENT_KINDS = ("builtin", "llm", "python", "file", "plugin", "sb3", "http")
 _NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
 
 
@@ -58,7 +58,7 @@ class AgentSpec:
     name : str or None
         The row name (None: the agent's own ``name``, else its attribute or plugin name).
     kind : str
-        One of :data:`SPEC_KINDS`.
+        One of :data:`AGENT_KINDS`.
     target : str
         What the kind points at: a built-in name, ``module:attr``, ``file.py:attr``, a plugin
         name, ``ALGO:PATH`` or a URL.
