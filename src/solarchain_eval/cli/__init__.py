@@ -34,6 +34,10 @@ COMMANDS = {
         "compare",
         "Compare two runs of the same episodes: mean(OTHER) - mean(BASE) per policy, setting and metric.",
     ),
+    "leaderboard": (
+        "leaderboard",
+        "Rank runs and paper roots of one protocol per setting, with start-day bootstrap intervals.",
+    ),
     "bench": ("bench", "Throughput of the single env, the vector env and the evaluation runner."),
     "bench-train": (
         "bench_train",
