@@ -19,7 +19,7 @@ register_user_error(ReportDataError)
 def leaderboard(
     inputs: list[Path] = typer.Argument(
         ...,
-        metavar="RUN_OR_ROOT...",
+        metavar="RUN_OR_ROOT",
         help="Run directories (evaluate --out), paper roots, or tarballs (.tar, .tar.gz, .tgz) of either.",
     ),
     out: Path = typer.Option(..., "--out", help="The board's folder (leaderboard.csv, .md, .html, pareto.png)."),
