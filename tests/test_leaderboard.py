@@ -27,6 +27,7 @@ from solarchain_eval.report.leaderboard import (
     REFERENCE_SOURCE,
     build_leaderboard,
     is_paper_protocol,
+    make_leaderboards,
     paired_improvement,
     paper_protocol,
     rank_setting,
@@ -286,3 +287,16 @@ def test_the_page_sorts_by_a_clicked_header_in_chromium(runs, tmp_path):
     assert ranked == main["policy"].tolist()
     assert safest == by_violation and least_safe == by_violation[::-1] and safest != ranked
     assert best == main.sort_values("cumulative_reward_mean", ascending=False)["policy"].tolist()
+
+
+def test_a_run_of_the_paper_protocol_shows_the_reference_rows(published_dir, tmp_path):
+    """The paper's protocol needs its 3 seeds × 30 episodes on the published data (static alone: seconds)."""
+    run = tmp_path / "paper-static"
+    evaluation = solarchain_eval.evaluate(["static"], data=published_dir, out=run)
+    assert is_paper_protocol(evaluation.protocol)
+    published = pd.DataFrame({"policy": ["static"], "cumulative_reward_mean": [-1.5], "cumulative_reward_std": [0.25]})
+    outcome = make_leaderboards([run], tmp_path / "board", OPTIONS, references=lambda setting: published)
+    frame = pd.read_csv(tmp_path / "board" / "leaderboard.csv")
+    assert list(frame["row_kind"]) == ["ranked", REFERENCE] and list(frame["source"]) == [str(run), REFERENCE_SOURCE]
+    assert frame["cumulative_reward_mean"].iloc[1] == -1.5 and outcome.boards[0].sections[0].paper_protocol
+    assert "-1.50 ± 0.25" in (tmp_path / "board" / "leaderboard.html").read_text(encoding="utf-8")
