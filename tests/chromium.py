@@ -54,6 +54,8 @@ class PageReport:
     images: list[dict[str, Any]] = field(default_factory=list)
     requests: list[str] = field(default_factory=list)
     title: str = ""
+    #: One entry per requested action: an ``eval``'s value, None for a ``click``.
+    results: list[Any] = field(default_factory=list)
 
 
 class _DevTools:
@@ -129,6 +131,34 @@ def _errors(events: list[dict[str, Any]]) -> list[str]:
     return errors
 
 
+CENTRE_JS = (
+    "(function () {{ var e = document.querySelector({selector}); if (!e) return null; "
+    "e.scrollIntoView({{block: 'center'}}); var r = e.getBoundingClientRect(); "
+    "return JSON.stringify([r.left + r.width / 2, r.top + r.height / 2]); }})()"
+)
+
+
+def _run_action(tools: _DevTools, kind: str, argument: str) -> Any:
+    """``("eval", expression)``: the expression's value; ``("click", css selector)``: a left mouse
+    click at the element's centre, dispatched as real input events (None)."""
+    if kind == "eval":
+        result = tools.call("Runtime.evaluate", expression=argument, returnByValue=True)
+        if "exceptionDetails" in result:
+            raise RuntimeError(f"{argument}: {result['exceptionDetails'].get('text', '')}")
+        return result["result"].get("value")
+    if kind != "click":
+        raise ValueError(f"unknown page action {kind!r} (eval or click)")
+    found = tools.call(
+        "Runtime.evaluate", expression=CENTRE_JS.format(selector=json.dumps(argument)), returnByValue=True
+    )
+    if found["result"].get("value") is None:
+        raise RuntimeError(f"no element matches {argument!r}")
+    x, y = json.loads(found["result"]["value"])
+    for event in ("mouseMoved", "mousePressed", "mouseReleased"):
+        tools.call("Input.dispatchMouseEvent", type=event, x=x, y=y, button="left", clickCount=1)
+    return None
+
+
 IMAGES_JS = (
     "JSON.stringify(Array.from(document.images).map(i => ({alt: i.alt, complete: i.complete, "
     "naturalWidth: i.naturalWidth, naturalHeight: i.naturalHeight, scheme: i.src.split(':')[0]})))"
@@ -141,6 +171,7 @@ def open_page(
     screenshots: dict[str, tuple[int, int, int, int]] | None = None,
     width: int = 1280,
     timeout_s: float = 60.0,
+    actions: list[tuple[str, str]] | None = None,
 ) -> tuple[PageReport, dict[str, bytes]]:
     """Load ``html_file`` in a fresh headless Chromium profile and inspect it.
 
@@ -154,6 +185,9 @@ def open_page(
         Viewport width in CSS pixels.
     timeout_s
         Limit for start-up and for the page's load event.
+    actions
+        Run after the load, in order: ``("click", css_selector)`` clicks the element with the
+        mouse, ``("eval", js_expression)`` records the expression's value in ``results``.
 
     Returns
     -------
@@ -179,6 +213,7 @@ def open_page(
             tools.call("Page.navigate", url=Path(html_file).resolve().as_uri())
             tools.wait_for("Page.loadEventFired", time.monotonic() + timeout_s)
             report = PageReport()
+            report.results = [_run_action(tools, kind, argument) for kind, argument in actions or ()]
             report.images = json.loads(
                 tools.call("Runtime.evaluate", expression=IMAGES_JS, returnByValue=True)["result"]["value"]
             )

@@ -180,7 +180,8 @@ DOMAIN_INTERFACE = {
         "market.observation.OBS_SLIPPAGE",
         "market.observation.OBS_VIOLATION",
     },
-    "report": {"data.files.MANIFEST_FILE", "market.baselines.BASELINES"},
+    # The leaderboard tells the paper's protocol by the published dataset's checksums.
+    "report": {"data.files.MANIFEST_FILE", "data.published.PAPER_DATASET_SHA256", "market.baselines.BASELINES"},
 }
 
 

@@ -38,6 +38,10 @@ COMMANDS = {
         "verify",
         "Verify a run: its files against their sha256, then a sample of episodes re-run bit for bit.",
     ),
+    "leaderboard": (
+        "leaderboard",
+        "Rank runs and paper roots of one protocol per setting, with start-day bootstrap intervals.",
+    ),
     "bench": ("bench", "Throughput of the single env, the vector env and the evaluation runner."),
     "bench-train": (
         "bench_train",

@@ -21,18 +21,20 @@ CLUSTER_UNITS = ("start_hour", "episode_seed")
 FORMATS = ("md", "tex", "csv", "html")
 #: What a run can be checked against (``report --against``): the paper's published values.
 AGAINST_CHOICES = ("paper",)
+#: Output formats of a leaderboard: ``leaderboard.csv``, ``leaderboard.md``, ``leaderboard.html``.
+LEADERBOARD_FORMATS = ("csv", "md", "html")
 
 
 class ReportDataError(NamesOptions, ValueError):
     """The run's files are missing, malformed or inconsistent (the message names file, column, row)."""
 
 
-def parse_formats(text: str) -> tuple[str, ...]:
-    """``"md,tex"`` -> ("md", "tex"); raises ValueError on an unknown format."""
+def parse_formats(text: str, choices: tuple[str, ...] = FORMATS, what: str = "report") -> tuple[str, ...]:
+    """``"md,tex"`` -> ("md", "tex"); raises ValueError on a format not in ``choices`` (``what`` names them)."""
     formats = tuple(dict.fromkeys(part.strip().lower() for part in text.split(",") if part.strip()))
-    unknown = [f for f in formats if f not in FORMATS]
+    unknown = [f for f in formats if f not in choices]
     if unknown or not formats:
-        raise ValueError(f"unknown report format(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(FORMATS)}")
+        raise ValueError(f"unknown {what} format(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(choices)}")
     return formats
 
 
@@ -61,6 +63,31 @@ class ReportOptions:
     cluster_by: Literal["start_hour", "episode_seed"] = "start_hour"
     case_policy: str = "ppo"
     case_setting: str = "llm_no_physics"
+
+    def bootstrap(self) -> dict:
+        """Keyword arguments of the ``bootstrap_*`` functions."""
+        return {"n_resamples": self.n_resamples, "confidence": self.confidence, "seed": self.seed}
+
+
+@dataclass(frozen=True)
+class LeaderboardOptions:
+    """How a leaderboard is built (``solarchain-eval leaderboard`` and :func:`~solarchain_eval.report.leaderboard.make_leaderboards`).
+
+    Attributes
+    ----------
+    formats
+        Files to write: ``csv``, ``md``, ``html`` (the Pareto figure comes with ``md`` or ``html``).
+    split
+        Write one board per protocol (``BOARD/<id>/``) instead of refusing inputs of different protocols.
+    n_resamples, confidence, seed
+        Start-day bootstrap resamples per interval, two-sided confidence level, resampling seed.
+    """
+
+    formats: tuple[str, ...] = LEADERBOARD_FORMATS
+    split: bool = False
+    n_resamples: int = DEFAULT_RESAMPLES
+    confidence: float = DEFAULT_CONFIDENCE
+    seed: int = DEFAULT_SEED
 
     def bootstrap(self) -> dict:
         """Keyword arguments of the ``bootstrap_*`` functions."""

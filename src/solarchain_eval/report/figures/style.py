@@ -82,14 +82,22 @@ def new_figure(
         yield figure, axes
 
 
-def save_figure(figure: Figure, out_dir: Path, key: str, title: str, caption: str) -> FigureFile:
-    """Write ``<key>.png`` and ``<key>.svg`` atomically, without metadata that would vary."""
-    paths = {}
+def figure_bytes(figure: Figure) -> dict[str, bytes]:
+    """The figure as PNG and SVG bytes (``{"png": ..., "svg": ...}``), without metadata that would vary."""
+    rendered = {}
     with matplotlib.rc_context(STYLE):
         for fmt, metadata in (("png", {"Software": None}), ("svg", {"Date": None, "Creator": None})):
             buffer = io.BytesIO()
             figure.savefig(buffer, format=fmt, dpi=PNG_DPI, metadata=metadata)
-            paths[fmt] = atomic_write_bytes(Path(out_dir) / f"{key}.{fmt}", buffer.getvalue())
+            rendered[fmt] = buffer.getvalue()
+    return rendered
+
+
+def save_figure(figure: Figure, out_dir: Path, key: str, title: str, caption: str) -> FigureFile:
+    """Write ``<key>.png`` and ``<key>.svg`` atomically, without metadata that would vary."""
+    paths = {
+        fmt: atomic_write_bytes(Path(out_dir) / f"{key}.{fmt}", data) for fmt, data in figure_bytes(figure).items()
+    }
     return FigureFile(key=key, title=title, caption=caption, png=paths["png"], svg=paths["svg"])
 
 

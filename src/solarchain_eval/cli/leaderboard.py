@@ -1,0 +1,78 @@
+"""``solarchain-eval leaderboard``: rank runs and paper roots of one protocol, per setting."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import typer
+from rich.table import Table
+
+from ..report.options import DEFAULT_RESAMPLES, LEADERBOARD_FORMATS, LeaderboardOptions, ReportDataError, parse_formats
+from . import app
+from .common import CliError, cli_error, console, register_user_error, reports_errors, say
+
+register_user_error(ReportDataError)
+
+
+@app.command("leaderboard")
+@reports_errors
+def leaderboard(
+    inputs: list[Path] = typer.Argument(
+        ...,
+        metavar="RUN_OR_ROOT",
+        help="Run directories (evaluate --out), paper roots, or tarballs (.tar, .tar.gz, .tgz) of either.",
+    ),
+    out: Path = typer.Option(..., "--out", help="The board's folder (leaderboard.csv, .md, .html, pareto.png)."),
+    split: bool = typer.Option(
+        False, "--split", help="Write one board per protocol into OUT/<protocol id>/ instead of refusing a mix."
+    ),
+    formats: str = typer.Option(
+        ",".join(LEADERBOARD_FORMATS), "--formats", help="Comma-separated: csv, md, html (md and html add pareto.png)."
+    ),
+    resamples: int = typer.Option(
+        DEFAULT_RESAMPLES, "--resamples", min=100, help="Start-day bootstrap resamples per interval."
+    ),
+) -> None:
+    """Rank runs and paper roots of one protocol per setting, with start-day bootstrap intervals.
+
+    Per policy and setting: mean cumulative reward and IQM with 95 % intervals, the probability
+    of improvement over the best baseline on paired episodes, the safety metrics, the access label
+    (public or privileged) and the source. All inputs must share one protocol apart from the
+    setting (dataset, run seeds, episodes, episode-seed rule, task configuration); otherwise the
+    command names the first differing field and two inputs, and writes nothing. See
+    docs/comparing_results_leaderboard.md.
+    """
+    try:
+        options = LeaderboardOptions(
+            formats=parse_formats(formats, LEADERBOARD_FORMATS, "leaderboard"), split=split, n_resamples=resamples
+        )
+    except ValueError as error:
+        raise cli_error(error) from None
+    from ..report.leaderboard import make_leaderboards
+    from ..report.leaderboard_inputs import LeaderboardError
+
+    try:
+        outcome = make_leaderboards(inputs, out, options)
+    except LeaderboardError as error:
+        raise cli_error(error) from None
+    for board in outcome.boards:
+        for section in board.sections:
+            shown = Table(
+                title=f"{section.setting} (board {board.board_id}, protocol {section.protocol_id})",
+                title_justify="left",
+            )
+            for column in ("rank", "policy", "access", "mean reward [95 % CI]", "P(> best baseline)", "source"):
+                shown.add_column(column, justify="right" if column in ("rank",) else "left")
+            for row in section.ranked.itertuples(index=False):
+                shown.add_row(
+                    str(row.rank),
+                    str(row.policy),
+                    str(row.access),
+                    f"{row.cumulative_reward_mean:.2f} [{row.cumulative_reward_low:.2f}, {row.cumulative_reward_high:.2f}]",
+                    "n/a" if row.p_improvement != row.p_improvement else f"{row.p_improvement:.2f}",
+                    str(row.source),
+                )
+            console.print(shown)
+    if not outcome.files:
+        raise CliError("nothing to write")
+    say(f"wrote {len(outcome.files)} files to {outcome.out_dir}", err=False)
