@@ -97,9 +97,31 @@ def reference_rows(setting: str) -> pd.DataFrame | None:
     row per policy: ``policy`` and any of :data:`REFERENCE_COLUMNS` (``cumulative_reward_mean``,
     ``cumulative_reward_std``, ``physics_violation_rate_mean``, ...). The board shows them, labelled
     :data:`REFERENCE_SOURCE` and unranked, only in sections whose protocol is the paper's
-    (:func:`is_paper_protocol`). No published values are connected yet: None for every setting.
+    (:func:`is_paper_protocol`). The values are the paper's stored ones
+    (:mod:`~solarchain_eval.report.paper_reference`), from the first table that prints each cell
+    (the main table before the appendix); ``episodes`` is the paper's 3 × 30.
     """
-    return None
+    from .paper_reference import paper_values
+
+    values = paper_values()
+    values["column"] = values["metric"].astype(str) + "_" + values["statistic"].astype(str)
+    chosen = values[
+        (values["setting"] == setting)
+        & (values["source"] == "table")
+        & (values["level"] == "episode")
+        & values["base_setting"].isna()  # not a difference between two settings
+        & values["column"].isin(REFERENCE_COLUMNS)
+        & ~values["policy"].astype(str).str.contains("+", regex=False)  # not the pooled learned row
+    ]
+    if chosen.empty:
+        return None
+    first = chosen.drop_duplicates(["policy", "column"], keep="first")
+    frame = first.pivot(index="policy", columns="column", values="value")
+    order = list(dict.fromkeys(first["policy"]))  # the paper's row order
+    frame = frame.loc[order].reset_index()
+    frame.columns.name = None
+    frame.insert(1, "episodes", len(PAPER_SEEDS) * PAPER_EPISODES)
+    return frame
 
 
 def paper_protocol(setting: str) -> dict[str, Any]:
