@@ -7,6 +7,8 @@ import importlib.util
 import math
 import subprocess
 import sys
+import threading
+from http.server import ThreadingHTTPServer
 from pathlib import Path
 
 import numpy as np
@@ -116,6 +118,25 @@ def test_one_connection_per_episode_and_the_request_is_the_documented_context(ti
         assert (body["hour"], body["hour_of_day"], body["step"]) == (hour, hour % 24, step)
         assert (body["episode"], body["episode_seed"], body["run_seed"]) == (0, PAPER_SEED + 1, PAPER_SEED + 1)
         assert body["observation"][0] == F32(np.sin(2 * np.pi * (hour % 24) / 24))  # hour_sin of that hour
+
+
+def test_the_example_server_keeps_one_connection_for_an_episode(tiny_dataset, example_rule):
+    clients = []
+
+    class Counting(example_rule.AgentHandler):
+        def do_POST(self):
+            clients.append(self.client_address)
+            super().do_POST()
+
+    server = ThreadingHTTPServer(("127.0.0.1", 0), Counting)
+    threading.Thread(target=server.serve_forever, args=(0.05,), daemon=True).start()
+    try:
+        with HttpAgent("mine", f"http://127.0.0.1:{server.server_address[1]}/act") as agent:
+            one_episode(SolarChainEnv(tiny_dataset), agent)
+    finally:
+        server.shutdown()
+        server.server_close()
+    assert len(clients) == 24 and len(set(clients)) == 1
 
 
 def test_closing_and_reusing_opens_a_new_connection(scripted):
