@@ -200,7 +200,8 @@ class HttpAgent:
 
     # --- Policy protocol ----------------------------------------------------------------------
     def begin_run(self, run_seed: int) -> None:
-        self._local.run_seed = int(run_seed)
+        """Nothing to prepare: each episode's context carries its run seed."""
+        return None
 
     def begin_episode(
         self, *, episode: int, run_seed: int, episode_seed: int, start_hour: int, **_ignored: Any

@@ -89,22 +89,26 @@ def example_server(action: Sequence[float], script: Path = EXAMPLE_SERVER) -> It
             "start an agent server and pass its URL instead"
         )
     constant = ",".join(repr(float(v)) for v in action)  # repr: the float32 values exactly
-    process = subprocess.Popen(
-        [sys.executable, str(script), "--port", "0", "--constant", constant],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        line = process.stdout.readline() if process.stdout is not None else ""
-        if not line.strip():
+    # stderr goes to a file, not a pipe nobody reads, which could fill up and stall the server.
+    with tempfile.TemporaryFile("w+") as errors:
+        process = subprocess.Popen(
+            [sys.executable, str(script), "--port", "0", "--constant", constant],
+            stdout=subprocess.PIPE,
+            stderr=errors,
+            text=True,
+        )
+        try:
+            line = process.stdout.readline() if process.stdout is not None else ""
+            if not line.strip():
+                process.wait(timeout=_SERVER_START_S)
+                errors.seek(0)
+                raise RuntimeError(f"the example agent server did not start: {' '.join(errors.read().split())[-300:]}")
+            yield line.split()[-1]
+        finally:
+            process.terminate()
             process.wait(timeout=_SERVER_START_S)
-            error = process.stderr.read() if process.stderr is not None else ""
-            raise RuntimeError(f"the example agent server did not start: {' '.join(error.split())[-300:]}")
-        yield line.split()[-1]
-    finally:
-        process.terminate()
-        process.wait(timeout=_SERVER_START_S)
+            if process.stdout is not None:
+                process.stdout.close()
 
 
 def evaluation_seconds(
