@@ -297,6 +297,8 @@ def test_bench_agent_measures_the_example_server(tiny_dataset):
     assert all(len(s) == 1 and s[0] > 0 for s in (result.static_s, result.python_s, result.http_s))
     assert result.http_overhead_ms_per_step == pytest.approx(1000 * (result.http_s[0] - result.python_s[0]) / 24)
     assert result.python_over_static == pytest.approx(result.python_s[0] / result.static_s[0])
+    cpu_ms = 1000 * (result.http_cpu_s[0] - result.python_cpu_s[0]) / 24
+    assert result.http_client_cpu_ms_per_step == pytest.approx(cpu_ms)
     output = CliRunner().invoke(
         app, ["bench-agent", "--data", str(tiny_dataset), "--seeds", "1", "--episodes", "1", "--repeats", "1"],
         terminal_width=200,

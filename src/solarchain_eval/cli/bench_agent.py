@@ -31,7 +31,8 @@ def bench_agent(
     Each evaluation writes a run directory (temporary). The HTTP agent asks the example agent
     server (examples/http_agent_server.py, started on a free port with Static's action) unless
     --url names another. Prints the Python agent's time relative to Static and the HTTP round
-    trip's cost per step. Measured figures: docs/http_agents.md.
+    trip's cost per step (wall time, and the CPU time of the
+    benchmark's own process). Measured figures: docs/http_agents.md.
     """
     from ..agents.http_agent import HttpAgentError
     from ..data.default import resolve_data_dir
@@ -58,4 +59,7 @@ def bench_agent(
         table.add_row(name, f"{statistics.median(samples):.3f}", f"{min(samples):.3f}", "s")
     table.add_row("ratio Python agent / Static (medians)", f"{result.python_over_static:.2f}x", "", "")
     table.add_row("HTTP overhead per step (medians)", f"{result.http_overhead_ms_per_step:.3f}", "", "ms/step")
+    table.add_row(
+        "  of which CPU time of this process (client)", f"{result.http_client_cpu_ms_per_step:.3f}", "", "ms/step"
+    )
     console.print(table)

@@ -56,12 +56,19 @@ class ConstantAgent:
 
 @dataclass(frozen=True)
 class AgentBench:
-    """Seconds per evaluation of each policy (one sample per repeat) over ``steps`` env steps."""
+    """Seconds per evaluation of each policy (one sample per repeat) over ``steps`` env steps.
+
+    ``*_s`` are wall times; ``python_cpu_s`` and ``http_cpu_s`` the CPU time of this process
+    (the HTTP client's share of the round trip, which a busy machine inflates less than the wall
+    time: the server's own time is not in it).
+    """
 
     steps: int
     static_s: tuple[float, ...]
     python_s: tuple[float, ...]
     http_s: tuple[float, ...]
+    python_cpu_s: tuple[float, ...]
+    http_cpu_s: tuple[float, ...]
     url: str
 
     @property
@@ -73,6 +80,11 @@ class AgentBench:
     def http_overhead_ms_per_step(self) -> float:
         """(median HTTP time - median Python time) per env step, milliseconds."""
         return 1000.0 * (statistics.median(self.http_s) - statistics.median(self.python_s)) / self.steps
+
+    @property
+    def http_client_cpu_ms_per_step(self) -> float:
+        """(median HTTP CPU time - median Python CPU time) of this process per env step, milliseconds."""
+        return 1000.0 * (statistics.median(self.http_cpu_s) - statistics.median(self.python_cpu_s)) / self.steps
 
 
 def static_action(market: MarketConfig | None = None) -> np.ndarray:
@@ -113,13 +125,14 @@ def example_server(action: Sequence[float], script: Path = EXAMPLE_SERVER) -> It
 
 def evaluation_seconds(
     policy: Policy | str, data_dir: Path | None, run_seeds: Sequence[int], episodes: int
-) -> tuple[float, int]:
-    """Wall time of one evaluation of ``policy`` into a temporary run directory, and its env steps."""
+) -> tuple[float, float, int]:
+    """Wall and CPU seconds of one evaluation of ``policy`` into a temporary run directory, and its env steps."""
     spec = EvaluationSpec(policies=[policy], run_seeds=tuple(run_seeds), episodes=episodes, data_dir=data_dir)
     with tempfile.TemporaryDirectory() as tmp:
-        start = time.perf_counter()
+        start, start_cpu = time.perf_counter(), time.process_time()
         outcome = run_evaluation(spec, Path(tmp) / "run", command=["bench-agent"])
-        return time.perf_counter() - start, sum(r.n_steps for r in outcome.results)
+        wall_s, cpu_s = time.perf_counter() - start, time.process_time() - start_cpu
+        return wall_s, cpu_s, sum(r.n_steps for r in outcome.results)
 
 
 def measure_agent_overhead(
@@ -154,11 +167,13 @@ def measure_agent_overhead(
         for policy in policies.values():
             evaluation_seconds(policy, data_dir, run_seeds[:1], 1)
         samples: dict[str, list[float]] = {key: [] for key in policies}
+        cpu: dict[str, list[float]] = {key: [] for key in policies}
         steps: set[int] = set()
         for _ in range(repeats):
             for key, policy in policies.items():
-                seconds, n_steps = evaluation_seconds(policy, data_dir, run_seeds, episodes)
-                samples[key].append(seconds)
+                wall_s, cpu_s, n_steps = evaluation_seconds(policy, data_dir, run_seeds, episodes)
+                samples[key].append(wall_s)
+                cpu[key].append(cpu_s)
                 steps.add(n_steps)
     if len(steps) != 1:  # the same action on the same episodes: the same steps
         raise RuntimeError(f"the evaluations played different numbers of steps: {sorted(steps)}")
@@ -167,5 +182,7 @@ def measure_agent_overhead(
         static_s=tuple(samples["static"]),
         python_s=tuple(samples["python"]),
         http_s=tuple(samples["http"]),
+        python_cpu_s=tuple(cpu["python"]),
+        http_cpu_s=tuple(cpu["http"]),
         url=http_agent.shown_url,
     )
