@@ -26,6 +26,7 @@ COMMANDS = [
     ["report"],
     ["bench"],
     ["bench-train"],
+    ["bench-agent"],
 ]
 
 
