@@ -203,11 +203,9 @@ class HttpAgent:
         """Nothing to prepare: each episode's context carries its run seed."""
         return None
 
-    def begin_episode(
-        self, *, episode: int, run_seed: int, episode_seed: int, start_hour: int, **_ignored: Any
-    ) -> None:
-        """Start an episode's context (sent with every step). Other keyword arguments are ignored:
-        nothing but the observation and this public context ever reaches the server."""
+    def begin_episode(self, *, episode: int, run_seed: int, episode_seed: int, start_hour: int) -> None:
+        """Start an episode's context (sent with every step): nothing but the observation and this
+        public context ever reaches the server."""
         self._local.episode = _Episode(int(run_seed), int(episode), int(episode_seed), int(start_hour))
 
     def act(self, observation: np.ndarray) -> np.ndarray | int:

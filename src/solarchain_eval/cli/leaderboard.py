@@ -40,7 +40,7 @@ def leaderboard(
     (public or privileged) and the source. All inputs must share one protocol apart from the
     setting (dataset, run seeds, episodes, episode-seed rule, task configuration); otherwise the
     command names the first differing field and two inputs, and writes nothing. See
-    docs/comparing_results_leaderboard.md.
+    docs/comparing_results.md.
     """
     try:
         options = LeaderboardOptions(

@@ -1,4 +1,4 @@
-"""The leaderboard: every policy of one protocol, ranked per setting (docs/comparing_results_leaderboard.md).
+"""The leaderboard: every policy of one protocol, ranked per setting (docs/comparing_results.md).
 
 ``make_leaderboards(paths, out)`` reads run directories, paper roots and tarballs of either
 (:mod:`.leaderboard_inputs`), refuses inputs of different protocols unless asked to split them,

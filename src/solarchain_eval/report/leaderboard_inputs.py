@@ -8,7 +8,7 @@ are theirs together). Every input is read and verified by
 refused), and every policy must hold exactly the rollouts its protocol promises (run seeds ×
 episodes), so that rows of different inputs pair up episode by episode.
 
-The rule of one board (docs/comparing_results_leaderboard.md): all sections must share the
+The rule of one board (docs/comparing_results.md): all sections must share the
 protocol *without its setting* (:func:`board_fingerprint`: the setting and the reward switch it
 implies are left out); rows are ranked per setting.
 """
