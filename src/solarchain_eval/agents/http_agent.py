@@ -273,11 +273,13 @@ class HttpAgent:
     def _client(self) -> httpx.Client:
         client = getattr(self._local, "client", None)
         if client is None or client.is_closed:
-            client = httpx.Client(
-                timeout=self.timeout_s,
+            # One keep-alive connection; TCP_NODELAY so the request body (a second small write after
+            # the headers) is not held back waiting for the server's delayed ACK.
+            transport = httpx.HTTPTransport(
                 limits=httpx.Limits(max_connections=1, max_keepalive_connections=1),
-                trust_env=False,
+                socket_options=[(socket.IPPROTO_TCP, socket.TCP_NODELAY, 1)],
             )
+            client = httpx.Client(timeout=self.timeout_s, transport=transport, trust_env=False)
             with self._connections.lock:
                 self._connections.clients.append(client)
             self._local.client = client
