@@ -147,6 +147,9 @@ def test_paper_runs_user_agents_as_eval_units_behind_the_layer_in_the_agentic_se
     unit = json.loads((paper_root / "units" / "eval" / f"mine-main-{SEED}" / "unit.json").read_text())
     source = hashlib.sha256((agents_dir / "steady.py").read_bytes()).hexdigest()
     assert unit["agent"] == {"spec": spec, "kind": "file", "args": {"level": 0.2}, "sha256": {"source": source}}
+    unit = json.loads((paper_root / "units" / "eval" / f"hold-llm-{SEED}" / "unit.json").read_text())
+    module = hashlib.sha256((agents_dir / f"{MODULE}.py").read_bytes()).hexdigest()
+    assert unit["agent"]["spec"] == f"{MODULE}:hold" and unit["agent"]["sha256"] == {"source": module}
     meta = json.loads((paper_root / "paper_metadata.json").read_text())
     assert meta["complete"] and meta["grid"]["agents"] == {"mine": spec, "hold": f"{MODULE}:hold"}
     assert meta["grid"]["settings"] == {"main": ["static", "mine", "hold"], "llm": ["mine", "hold"]}

@@ -15,6 +15,7 @@ models and action shapes before any work), and says what a unit records about it
 
 from __future__ import annotations
 
+import importlib.util
 import json
 from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
@@ -328,18 +329,32 @@ def agent_identity(
     vecnormalize: Mapping[str | None, Path],
 ) -> dict[str, Any]:
     """What a unit of user agent ``name`` records (``unit.json`` → ``agent``): its spec, options
-    and the sha256 of the files it is built from (the Python file, the SB3 model, the
-    VecNormalize statistics). A done unit whose record differs is redone."""
+    and the sha256 of the files it is built from (the Python file or the module's file, the SB3
+    model, the VecNormalize statistics). A done unit whose record differs is redone."""
     spec = _parse(text)
     files: dict[str, str] = {}
     if spec.kind == "file":
         files["source"] = _digest(Path(spec.target.rpartition(":")[0]))
+    elif spec.kind == "python":
+        origin = _module_file(spec.target.rpartition(":")[0])
+        if origin is not None:
+            files["source"] = _digest(origin)
     elif spec.kind == "sb3":
         files["model"] = _digest(Path(spec.target.partition(":")[2]))
         stats = vecnormalize.get(name) or vecnormalize.get(None)
         if stats is not None:
             files["vecnormalize"] = _digest(Path(stats))
     return {"spec": text, "kind": spec.kind, "args": agent_kwargs(name, agent_args), "sha256": files}
+
+
+def _module_file(module: str) -> Path | None:
+    """The file of an importable module (None for a namespace or built-in module)."""
+    try:
+        found = importlib.util.find_spec(module)
+    except (ImportError, ValueError):
+        return None
+    origin = getattr(found, "origin", None)
+    return Path(origin) if origin and Path(origin).is_file() else None
 
 
 def _digest(path: Path) -> str:
