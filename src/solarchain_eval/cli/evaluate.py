@@ -57,7 +57,7 @@ VECNORMALIZE = typer.Option(
     help="VecNormalize statistics (VecNormalize.save) for an sb3: agent; NAME= picks the agent when there are several.",
 )
 #: The --policies help of every command that takes agent specs (its default is the command's own).
-AGENT_SPECS_HELP = (
+USER_AGENTS_HELP = (
     "package.module:attr, path/to/file.py:attr, an installed plugin's name, NAME=sb3:ALGO:PATH.zip or "
     "NAME=http://HOST:PORT/PATH; NAME=spec names the row. See docs/evaluate_your_agent.md."
 )
@@ -105,7 +105,7 @@ def evaluate(
     ),
     policies: str | None = typer.Option(
         None,
-        help=f"Comma-separated agents: built-in ({', '.join(known_policies())}, {LLM_AGENT}), {AGENT_SPECS_HELP} "
+        help=f"Comma-separated agents: built-in ({', '.join(known_policies())}, {LLM_AGENT}), {USER_AGENTS_HELP} "
         "Default: the config's evaluation.policies (static,random,myopic).",
     ),
     agent_arg: list[str] | None = AGENT_ARG,

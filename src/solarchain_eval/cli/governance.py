@@ -40,7 +40,7 @@ from .common import (
     say,
     show_files,
 )
-from .evaluate import AGENT_ARG, AGENT_SPECS_HELP, OVERWRITE, VECNORMALIZE
+from .evaluate import AGENT_ARG, OVERWRITE, USER_AGENTS_HELP, VECNORMALIZE
 
 METADATA = "governance_metadata.json"
 #: The Planner/Auditor options this command offers as they are: the LLM endpoint and its cache
@@ -144,7 +144,7 @@ def governance(
         "rule", "--planner", help="Comma-separated planners: rule, calibrated-rule, default, llm:MODEL."
     ),
     policies: str = typer.Option(
-        "static,random,myopic", help=f"Comma-separated policies ({', '.join(known_policies())}) or {AGENT_SPECS_HELP}"
+        "static,random,myopic", help=f"Comma-separated policies ({', '.join(known_policies())}) or {USER_AGENTS_HELP}"
     ),
     agent_arg: list[str] | None = AGENT_ARG,
     vecnormalize: list[str] | None = VECNORMALIZE,

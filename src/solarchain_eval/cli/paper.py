@@ -40,7 +40,7 @@ from .common import (
     reports_errors,
     results_table,
 )
-from .evaluate import AGENT_ARG, AGENT_SPECS_HELP, VECNORMALIZE
+from .evaluate import AGENT_ARG, USER_AGENTS_HELP, VECNORMALIZE
 
 register_user_error(GridError)
 
@@ -173,7 +173,7 @@ def paper(
         None,
         "--policies",
         help="Comma-separated subset of the policies to run (default: all; train units follow), and agents of "
-        f"your own, evaluated in every setting: {AGENT_SPECS_HELP}",
+        f"your own, evaluated in every setting: {USER_AGENTS_HELP}",
     ),
     agent_arg: list[str] | None = AGENT_ARG,
     vecnormalize: list[str] | None = VECNORMALIZE,
