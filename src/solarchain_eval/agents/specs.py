@@ -168,6 +168,19 @@ def parse_agent_args(items: list[str], names: list[str]) -> dict[str | None, dic
     return args
 
 
+def parse_vecnormalize(items: list[str], names: list[str]) -> dict[str | None, Path]:
+    """``--vecnormalize`` values: ``PATH`` (the only ``sb3:`` agent) or ``NAME=PATH`` (agent NAME,
+    one of ``names``). Returned as {NAME or None: PATH}."""
+    stats: dict[str | None, Path] = {}
+    for item in items:
+        name, sep, path = item.partition("=")
+        if sep and name in names:
+            stats[name] = Path(path)
+        else:
+            stats[None] = Path(item)
+    return stats
+
+
 def plugin_names() -> tuple[str, ...]:
     """Names of the agents installed packages register (entry-point group :data:`ENTRY_POINT_GROUP`)."""
     return tuple(sorted({ep.name for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}))

@@ -10,7 +10,7 @@ import typer
 from ..agents.adapters import AgentError
 from ..agents.registry import known_policies, parse_agents
 from ..agents.sb3 import parse_models
-from ..agents.specs import LLM_AGENT, parse_agent_args
+from ..agents.specs import LLM_AGENT, parse_agent_args, parse_vecnormalize
 from ..config import BenchmarkConfig, load_config
 from ..data.default import default_dataset_dir
 from ..evaluation.records import metrics_frame, summarize
@@ -40,6 +40,26 @@ OVERWRITE = typer.Option(
     False,
     "--overwrite",
     help="Replace an existing run directory as a whole (its old files are removed, never mixed in).",
+)
+
+# The user-agent options of every command that names policies (evaluate, paper, governance).
+AGENT_ARG = typer.Option(
+    None,
+    "--agent-arg",
+    metavar="[NAME.]KEY=VALUE",
+    help="An option for agents built from a class or factory (repeatable); VALUE is read as JSON when it is "
+    "JSON. NAME. limits it to one agent.",
+)
+VECNORMALIZE = typer.Option(
+    None,
+    "--vecnormalize",
+    metavar="[NAME=]PATH",
+    help="VecNormalize statistics (VecNormalize.save) for an sb3: agent; NAME= picks the agent when there are several.",
+)
+#: The --policies help of every command that takes agent specs (its default is the command's own).
+USER_AGENTS_HELP = (
+    "package.module:attr, path/to/file.py:attr, an installed plugin's name, NAME=sb3:ALGO:PATH.zip or "
+    "NAME=http://HOST:PORT/PATH; NAME=spec names the row. See docs/evaluate_your_agent.md."
 )
 
 # An evaluate option, not a GovernanceRequest field: it schedules this command's episodes (paper and
@@ -76,18 +96,6 @@ def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> N
     say(f"protocol {outcome.protocol_id} (equal ids: comparable results; see run_metadata.json 'protocol')", err=False)
 
 
-def _vecnormalize(items: list[str], names: list[str]) -> dict[str | None, Path]:
-    """``--vecnormalize`` values: PATH (the only sb3: agent) or NAME=PATH."""
-    stats: dict[str | None, Path] = {}
-    for item in items:
-        name, sep, path = item.partition("=")
-        if sep and name in names:
-            stats[name] = Path(path)
-        else:
-            stats[None] = Path(item)
-    return stats
-
-
 @app.command("evaluate")
 @reports_errors
 @agentic_cli.governance_options()
@@ -97,24 +105,11 @@ def evaluate(
     ),
     policies: str | None = typer.Option(
         None,
-        help=f"Comma-separated agents: built-in ({', '.join(known_policies())}, {LLM_AGENT}), "
-        "package.module:attr, path/to/file.py:attr, an installed plugin's name, NAME=sb3:ALGO:PATH.zip or "
-        "NAME=http://HOST:PORT/PATH; NAME=spec names the row. Default: the config's evaluation.policies "
-        "(static,random,myopic). See docs/evaluate_your_agent.md.",
+        help=f"Comma-separated agents: built-in ({', '.join(known_policies())}, {LLM_AGENT}), {USER_AGENTS_HELP} "
+        "Default: the config's evaluation.policies (static,random,myopic).",
     ),
-    agent_arg: list[str] | None = typer.Option(
-        None,
-        "--agent-arg",
-        metavar="[NAME.]KEY=VALUE",
-        help="An option for agents built from a class or factory (repeatable); VALUE is read as JSON when it is "
-        "JSON. NAME. limits it to one agent.",
-    ),
-    vecnormalize: list[str] | None = typer.Option(
-        None,
-        "--vecnormalize",
-        metavar="[NAME=]PATH",
-        help="VecNormalize statistics (VecNormalize.save) for an sb3: agent; NAME= picks the agent when there are several.",
-    ),
+    agent_arg: list[str] | None = AGENT_ARG,
+    vecnormalize: list[str] | None = VECNORMALIZE,
     seeds: str = typer.Option(_SEEDS, help="Comma-separated run seeds; episode e of seed s is reset with s + e."),
     episodes: int | None = typer.Option(
         None, min=1, help=f"Episodes per run seed (default: the config's evaluation.episodes, {PAPER_EPISODES})."
@@ -169,7 +164,7 @@ def evaluate(
         agentic=options,
         concurrency=llm_concurrency,
         agent_args=agent_args,
-        vecnormalize=_vecnormalize(vecnormalize or [], named),
+        vecnormalize=parse_vecnormalize(vecnormalize or [], named),
     )
     try:
         check_agents(spec)  # unknown names, imports, models, names used twice, action shapes: before any work

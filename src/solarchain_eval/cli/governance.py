@@ -11,13 +11,15 @@ import pandas as pd
 import typer
 from rich.table import Table
 
-from ..agents.registry import known_policies, parse_policy_list
+from ..agents.registry import known_policies, parse_agents
 from ..agents.sb3 import parse_models
+from ..agents.specs import parse_agent_args, parse_vecnormalize
 from ..common.atomic_files import atomic_write_json, sha256_file
 from ..config import BenchmarkConfig, load_config
 from ..evaluation.rundir import RunDirWriter, check_target
 from ..evaluation.settings import AGENTIC_SETTINGS
 from ..experiments.governance import Combination, GovernanceSpec, run_governance
+from ..experiments.user_agents import refuse_llm_agent
 from ..governance.calibrated import DEFAULT_TARGET_AUDIT_RATE
 from ..governance.controls import DEFAULT_ORACLE_REWARD_LOSS, TRIGGER_SETS, SchedulerControls
 from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
@@ -38,7 +40,7 @@ from .common import (
     say,
     show_files,
 )
-from .evaluate import OVERWRITE
+from .evaluate import AGENT_ARG, OVERWRITE, USER_AGENTS_HELP, VECNORMALIZE
 
 METADATA = "governance_metadata.json"
 #: The Planner/Auditor options this command offers as they are: the LLM endpoint and its cache
@@ -142,8 +144,10 @@ def governance(
         "rule", "--planner", help="Comma-separated planners: rule, calibrated-rule, default, llm:MODEL."
     ),
     policies: str = typer.Option(
-        "static,random,myopic", help=f"Comma-separated policies ({', '.join(known_policies())})."
+        "static,random,myopic", help=f"Comma-separated policies ({', '.join(known_policies())}) or {USER_AGENTS_HELP}"
     ),
+    agent_arg: list[str] | None = AGENT_ARG,
+    vecnormalize: list[str] | None = VECNORMALIZE,
     models: list[str] | None = typer.Option(
         None, "--models", metavar="DIR|NAME=PATH", help="Trained models: a directory, or NAME=PATH (repeatable)."
     ),
@@ -181,11 +185,18 @@ def governance(
     step (audit rate, precision, recall, Δcost, Δreward, Δartificial liquidity with cluster-bootstrap
     intervals over start days; LLM calls, tokens, latency), leaderboard_by_policy.csv/.md and
     figures/ (precision–recall per auditor; Δcost vs Δreward per revision). See docs/governance.md.
+
+    --policies also takes your own agents (package.module:attr, path/to/file.py:attr, plugins,
+    NAME=sb3:ALGO:PATH.zip, NAME=http://...; with --agent-arg and --vecnormalize as in evaluate).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     check_target(out, overwrite=overwrite)
     try:
-        names = parse_policy_list(policies)
+        specs = parse_agents(policies)
+        named = [s.name for s in specs if s.name is not None]
+        agent_args = parse_agent_args(agent_arg or [], named)
+        stats = parse_vecnormalize(vecnormalize or [], named)
+        refuse_llm_agent(specs)
     except ValueError as error:
         raise cli_error(error) from None
     chosen_settings = _split(settings, "settings")
@@ -216,7 +227,7 @@ def governance(
                     combination = dataclasses.replace(combination, planner_label=f"{p}[{trigger_set}]")
                 combinations.append(combination)
     spec = GovernanceSpec(
-        policies=names,
+        policies=[s.text for s in specs],
         combinations=combinations,
         settings=chosen_settings,
         run_seeds=parse_seeds(seeds),
@@ -224,8 +235,10 @@ def governance(
         data_dir=data,
         config=cfg,
         models=parse_models(models or []),
+        agent_args=agent_args,
+        vecnormalize=stats,
     )
-    _check_models(spec, cfg)
+    names = _check_agents(spec)
     total = len(combinations) * len(chosen_settings) * len(names) * len(spec.run_seeds) * episodes
     llm_options = next((c.options for c in combinations if c.options.uses_llm), None)
     with (
@@ -267,12 +280,22 @@ def governance(
     show_files({name: out / name for name in [*files, METADATA]}, f"wrote the leaderboard to {out}")
 
 
-def _check_models(spec: GovernanceSpec, cfg: BenchmarkConfig) -> None:
-    """Unknown policies or missing models fail before any work."""
-    from ..agents.registry import make_policy
+def _check_agents(spec: GovernanceSpec) -> list[str]:
+    """The policies' names; unknown policies, missing models, imports, names used twice and
+    actions of the wrong shape fail before any work."""
+    from ..evaluation.runner import EvaluationSpec, check_agents
 
+    evaluation = EvaluationSpec(
+        policies=list(spec.policies),
+        run_seeds=spec.run_seeds,
+        episodes=spec.episodes,
+        data_dir=spec.data_dir,
+        config=spec.config,
+        models=spec.models,
+        agent_args=spec.agent_args,
+        vecnormalize=spec.vecnormalize,
+    )
     try:
-        for name in spec.policies:
-            make_policy(name, cfg, spec.models)
+        return check_agents(evaluation)
     except (ValueError, FileNotFoundError) as error:
         raise cli_error(error) from None

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import dataclasses
 import json
 from enum import StrEnum
 from pathlib import Path
@@ -12,6 +13,7 @@ from rich.text import Text
 
 from ..agents.checkpoints import OPT_IN_ALGOS
 from ..agents.registry import parse_policy_list
+from ..agents.specs import parse_agent_args, parse_vecnormalize
 from ..config import BenchmarkConfig, load_config
 from ..evaluation.records import SUMMARY_FILE
 from ..evaluation.settings import KNOWN_SETTINGS
@@ -19,6 +21,7 @@ from ..experiments.grid import GridSpec, Unit, plan_units
 from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
 from ..experiments.units import UnitResult
+from ..experiments.user_agents import PolicyChoice, resolve_agents, split_policies
 from ..governance.request import GovernanceRequest
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
@@ -37,6 +40,7 @@ from .common import (
     reports_errors,
     results_table,
 )
+from .evaluate import AGENT_ARG, USER_AGENTS_HELP, VECNORMALIZE
 
 register_user_error(GridError)
 
@@ -61,8 +65,17 @@ def _settings(text: str | None) -> tuple[str, ...]:
     return names
 
 
+def _choice(text: str | None) -> PolicyChoice:
+    """``--policies`` split into built-in policies and the specs of user agents."""
+    choice = split_policies(text.split(",")) if text else PolicyChoice((), ())
+    if text and not choice.builtins and not choice.agents:
+        raise ValueError("--policies: no policies given")
+    return choice
+
+
 def _policies(text: str | None, extra: str | None, settings: tuple[str, ...]) -> tuple[str, ...] | None:
-    """``--policies`` plus ``--extra-policies`` (None: every non-opt-in policy of the settings)."""
+    """The built-in policies of ``--policies`` plus ``--extra-policies`` (None: every non-opt-in
+    policy of the settings; user agents are :func:`_choice`'s)."""
     extras = parse_policy_list(extra) if extra else []
     unknown = [p for p in extras if p not in OPT_IN_ALGOS]
     if unknown:
@@ -70,7 +83,7 @@ def _policies(text: str | None, extra: str | None, settings: tuple[str, ...]) ->
     if not text and not extras:
         return None
     defaults = dict.fromkeys(p for s in settings for p in KNOWN_SETTINGS[s].policies if p not in OPT_IN_ALGOS)
-    base = parse_policy_list(text) if text else list(defaults)
+    base = list(_choice(text).builtins) if text else list(defaults)
     return tuple(dict.fromkeys([*base, *extras]))
 
 
@@ -160,8 +173,13 @@ def paper(
         None, "--settings", help="Comma-separated settings (default: every registered one: main, no_physics, ...)."
     ),
     policies: str | None = typer.Option(
-        None, "--policies", help="Comma-separated subset of the policies to run (default: all; train units follow)."
+        None,
+        "--policies",
+        help="Comma-separated subset of the policies to run (default: all; train units follow), and agents of "
+        f"your own, evaluated in every setting: {USER_AGENTS_HELP}",
     ),
+    agent_arg: list[str] | None = AGENT_ARG,
+    vecnormalize: list[str] | None = VECNORMALIZE,
     extra_policies: str | None = typer.Option(
         None,
         "--extra-policies",
@@ -211,6 +229,11 @@ def paper(
     unless --planner/--auditor say otherwise); writes ROOT/combined/<setting>/ files,
     ROOT/paper_metadata.json and, after a complete grid, the report in ROOT/report.
 
+    --policies also takes your own agents (package.module:attr, path/to/file.py:attr, plugins,
+    NAME=sb3:ALGO:PATH.zip, NAME=http://...; with --agent-arg and --vecnormalize as in evaluate):
+    each is evaluated, not trained, in every setting (behind the Planner/Auditor layer in the
+    agentic ones), in units named by the agent.
+
     --extra-policies ppo-lag adds PPO-Lagrangian (train --algo ppo-lag) in main and no_physics,
     with --cost-limit and --multiplier-lr.
 
@@ -222,13 +245,17 @@ def paper(
     options = agentic_cli.resolve(governance)
     chosen_settings = _settings(settings)
     try:
+        builtins, choice = _policies(policies, extra_policies, chosen_settings), _choice(policies)
+        named = [s.name for s in choice.agents if s.name is not None]
+        agent_args = parse_agent_args(agent_arg or [], named)
+        stats = parse_vecnormalize(vecnormalize or [], named)
         spec = GridSpec.from_preset(
             preset.value,
             timesteps=timesteps,
             episodes=episodes,
             seeds=tuple(parse_seeds(seeds)) if seeds else None,
             settings=chosen_settings,
-            policies=_policies(policies, extra_policies, chosen_settings),
+            policies=builtins,
             episode_seed_protocol=episode_seeds.value,
             data_dir=data,
             config=cfg,
@@ -236,14 +263,29 @@ def paper(
             agentic=options,
             backend=backend,
             lagrangian=LagrangianSettings(cost_limit, multiplier_lr),
+            agent_args=agent_args,
+            vecnormalize=stats,
         )
+        # User agents are named by building them once, which also checks imports, models and
+        # action shapes on the grid's dataset before any unit runs.
+        agents = resolve_agents(
+            choice.agents,
+            config=cfg,
+            agent_args=agent_args,
+            vecnormalize=stats,
+            data_dirs=[data],
+            run_seed=spec.seeds[0],
+            builtins=builtins or (),
+        )
+        spec = dataclasses.replace(spec, agents=agents)
         spec.validate()
-    except ValueError as error:
+    except (ValueError, FileNotFoundError) as error:
         raise cli_error(error) from None
     where = f"Ray ({ray_address})" if ray_address else f"{workers} worker(s)"
+    mine = f", your agents {', '.join(name for name, _ in spec.agents)}" if spec.agents else ""
     err_console.print(
         f"grid: {spec.timesteps:,} training steps, {spec.episodes} episodes × {len(spec.seeds)} seed(s), "
-        f"settings {', '.join(spec.settings)}, {spec.backend} backend, on {where} -> {out}",
+        f"settings {', '.join(spec.settings)}{mine}, {spec.backend} backend, on {where} -> {out}",
         soft_wrap=True,
     )
     with agentic_cli.serving(governance, options):

@@ -36,7 +36,8 @@ def sweep(
     Axes: dataset scenario (fdia_rate, fdia_pattern, fdia_severity, fdia_burst_hours,
     nodes_per_city, cities = a number of synthetic cities), reward weights (lambda_p, lambda_d,
     lambda_j, lambda_u, lambda_f) and the PPO-Lagrangian constraint (cost_limit,
-    multiplier_lr); grid.policies lists the policies and algorithms every point runs.
+    multiplier_lr); grid.policies lists the policies and algorithms every point runs, and agents
+    of your own as agent specs (with grid.agent_args and grid.vecnormalize), evaluated only.
 
     Writes ROOT/datasets/, ROOT/points/<point>/ (each a paper root), ROOT/results.csv (a row per
     point x setting x policy x seed x episode) and ROOT/sensitivity/ (each metric against each

@@ -146,21 +146,28 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
     return built
 
 
-def check_agents(spec: EvaluationSpec) -> None:
+def check_agents(spec: EvaluationSpec) -> list[str]:
     """Build the spec's agents and try each user agent's first action, then release them.
 
     Run before any work so that an import error, a missing model, a name used twice or an
     action of the wrong shape is reported at once. The first action is taken by a *copy* of the
     agent (its state is not advanced); agents that cannot be copied (an open connection) are
     tried on their first real step instead.
+
+    Returns
+    -------
+    list of str
+        The agents' names (the ``policy`` column of their records), in the spec's order.
     """
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
     data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
     table = load_table(data_dir)
     with ExitStack() as stack:
-        for agent in make_policies(spec, stack):
+        agents = make_policies(spec, stack)
+        for agent in agents:
             if isinstance(agent, UserAgent):
                 _try_first_action(agent, config, table, spec)
+        return [agent.name for agent in agents]
 
 
 def _try_first_action(agent: UserAgent, config: BenchmarkConfig, table: HourlyTable, spec: EvaluationSpec) -> None:

@@ -20,6 +20,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import Any
 
 import pandas as pd
 
@@ -51,7 +52,12 @@ class Combination:
 
 @dataclass
 class GovernanceSpec:
-    """What the leaderboard evaluates (policies, seeds and episodes as for ``evaluate``)."""
+    """What the leaderboard evaluates (policies, seeds and episodes as for ``evaluate``).
+
+    ``policies`` are agent specs as :class:`~solarchain_eval.evaluation.runner.EvaluationSpec`
+    takes them (built-in names, ``package.module:attr``, ``path/file.py:attr``, ...), with their
+    ``agent_args`` and ``vecnormalize``.
+    """
 
     policies: Sequence[str]
     combinations: Sequence[Combination]
@@ -61,6 +67,8 @@ class GovernanceSpec:
     data_dir: Path | None = None
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     models: dict[str, Path] = field(default_factory=dict)
+    agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
+    vecnormalize: dict[str | None, Path] = field(default_factory=dict)
 
 
 @dataclass
@@ -128,6 +136,8 @@ def run_governance(
                 config=spec.config,
                 models=spec.models,
                 agentic=options,
+                agent_args=spec.agent_args,
+                vecnormalize=spec.vecnormalize,
             )
             run_dir = Path(root) / RUNS_DIR / setting / combination.slug
             outcome = run_evaluation(evaluation, run_dir, on_episode=on_episode, command=command)

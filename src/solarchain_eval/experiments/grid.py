@@ -11,6 +11,10 @@ A grid is a list of *units*, each one directory under ``ROOT/units`` (see :mod:`
   run seed over the grid's episodes. An eval unit of a learned policy depends on the train unit
   of the same algorithm, seed and the setting's ``model_setting``.
 
+User agents (``GridSpec.agents``: agent specs, :mod:`.agents`) get eval units only, named by the
+agent, in every setting of the grid (behind the Planner/Auditor layer in the agentic ones) after
+the built-in policies.
+
 Settings are :data:`~solarchain_eval.evaluation.settings.KNOWN_SETTINGS`: ``main`` and
 ``no_physics`` evaluate every policy; the agentic settings ``llm`` (models trained in ``main``) and
 ``llm_no_physics`` (models from ``no_physics``) evaluate the learned policies behind the
@@ -78,10 +82,18 @@ class GridSpec:
     agentic: AgenticOptions = field(default_factory=AgenticOptions)  # the agentic settings' layer
     backend: str = "sb3"  # the train units' backend: "sb3" or "jax"
     lagrangian: LagrangianSettings = field(default_factory=lambda: LagrangianSettings(DEFAULT_COST_LIMIT))
-    #: Per-setting policy lists ((setting, policies), ...) that override ``policies`` there.
+    #: Per-setting policy lists ((setting, policies), ...) that override ``policies`` there
+    #: (they may name user agents, which then run in those settings only).
     policies_by_setting: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    #: User agents ((name, agent spec text), ...): evaluated, never trained, in every setting.
+    agents: tuple[tuple[str, str], ...] = ()
+    #: ``--agent-arg`` options of the user agents by name (None: every agent built from a class or factory).
+    agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
+    #: VecNormalize statistics of ``sb3:`` user agents by name (None: the only one).
+    vecnormalize: dict[str | None, Path] = field(default_factory=dict)
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
+        """The built-in policies evaluated in ``setting`` (:meth:`setting_agents` adds the user agents)."""
         listed = KNOWN_SETTINGS[setting].policies
         chosen = dict(self.policies_by_setting).get(setting)
         if chosen is not None:
@@ -89,6 +101,15 @@ class GridSpec:
         if self.policies is None:
             return tuple(p for p in listed if p not in OPT_IN_ALGOS)
         return tuple(p for p in listed if p in self.policies)
+
+    def setting_agents(self, setting: str) -> tuple[str, ...]:
+        """The names of the user agents evaluated in ``setting``."""
+        chosen = dict(self.policies_by_setting).get(setting)
+        return tuple(name for name, _ in self.agents if chosen is None or name in chosen)
+
+    def agent_spec(self, name: str) -> str | None:
+        """The spec text of user agent ``name`` (None for a built-in policy)."""
+        return dict(self.agents).get(name)
 
     @property
     def uses_lagrangian(self) -> bool:
@@ -120,15 +141,20 @@ class GridSpec:
             raise ValueError(f"unknown setting(s) {', '.join(unknown)} (registered: {', '.join(KNOWN_SETTINGS)})")
         if self.backend != "sb3" and self.uses_lagrangian:
             raise ValueError("ppo-lag trains with the sb3 backend only")
+        if self.agents:
+            from .user_agents import check_agent_names  # the agent registry, only for grids with user agents
+
+            check_agent_names(self.agents, self.policies or ())
         if self.policies is not None:
             offered = {p for s in self.settings for p in KNOWN_SETTINGS[s].policies}
             unknown = [p for p in self.policies if p not in offered]
-            if unknown or not self.policies:
+            if unknown or not (self.policies or self.agents):
                 raise ValueError(
                     f"unknown or no policies {', '.join(unknown)} (the settings offer {', '.join(sorted(offered))})"
                 )
+        names = [name for name, _ in self.agents]
         for setting, chosen in self.policies_by_setting:
-            offered = KNOWN_SETTINGS[setting].policies if setting in KNOWN_SETTINGS else ()
+            offered = (*KNOWN_SETTINGS[setting].policies, *names) if setting in KNOWN_SETTINGS else ()
             unknown = [p for p in chosen if p not in offered]
             if setting not in self.settings or unknown or not chosen:
                 raise ValueError(f"policies of setting '{setting}': {', '.join(unknown) or 'none'} not offered there")
@@ -197,7 +223,8 @@ def train_unit(algo: str, setting: str, seed: int, backend: str = "sb3", seed_gr
 
 def plan_units(spec: GridSpec) -> list[Unit]:
     """Every unit of the grid in a fixed order: train units (SAC first: the longest), then eval
-    units by setting, policy and seed. Train units are planned only where an eval unit needs them.
+    units by setting, policy (the user agents after the built-ins) and seed. Train units are
+    planned only where an eval unit needs them.
 
     With the JAX backend the seeds of an algorithm and training setting form one train unit
     (rejax trains them in one ``vmap``, compiled once; on a GPU in about the time of one).
@@ -206,10 +233,10 @@ def plan_units(spec: GridSpec) -> list[Unit]:
     wanted: list[tuple[str, str, int]] = []
     for setting_name in spec.settings:
         setting = KNOWN_SETTINGS[setting_name]
-        for policy in spec.setting_policies(setting_name):
+        for policy in (*spec.setting_policies(setting_name), *spec.setting_agents(setting_name)):
             for seed in spec.seeds:
                 wanted.append((policy, setting_name, seed))
-                if policy in TRAINABLE_ALGOS:
+                if policy in TRAINABLE_ALGOS:  # a user agent cannot take a built-in's name
                     needed.setdefault((policy, setting.model_setting), set()).add(seed)
     order = {algo: i for i, algo in enumerate(("sac", "ppo", "ppo-lag", "dqn"))}
     trains: dict[tuple[str, str, int], Unit] = {}

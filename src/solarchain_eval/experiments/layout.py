@@ -10,7 +10,7 @@ A paper root (``solarchain-eval paper --out ROOT``)::
     ROOT/paper_metadata.json                            the grid spec, versions, dataset provenance
     ROOT/units/train/<algo>-<setting>-<seed>/           one trained model (SB3 .zip, config, log)
     ROOT/units/train/<algo>-<setting>-<s1>+<s2>+.../    JAX backend: a seed group, seed_<s>/ per model
-    ROOT/units/eval/<policy>-<setting>-<seed>/          one evaluation = a run directory
+    ROOT/units/eval/<policy>-<setting>-<seed>/          one evaluation = a run directory (policy: a built-in or user agent name)
     ROOT/combined/<setting>/metrics.csv ...             every unit of a setting concatenated
     ROOT/report/                                        tables, figures, index.html
 

@@ -5,8 +5,9 @@ units resume from their last checkpoint). A root remembers what it was made with
 (``paper_metadata.json`` → ``identity``: budgets, episode-seed protocol, dataset hashes, config);
 running a different grid into it is an error, while adding seeds or settings extends it. An eval
 unit of a learned policy records the sha256 of the model it used and is redone if that model
-changed. One run at a time may use a root (a lock file). The ``paper`` command writes the
-report after a complete grid.
+changed; an eval unit of a user agent records its spec, options and files (:mod:`.agents`) and
+is redone if they changed. One run at a time may use a root (a lock file). The ``paper``
+command writes the report after a complete grid.
 """
 
 from __future__ import annotations
@@ -41,6 +42,7 @@ from .grid import GridSpec, Unit, eval_model_path, plan_units
 from .layout import PAPER_METADATA_FILE
 from .pool import Executor, InlineExecutor, LocalPool, RunReport, run_units
 from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
+from .user_agents import absolute_paths, agent_identity, worker_spec
 
 
 class GridError(NamesOptions, ValueError):
@@ -125,18 +127,30 @@ def _read_metadata(root: Path) -> dict[str, Any] | None:
         raise GridError(f"{path} is not valid JSON ({error})") from None
 
 
-def _stale_eval(root: Path, unit: Unit, backend: str) -> bool:
-    """A done eval unit whose model changed since it was evaluated."""
-    if unit.policy not in TRAINABLE_ALGOS or not unit.depends_on:
-        return False
+def _recorded(root: Path, unit: Unit) -> dict[str, Any] | None:
+    """The unit's ``unit.json`` (None if unreadable)."""
     import json
 
     try:
-        recorded = json.loads((unit.directory(root) / UNIT_FILE).read_text(encoding="utf-8")).get("model_sha256")
+        return json.loads((unit.directory(root) / UNIT_FILE).read_text(encoding="utf-8"))
     except (OSError, ValueError):
+        return None
+
+
+def _stale_eval(root: Path, unit: Unit, spec: GridSpec) -> bool:
+    """A done eval unit whose model (learned policy) or agent (user agent) changed since it was evaluated."""
+    agent = spec.agent_spec(unit.policy)
+    if agent is not None:
+        recorded = _recorded(root, unit)
+        current = agent_identity(unit.policy, agent, spec.agent_args, spec.vecnormalize)
+        return recorded is None or recorded.get("agent") != current
+    if unit.policy not in TRAINABLE_ALGOS or not unit.depends_on:
+        return False
+    recorded = _recorded(root, unit)
+    if recorded is None:
         return True
-    model = eval_model_path(root, unit, backend, model_file(backend))
-    return model is None or not model.is_file() or recorded != model_digest({unit.policy: model})
+    model = eval_model_path(root, unit, spec.backend, model_file(spec.backend))
+    return model is None or not model.is_file() or recorded.get("model_sha256") != model_digest({unit.policy: model})
 
 
 def run_paper(
@@ -181,7 +195,7 @@ def run_paper(
                 "{root} holds a different grid ({diffs}); use another {opt_root}", root=root, diffs="; ".join(diffs[:5])
             )
         units = plan_units(spec)
-        done = _finished_units(root, units, spec.backend)
+        done = _finished_units(root, units, spec)
         already = [u.name for u in units if u.name in done]
         meta = _metadata(spec, identity, dataset, data_dir, command, workers, ray_address)
         atomic_write_json(root / PAPER_METADATA_FILE, {**meta, "status": "running", "complete": False})
@@ -200,13 +214,13 @@ def run_paper(
     return outcome
 
 
-def _finished_units(root: Path, units: list[Unit], backend: str) -> set[str]:
-    """Names of the units already done; an eval unit whose model was retrained since is undone."""
+def _finished_units(root: Path, units: list[Unit], spec: GridSpec) -> set[str]:
+    """Names of the units already done; an eval unit whose model or agent changed since is undone."""
     done = set()
     for unit in units:
         if read_done(unit.directory(root)) is None:
             continue
-        if unit.kind == "eval" and _stale_eval(root, unit, backend):
+        if unit.kind == "eval" and _stale_eval(root, unit, spec):
             undo(unit.directory(root))
         else:
             done.add(unit.name)
@@ -294,6 +308,9 @@ def _task(
     if unit.kind == "eval" and unit.depends_on:
         models = {unit.policy: eval_model_path(root, unit, spec.backend, model_file(spec.backend))}
         unit_identity["model_sha256"] = model_digest(models)
+    agent = spec.agent_spec(unit.policy) if unit.kind == "eval" else None
+    if agent is not None:
+        unit_identity["agent"] = agent_identity(unit.policy, agent, spec.agent_args, spec.vecnormalize)
     return UnitTask(
         unit=unit,
         unit_dir=unit.directory(root),
@@ -309,6 +326,10 @@ def _task(
         identity=unit_identity,
         command=tuple(command or sys.argv),
         lagrangian=spec.lagrangian if unit.policy == "ppo-lag" else None,
+        # the spec as text (workers build the agent), named and with absolute paths
+        agent_spec=worker_spec(unit.policy, agent) if agent is not None else None,
+        agent_args=spec.agent_args if agent is not None else {},
+        vecnormalize=absolute_paths(spec.vecnormalize) if agent is not None else {},
     )
 
 
@@ -328,7 +349,8 @@ def _metadata(
             "timesteps": spec.timesteps,
             "episodes": spec.episodes,
             "seeds": list(spec.seeds),
-            "settings": {s: list(spec.setting_policies(s)) for s in spec.settings},
+            "settings": {s: [*spec.setting_policies(s), *spec.setting_agents(s)] for s in spec.settings},
+            "agents": dict(spec.agents),
             "algorithms": list(ALGOS),
             "backend": spec.backend,
             "episode_seed_protocol": spec.episode_seed_protocol,

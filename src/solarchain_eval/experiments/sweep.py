@@ -40,6 +40,7 @@ from .paper import GridError, _executor, _locked, _metadata, _read_metadata, _st
 from .pool import RunReport, run_units
 from .sweep_spec import Sweep, SweepDataset, SweepPoint, dataset_cities, fdia_scenario
 from .units import UnitResult, UnitTask, read_done, undo
+from .user_agents import GridPolicies, check_resolved, grid_policies
 
 DATASETS_DIR = "datasets"
 POINTS_DIR = "points"
@@ -112,7 +113,7 @@ def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
     return out
 
 
-def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path) -> GridSpec:
+def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path, policies: GridPolicies) -> GridSpec:
     g = sweep.spec.grid
     try:
         spec = GridSpec(
@@ -125,11 +126,12 @@ def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path) -> GridSpec:
             config=point.config,
             checkpoint_every=g.checkpoint_every,
             preset="sweep",
-            policies=tuple(g.policies) if isinstance(g.policies, list) else None,
-            policies_by_setting=tuple((s, tuple(p)) for s, p in g.policies.items())
-            if isinstance(g.policies, dict)
-            else (),
+            policies=policies.policies,
+            policies_by_setting=policies.by_setting,
             lagrangian=point.lagrangian,
+            agents=policies.agents,
+            agent_args=policies.agent_args,
+            vecnormalize=policies.vecnormalize,
         )
         spec.validate()
     except ValueError as error:
@@ -137,12 +139,54 @@ def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path) -> GridSpec:
     return spec
 
 
+def sweep_policies(sweep: Sweep) -> GridPolicies:
+    """``grid.policies`` as every point's grid takes them, user agents named (each built once);
+    paths in agent specs and ``grid.vecnormalize`` are relative to the YAML.
+
+    Raises
+    ------
+    GridError
+        A spec that cannot be read or built, or a name that is taken (one line, naming the file).
+    """
+    g = sweep.spec.grid
+    try:
+        return grid_policies(
+            g.policies,
+            base=sweep.source.parent,
+            config=sweep.points[0].config,
+            agent_args=g.agent_args,
+            vecnormalize=g.vecnormalize,
+        )
+    except (ValueError, FileNotFoundError) as error:
+        raise GridError(f"{sweep.source}: grid.policies: {error}") from None
+
+
+def check_sweep_agents(sweep: Sweep, policies: GridPolicies, data_dir: Path) -> None:
+    """Try every user agent's first action on one of the sweep's datasets (a :class:`GridError` if it fails)."""
+    try:
+        check_resolved(
+            policies.agents,
+            config=sweep.points[0].config,
+            agent_args=policies.agent_args,
+            vecnormalize=policies.vecnormalize,
+            data_dir=data_dir,
+            run_seed=sweep.spec.grid.seeds[0],
+        )
+    except (ValueError, FileNotFoundError) as error:
+        raise GridError(f"{sweep.source}: grid.policies on the dataset {data_dir}: {error}") from None
+
+
 def _prepare_points(
-    sweep: Sweep, root: Path, on_dataset: Callable[[str, bool], None] | None, command: list[str] | None
+    sweep: Sweep,
+    root: Path,
+    policies: GridPolicies,
+    on_dataset: Callable[[str, bool], None] | None,
+    command: list[str] | None,
 ) -> list[_PointRun]:
     from ..data.table import load_table
 
-    runs, tables = [], {}
+    tables: dict[str, dict[str, Any]] = {}
+    data_dirs: list[Path] = []
     for point in sweep.points:
         if point.uses_existing_data:
             data_dir = _resolve(sweep, str(point.dataset.data)).resolve()
@@ -155,8 +199,14 @@ def _prepare_points(
                 build_point_dataset(sweep, point.dataset, data_dir)
         if str(data_dir) not in tables:
             tables[str(data_dir)] = dataset_provenance(load_table(data_dir))
+        data_dirs.append(data_dir)
+    # The user agents' first actions on every dataset (their shapes follow its cities), before any unit.
+    for data_dir in dict.fromkeys(data_dirs):
+        check_sweep_agents(sweep, policies, data_dir)
+    runs = []
+    for point, data_dir in zip(sweep.points, data_dirs, strict=True):
         dataset = tables[str(data_dir)]
-        spec = _point_spec(sweep, point, data_dir)
+        spec = _point_spec(sweep, point, data_dir, policies)
         identity = grid_identity(spec, dataset)
         point_root = root / POINTS_DIR / point.point_id
         previous = _read_metadata(point_root)
@@ -199,10 +249,11 @@ def run_sweep(
     started = time.perf_counter()
     if workers < 1:
         raise GridError.about("{opt_workers} must be at least 1, got {workers}", workers=workers)
+    policies = sweep_policies(sweep)  # user agents named (and built once) before anything is written
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     with _locked(root, "sweep"):
-        runs = _prepare_points(sweep, root, on_dataset, command)
+        runs = _prepare_points(sweep, root, policies, on_dataset, command)
         by_scope = {f"{POINTS_DIR}/{r.point.point_id}": r for r in runs}
         units = [u for r in runs for u in r.units]
         done: set[str] = set()
@@ -210,7 +261,7 @@ def run_sweep(
             for unit in run.units:
                 if read_done(unit.directory(root)) is None:
                     continue
-                if unit.kind == "eval" and _stale_eval(run.root, unit.unscoped(), run.spec.backend):
+                if unit.kind == "eval" and _stale_eval(run.root, unit.unscoped(), run.spec):
                     undo(unit.directory(root))
                 else:
                     done.add(unit.name)
@@ -309,4 +360,4 @@ def _write_metadata(sweep: Sweep, root: Path, runs: list[_PointRun], outcome: Sw
     )
 
 
-__all__ = ["SweepOutcome", "build_point_dataset", "run_sweep", "tidy_results"]
+__all__ = ["SweepOutcome", "build_point_dataset", "run_sweep", "sweep_policies", "tidy_results"]

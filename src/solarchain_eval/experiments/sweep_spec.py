@@ -48,9 +48,14 @@ class SweepGrid(_Section):
     episodes: int = Field(5, ge=1, le=10**6)
     seeds: list[int] = Field(default_factory=lambda: [DEFAULT_SEED], min_length=1)
     settings: list[str] = Field(default_factory=lambda: ["main", "no_physics"], min_length=1)
-    policies: list[str] | dict[str, list[str]] | None = None  # a list, or a list per setting
+    #: A list, or a list per setting: built-in policies and agent specs (paths relative to the YAML).
+    policies: list[str] | dict[str, list[str]] | None = None
     episode_seeds: Literal["paper", "independent"] = "paper"
     checkpoint_every: int = Field(0, ge=0)
+    #: Options of the user agents built from a class or factory: ``KEY: VALUE`` or ``NAME.KEY: VALUE``.
+    agent_args: dict[str, Any] = Field(default_factory=dict)
+    #: VecNormalize statistics of ``sb3:`` agents: a path (the only one) or ``{NAME: PATH}``.
+    vecnormalize: str | dict[str, str] | None = None
 
 
 class SweepDataset(_Section):

@@ -50,6 +50,10 @@ class UnitTask:
     identity: dict[str, Any] = field(default_factory=dict)
     command: tuple[str, ...] = ()
     lagrangian: LagrangianSettings | None = None  # train units of ppo-lag
+    #: Eval units of a user agent: its spec text (built in the worker) and options.
+    agent_spec: str | None = None
+    agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
+    vecnormalize: dict[str | None, Path] = field(default_factory=dict)
 
 
 @dataclass(frozen=True)
@@ -210,7 +214,7 @@ def _evaluate_unit(task: UnitTask) -> None:
 
     unit = task.unit
     spec = EvaluationSpec(
-        policies=[unit.policy],
+        policies=[task.agent_spec or unit.policy],
         run_seeds=[unit.seed],
         episodes=task.episodes,
         data_dir=task.data_dir,
@@ -220,6 +224,8 @@ def _evaluate_unit(task: UnitTask) -> None:
         episode_seeds=EPISODE_SEED_RULES[task.episode_seed_protocol],
         agentic=task.agentic,  # the Planner/Auditor layer in the agentic settings
         setting_label=unit.setting,
+        agent_args=dict(task.agent_args),
+        vecnormalize=dict(task.vecnormalize),
     )
     if spec.setting != unit.setting:
         raise ValueError(f"unit {unit.name}: the task evaluates setting {spec.setting!r}")

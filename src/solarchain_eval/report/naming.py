@@ -8,6 +8,7 @@ from __future__ import annotations
 from collections.abc import Iterable, Mapping
 from typing import Any
 
+from ..agents.checkpoints import TRAINABLE_ALGOS
 from ..evaluation.settings import (
     KNOWN_SETTINGS,
     SETTING_AGENTIC,
@@ -33,6 +34,10 @@ POLICY_DISPLAY = {
 PAPER_POLICY_ORDER = ("static", "random", "myopic", "ppo", "sac", "dqn")
 #: The paper's learned-policy order in the body tables (PPO, SAC, DQN).
 LEARNED_ORDER = ("ppo", "sac", "dqn")
+#: The package's own policies; any other name in a run is a user agent (an agent spec's).
+BUILTIN_POLICIES = (*BASELINES, *TRAINABLE_ALGOS, "llm-agent")
+#: What a user agent's display name says after its name.
+USER_AGENT_SUFFIX = " (user agent)"
 
 #: Setting labels of the four-setting tables ("Governance" / "Setting" columns of the body).
 GOVERNANCE_LABELS = {name: KNOWN_SETTINGS[name].governance_label for name in SETTINGS}
@@ -56,9 +61,12 @@ __all__ = [
     "AGENTIC_REWARD_LABELS",
     "AGENTIC_BASE",
     "ABLATION_PAIRS",
+    "BUILTIN_POLICIES",
     "policy_label",
     "setting_label",
     "is_learned",
+    "is_user_agent",
+    "is_trained",
     "paper_order",
     "learned_order",
     "governance_layer",
@@ -67,7 +75,9 @@ __all__ = [
 
 
 def policy_label(policy: str) -> str:
-    """Display name of ``policy`` (the paper's spelling; unknown names are shown as given)."""
+    """Display name of ``policy`` (the paper's spelling; a user agent's name marked as such)."""
+    if is_user_agent(policy):
+        return f"{policy}{USER_AGENT_SUFFIX}"
     return POLICY_DISPLAY.get(policy, policy)
 
 
@@ -77,8 +87,20 @@ def setting_label(setting: str) -> str:
 
 
 def is_learned(policy: str) -> bool:
-    """True for every policy that is not a rule baseline (PPO, SAC, DQN and any new learner)."""
+    """True for every policy that is not a rule baseline (PPO, SAC, DQN, any new learner and
+    user agents): the policies the per-policy tables across settings list."""
     return policy not in BASELINES
+
+
+def is_user_agent(policy: str) -> bool:
+    """True for an agent evaluated from a user's spec (any name the package does not define)."""
+    return policy not in BUILTIN_POLICIES
+
+
+def is_trained(policy: str) -> bool:
+    """True for the package's learned policies (not baselines, not user agents): what the
+    pooled "RL" claims are about."""
+    return is_learned(policy) and not is_user_agent(policy)
 
 
 def paper_order(policies: Iterable[str]) -> list[str]:

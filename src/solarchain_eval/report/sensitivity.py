@@ -28,7 +28,7 @@ import pandas as pd
 
 from ..common.atomic_files import atomic_write_text, atomic_write_with
 from ..market.baselines import BASELINES
-from .naming import is_learned
+from .naming import is_trained
 from .statistics import Interval, bootstrap_mean, bootstrap_mean_difference
 
 SENSITIVITY_METRICS = (
@@ -114,7 +114,7 @@ def _point_findings(frame: pd.DataFrame, resamples: int) -> list[dict]:
         )
 
     main = frame[frame["setting"] == "main"]
-    learned = sorted(p for p in main["policy"].unique() if is_learned(p))
+    learned = sorted(p for p in main["policy"].unique() if is_trained(p))  # user agents are not "RL"
     heuristics = sorted(p for p in main["policy"].unique() if p in BASELINES)
     if learned and heuristics:
         rl, heuristic = _best(main, learned), _best(main, heuristics)

@@ -5,7 +5,7 @@ from __future__ import annotations
 import pandas as pd
 
 from ..loading import ReportData
-from ..naming import is_learned, paper_order, policy_label, setting_label
+from ..naming import is_learned, is_trained, paper_order, policy_label, setting_label
 from ..options import ReportOptions
 from ..statistics import (
     SampleSize,
@@ -28,7 +28,8 @@ SUMMARY_METRICS = (
 
 
 def _comparisons(rollouts: pd.DataFrame) -> list[tuple[str, pd.DataFrame, pd.DataFrame]]:
-    """The paper's comparisons: RL vs non-RL pooled and each learner vs each baseline.
+    """The paper's comparisons: RL vs non-RL pooled and each learner vs each baseline (user
+    agents are compared with each baseline too, but not pooled into "RL").
 
     Without learned policies (or without baselines), every pair of policies present.
     """
@@ -36,15 +37,16 @@ def _comparisons(rollouts: pd.DataFrame) -> list[tuple[str, pd.DataFrame, pd.Dat
     rows = {p: rollouts[rollouts["policy"] == p] for p in policies}
     learned = [p for p in policies if is_learned(p)]
     baselines = [p for p in policies if not is_learned(p)]
+    trained = [p for p in learned if is_trained(p)]
     if learned and baselines:
         pooled = [
             (
                 "RL vs non-RL",
-                rollouts[rollouts["policy"].isin(learned)],
+                rollouts[rollouts["policy"].isin(trained)],
                 rollouts[rollouts["policy"].isin(baselines)],
             )
         ]
-        return pooled + [
+        return (pooled if trained else []) + [
             (f"{policy_label(a)} vs {policy_label(b)}", rows[a], rows[b]) for a in learned for b in baselines
         ]
     return [

@@ -6,7 +6,15 @@ import pandas as pd
 
 from ...evaluation.settings import SETTING_MAIN
 from ..loading import ReportData
-from ..naming import GOVERNANCE_LABELS, GOVERNANCE_ORDER, learned_order, paper_order, policy_label
+from ..naming import (
+    GOVERNANCE_LABELS,
+    GOVERNANCE_ORDER,
+    is_trained,
+    is_user_agent,
+    learned_order,
+    paper_order,
+    policy_label,
+)
 from ..options import ReportOptions
 from .common import learned_rollouts, means, moments, size_fields, sizes_of
 from .model import Column, ReportTable, Skipped, basis_sentence, cell, cell_pm, integer, span, text
@@ -29,6 +37,8 @@ SETTING_METRICS = (
     ("spatial_fairness_index", "Fairness", 4),
 )
 NO_MAIN = "no rollouts in the main setting (physics-penalised reward, no LLM layer)"
+NO_TRAINED = "the run has no learned policies of the package (PPO, SAC, DQN, ...); user agents are not pooled here"
+USER_AGENTS_NOTE = "Rows marked (user agent) are agents evaluated from their specs, not trained by the grid."
 NO_LEARNED = "the run has no learned policies (only rule baselines); this table covers PPO, SAC, DQN and other learners"
 
 
@@ -145,16 +155,19 @@ def four_setting_learned(data: ReportData, options: ReportOptions) -> ReportTabl
         columns=columns,
         data=frame,
         basis=basis_sentence(sizes_of(frame), "rollouts"),
-        notes=[f"Settings without learned rollouts in this run: {', '.join(absent)}."] if absent else [],
+        notes=([f"Settings without learned rollouts in this run: {', '.join(absent)}."] if absent else [])
+        + ([USER_AGENTS_NOTE] if learned["policy"].map(is_user_agent).any() else []),
     )
 
 
 def four_setting_aggregate(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
-    """Appendix: per setting, the mean over every learned-policy rollout (PPO, SAC, DQN pooled)."""
+    """Appendix: per setting, the mean over every learned-policy rollout (PPO, SAC, DQN pooled;
+    user agents are not pooled with them)."""
     title = "Aggregate learned-policy means by setting"
     learned = learned_rollouts(data)
+    learned = learned[learned["policy"].map(is_trained)]
     if learned.empty:
-        return Skipped("four_setting_aggregate", title, NO_LEARNED)
+        return Skipped("four_setting_aggregate", title, NO_TRAINED)
     rows = []
     for setting in GOVERNANCE_ORDER:
         group = learned[learned["setting"] == setting]
