@@ -280,3 +280,12 @@ def test_independent_episode_seeds_reach_the_evaluation(tiny_dataset, tmp_path):
     meta = json.loads((tmp_path / "root" / "paper_metadata.json").read_text())
     assert meta["grid"]["episode_seed_protocol"] == "independent"
     assert "SeedSequence(entropy=s, spawn_key=(0x45504953,))" in meta["grid"]["episode_seed_derivation"]
+
+
+def test_a_setting_with_no_policy_to_evaluate_is_refused_before_any_work():
+    from solarchain_eval.experiments.grid import GridSpec
+
+    spec = GridSpec.from_preset("smoke", settings=("main", "llm"), policies=("static",))
+    with pytest.raises(ValueError, match="setting 'llm' would evaluate no policy: choose some of ppo, sac, dqn"):
+        spec.validate()
+    GridSpec.from_preset("smoke", settings=("main",), policies=("static",)).validate()

@@ -158,6 +158,12 @@ class GridSpec:
             unknown = [p for p in chosen if p not in offered]
             if setting not in self.settings or unknown or not chosen:
                 raise ValueError(f"policies of setting '{setting}': {', '.join(unknown) or 'none'} not offered there")
+        for setting in self.settings:  # a setting with nothing to evaluate would have nothing to combine
+            if not (self.setting_policies(setting) or self.setting_agents(setting)):
+                offered = ", ".join(KNOWN_SETTINGS[setting].policies)
+                raise ValueError(
+                    f"setting '{setting}' would evaluate no policy: choose some of {offered} there, or drop the setting"
+                )
         if self.episode_seed_protocol not in EPISODE_SEED_RULES:
             raise ValueError(
                 f"unknown episode-seed protocol '{self.episode_seed_protocol}' (choose from {', '.join(EPISODE_SEED_RULES)})"
