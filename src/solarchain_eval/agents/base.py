@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import inspect
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
@@ -21,7 +22,9 @@ class Policy(Protocol):
     - ``begin_run(run_seed)``: once per run seed, before its first episode (the Random baseline
       seeds its generator there);
     - ``begin_episode(*, env, episode, run_seed, episode_seed, start_hour)``: after each reset,
-      before the first ``act`` (the Planner/Auditor wrapper plans the episode there);
+      before the first ``act`` (the Planner/Auditor wrapper plans the episode there). The env is
+      passed only to a hook that declares an ``env`` parameter (or ``**kwargs``): a policy that
+      must see no more than its observations (the LLM agent) leaves it out;
     - ``observe(info)``: after each step, with that step's ``info`` dict;
     - ``end_episode()``: after the last step; a returned dict is kept in the episode's
       ``extras`` (the wrapper returns its log rows and agentic metrics).
@@ -37,3 +40,28 @@ class Policy(Protocol):
     def begin_run(self, run_seed: int) -> None: ...
 
     def act(self, observation: np.ndarray) -> Any: ...
+
+
+def hook_takes_env(hook: Any) -> bool:
+    """Whether a ``begin_episode`` hook declares an ``env`` parameter (or takes ``**kwargs``)."""
+    try:
+        parameters = inspect.signature(hook).parameters.values()
+    except (TypeError, ValueError):  # no signature to read (a builtin): pass the env as before
+        return True
+    return any(p.name == "env" or p.kind is inspect.Parameter.VAR_KEYWORD for p in parameters)
+
+
+def begin_episode(policy: Any, *, env: Any, episode: int, run_seed: int, episode_seed: int, start_hour: int) -> None:
+    """Call ``policy``'s ``begin_episode`` hook, if it has one, with the env only if it asks for it."""
+    hook = getattr(policy, "begin_episode", None)
+    if hook is None:
+        return
+    context: dict[str, Any] = {
+        "episode": episode,
+        "run_seed": run_seed,
+        "episode_seed": episode_seed,
+        "start_hour": start_hour,
+    }
+    if hook_takes_env(hook):
+        context["env"] = env
+    hook(**context)

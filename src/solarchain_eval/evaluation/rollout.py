@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ..agents.base import Policy
+from ..agents.base import Policy, begin_episode
 from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
 from ..protocol import paper_episode_seeds
 from .metrics import episode_metrics
@@ -48,15 +48,14 @@ def run_episode(
 ) -> EpisodeResult:
     """Run one full episode with ``policy`` acting deterministically."""
     obs, reset_info = env.reset(seed=episode_seed)
-    begin = getattr(policy, "begin_episode", None)
-    if begin is not None:
-        begin(
-            env=env,
-            episode=episode,
-            run_seed=run_seed,
-            episode_seed=episode_seed,
-            start_hour=reset_info["episode_start_hour"],
-        )
+    begin_episode(
+        policy,
+        env=env,
+        episode=episode,
+        run_seed=run_seed,
+        episode_seed=episode_seed,
+        start_hour=reset_info["episode_start_hour"],
+    )
     columns: dict[str, list] = {name: [] for name in STEP_FIELDS}
     appenders = [(columns[name].append, name) for name in STEP_FIELDS]
     city_rewards: list[tuple[float, ...]] = []

@@ -18,6 +18,7 @@ from typing import Any
 import numpy as np
 
 from ..agents.base import Policy
+from ..agents.base import begin_episode as begin_base_episode
 from ..llm.errors import CallSite
 from ..market.actions import DiscreteActions, initial_action
 from ..market.observation import OBS_GAP, OBS_SLIPPAGE, OBS_VIOLATION, OBSERVATION_NAMES
@@ -40,7 +41,7 @@ RECENT_FIELDS = (
     "physics_violation_rate",
     "artificial_liquidity_MWh",
 )
-_HOOKS = ("begin_episode", "observe", "end_episode")
+_HOOKS = ("observe", "end_episode")
 
 #: Keys of the dict ``end_episode`` returns (merged into ``EpisodeResult.extras``): the
 #: episode's agentic metrics (extra ``metrics.csv`` columns) and its step log rows.
@@ -115,9 +116,9 @@ class GovernedPolicy:
         self._evaluate = CounterfactualEvaluator(env)
         self._pending: dict[str, Any] | None = None
         self._planner_retries = int((outcome.llm or {}).get("retries", 0))
-        hook = self._base_hooks["begin_episode"]
-        if hook is not None:
-            hook(env=env, episode=episode, run_seed=run_seed, episode_seed=episode_seed, start_hour=start_hour)
+        begin_base_episode(
+            self.base, env=env, episode=episode, run_seed=run_seed, episode_seed=episode_seed, start_hour=start_hour
+        )
 
     def _start_scheduler(self) -> None:
         """The episode's budget and scheduler (plan, overrides, or the auditor's own step choice)."""
@@ -225,6 +226,9 @@ class GovernedPolicy:
         hook = self._base_hooks["end_episode"]
         if hook is not None:
             extras.update(hook() or {})
+        # The base policy's own metrics columns (the LLM agent's calls) follow the layer's.
+        base_metrics = extras.get(EXTRA_METRICS_KEY, {})
+        metrics = {**metrics, **{k: v for k, v in base_metrics.items() if k not in metrics}}
         extras.update({EXTRA_METRICS_KEY: metrics, EXTRA_LOG_KEY: self._rows})
         if self.diagnostics:
             extras[EXTRA_DIAGNOSTICS_KEY] = self._diagnostics_rows
