@@ -253,3 +253,26 @@ def test_a_short_rollout_with_the_real_local_model_stays_inside_the_bounds(tiny_
         reply = json.loads(json.loads(path.read_text())["response"]["choices"][0]["message"]["content"])
         for name, low, high in zip(("reward_ratio", "liquidity_ratio", "burn_rate"), CODEC.lo, CODEC.hi, strict=True):
             assert low <= reply[name] <= high, (name, reply)
+
+
+def test_a_rejected_responses_api_reply_is_shown_back_and_counted(tiny_dataset):
+    """The retry also works in the Responses API envelope; tokens of every attempt are counted."""
+    from fake_openai import responses_body
+
+    bad, good = (
+        {"reward_ratio": 0.3, "liquidity_ratio": 0.5},
+        {"reward_ratio": 0.3, "liquidity_ratio": 0.5, "burn_rate": 0.1},
+    )
+    script = [Reply(200, responses_body(json.dumps(bad))), Reply(200, responses_body(json.dumps(good)))]
+    with FakeOpenAI(script) as server:
+        settings = resolve_llm_settings(
+            api="responses", model="m", base_url=server.base_url, environ={"SOLARCHAIN_LLM_API_KEY": "none"}
+        )
+        with open_llm_agent(LLMOptions(settings), CONFIG.market) as agent:
+            agent.begin_episode(episode=2, run_seed=1, episode_seed=3, start_hour=0)
+            action = agent.act(SolarChainEnv(tiny_dataset, config=CONFIG).reset(seed=3)[0])
+    assert action.tolist() == CODEC.encode(0.3, 0.5, 0.1).tolist()
+    retry = server.seen[1].body["input"]
+    assert retry[-2] == {"role": "assistant", "content": json.dumps(bad)} and "burn_rate" in retry[-1]["content"]
+    (meta,) = agent._calls
+    assert meta["invalid_replies"] == 1 and meta["retries"] == 1 and meta["input_tokens"] == 2 * 130

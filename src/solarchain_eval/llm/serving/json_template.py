@@ -165,6 +165,8 @@ def reachable_values(text: str, *, integer: bool) -> list[tuple[Decimal, Decimal
     body = text[1:] if negative else text
     step = Decimal(1) if integer else Decimal(10) ** -MAX_FRACTION_DIGITS  # the finest last digit
     largest = Decimal(10) ** MAX_INTEGER_DIGITS - step
+    if not text:  # a sign may still come
+        return [(-largest, largest)]
     if not body:
         spans = [(Decimal(0), largest)]
     elif "." in body:
