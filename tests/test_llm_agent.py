@@ -11,6 +11,7 @@ import inspect
 import json
 
 import numpy as np
+import pandas as pd
 import pytest
 
 from fake_openai import FakeOpenAI, Reply, Seen, ok, user_context
@@ -276,3 +277,24 @@ def test_a_rejected_responses_api_reply_is_shown_back_and_counted(tiny_dataset):
     assert retry[-2] == {"role": "assistant", "content": json.dumps(bad)} and "burn_rate" in retry[-1]["content"]
     (meta,) = agent._calls
     assert meta["invalid_replies"] == 1 and meta["retries"] == 1 and meta["input_tokens"] == 2 * 130
+
+
+def test_a_run_with_the_agent_and_a_baseline_writes_each_policys_columns(tiny_dataset, tmp_path):
+    """metrics.csv has the agent's columns (empty for the baseline); summary.json only each policy's own."""
+    from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
+
+    with FakeOpenAI(responder=responder) as server, make_agent(server) as agent:
+        spec = EvaluationSpec(policies=["static", agent], run_seeds=[3], episodes=1, data_dir=tiny_dataset)
+        run_evaluation(spec, tmp_path / "run")
+    metrics = pd.read_csv(tmp_path / "run" / "metrics.csv")
+    assert list(metrics.columns[-len(LLM_AGENT_METRIC_NAMES) :]) == list(LLM_AGENT_METRIC_NAMES)
+    rows = metrics.set_index("policy")
+    assert (
+        rows.loc["llm-agent", "llm_agent_call_count"] == 24 and rows.loc["static", LLM_AGENT_METRIC_NAMES].isna().all()
+    )
+    summary = {
+        entry["policy"]: entry["metrics"] for entry in json.loads((tmp_path / "run" / "summary.json").read_text())
+    }
+    assert (
+        "llm_agent_call_count" not in summary["static"] and summary["llm-agent"]["llm_agent_call_count"]["mean"] == 24
+    )
