@@ -60,7 +60,9 @@ COLUMN_LIKE = re.compile(
 
 def test_every_column_has_a_unit_and_a_meaning():
     # no duplicates
-    assert len(ALL_COLUMNS) == len(EPISODE_KEYS) + len(METRIC_NAMES) + len(AGENTIC_METRIC_NAMES) + len(LLM_AGENT_METRIC_NAMES)
+    assert len(ALL_COLUMNS) == len(EPISODE_KEYS) + len(METRIC_NAMES) + len(AGENTIC_METRIC_NAMES) + len(
+        LLM_AGENT_METRIC_NAMES
+    )
     for column in ALL_COLUMNS.values():
         assert column.unit and column.meaning, column.name
     assert not set(RENAMED_COLUMNS) & set(ALL_COLUMNS) and not set(REMOVED_COLUMNS) & set(ALL_COLUMNS)
