@@ -10,13 +10,15 @@ from __future__ import annotations
 
 import ctypes
 import json
+from decimal import Decimal
 
 import numpy as np
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from solarchain_eval.governance.schemas import AuditorOutput, PlannerOutput
+from solarchain_eval.config import MarketConfig
+from solarchain_eval.governance.schemas import AuditorOutput, PlannerOutput, agent_action_model
 from solarchain_eval.llm.response_format import response_format
 from solarchain_eval.llm.serving import jump_forward
 from solarchain_eval.llm.serving.json_template import (
@@ -25,6 +27,7 @@ from solarchain_eval.llm.serving.json_template import (
     Value,
     compile_template,
 )
+from solarchain_eval.market.actions import ActionCodec
 
 AUDITOR_SCHEMA = response_format(AuditorOutput, "chat-json-object")["schema"]
 PLANNER_SCHEMA = response_format(PlannerOutput, "chat-json-object")["schema"]
@@ -284,3 +287,82 @@ def test_any_valid_audit_the_model_wants_is_written_as_it_wants(ratio, risk, rea
     text = json.dumps(target, separators=(",", ":"))
     reply, _ = _decode(text)
     assert reply.text == text
+
+
+# --- numbers with minimum and maximum (the LLM agent's action) ------------------------------
+AGENT_SCHEMA = response_format(agent_action_model(ActionCodec.from_config(MarketConfig())), "chat-json-object")[
+    "schema"
+]
+
+
+def test_a_bounded_schema_compiles_to_bounded_number_slots():
+    assert compile_template(AGENT_SCHEMA) == [
+        Literal('{"reward_ratio":'),
+        Value("number", minimum="0.05", maximum="0.65"),
+        Literal(',"liquidity_ratio":'),
+        Value("number", minimum="0.2", maximum="0.95"),
+        Literal(',"burn_rate":'),
+        Value("number", minimum="0.0", maximum="0.2"),
+        Literal("}"),
+    ]
+
+
+@settings(max_examples=200, deadline=None)
+@given(
+    st.decimals(-1000, 1000, places=3, allow_nan=False, allow_infinity=False),
+    st.decimals(-1000, 1000, places=2, allow_nan=False, allow_infinity=False),
+    st.decimals(0, 500, places=2, allow_nan=False, allow_infinity=False),
+    st.sampled_from(["number", "integer"]),
+)
+def test_a_bounded_number_admits_exactly_the_prefixes_of_values_inside_its_bounds(value, low, width, kind):
+    if kind == "integer":
+        value = value.to_integral_value()
+    slot = Value(kind, minimum=str(low), maximum=str(low + width))
+    text = format(value, "f")
+    inside = low <= value <= low + width
+    assert slot.complete(text) == inside
+    if inside:  # every prefix of a value inside stays open
+        assert all(slot.accepts(text[:i]) for i in range(len(text) + 1))
+    # whatever is accepted can still be completed inside the bounds by appending one digit at a time
+    prefix = text[: len(text) // 2]
+    if slot.accepts(prefix):
+        for _ in range(40):
+            if slot.complete(prefix):
+                break
+            prefix += next(ch for ch in "-0123456789." if slot.accepts(prefix + ch))
+        assert slot.complete(prefix) and low <= Decimal(prefix) <= low + width
+
+
+def test_a_bounded_number_never_takes_an_exponent_or_leaves_its_integers():
+    slot = Value("number", minimum="0.05", maximum="0.65")
+    assert slot.accepts("0.0") and not slot.accepts("0.04") and not slot.accepts("0.7") and not slot.accepts("1")
+    assert not slot.complete("5e-2") and not slot.accepts("5e")
+    assert Value("integer", minimum="-3", maximum="12").accepts("1") and not Value("integer", maximum="12").accepts(
+        "13"
+    )
+    with pytest.raises(UnsupportedSchema):  # no integer between the bounds
+        compile_template({"type": "integer", "minimum": 0.5, "maximum": 0.7})
+    for schema in ({"type": "number", "exclusiveMinimum": 0}, {"type": "number", "minimum": 2, "maximum": 1}):
+        with pytest.raises(UnsupportedSchema):
+            compile_template(schema)
+
+
+@pytest.mark.parametrize(
+    "wish",
+    [
+        '{"reward_ratio":0.9,"liquidity_ratio":1.5,"burn_rate":0.5}',  # each above its maximum
+        '{"reward_ratio":0.01,"liquidity_ratio":-1,"burn_rate":-0.1}',  # each below its minimum
+        '{"reward_ratio":6.5e-1,"liquidity_ratio":0.20,"burn_rate":2e-1}',  # exponents
+    ],
+)
+def test_a_model_that_wants_values_out_of_range_still_writes_values_inside(wish):
+    reply, _ = _decode(wish, schema=AGENT_SCHEMA)
+    assert reply.finish_reason == "stop"
+    model = agent_action_model(ActionCodec.from_config(MarketConfig()))
+    action = model.model_validate_json(reply.text)  # validates the bounds
+    assert 0.05 <= action.reward_ratio <= 0.65 and 0.2 <= action.liquidity_ratio <= 0.95
+
+
+def test_a_wish_inside_the_bounds_is_written_as_it_is():
+    wish = '{"reward_ratio":0.25,"liquidity_ratio":0.7,"burn_rate":0.05}'
+    assert _decode(wish, schema=AGENT_SCHEMA)[0].text == wish

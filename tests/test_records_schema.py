@@ -26,6 +26,7 @@ from solarchain_eval.records_schema import (
     ALL_COLUMNS,
     DIAGNOSTIC_NAMES,
     EPISODE_KEYS,
+    LLM_AGENT_METRIC_NAMES,
     METRIC_NAMES,
     REMOVED_COLUMNS,
     RENAMED_COLUMNS,
@@ -58,7 +59,10 @@ COLUMN_LIKE = re.compile(
 
 
 def test_every_column_has_a_unit_and_a_meaning():
-    assert len(ALL_COLUMNS) == len(EPISODE_KEYS) + len(METRIC_NAMES) + len(AGENTIC_METRIC_NAMES)  # no duplicates
+    # no duplicates
+    assert len(ALL_COLUMNS) == len(EPISODE_KEYS) + len(METRIC_NAMES) + len(AGENTIC_METRIC_NAMES) + len(
+        LLM_AGENT_METRIC_NAMES
+    )
     for column in ALL_COLUMNS.values():
         assert column.unit and column.meaning, column.name
     assert not set(RENAMED_COLUMNS) & set(ALL_COLUMNS) and not set(REMOVED_COLUMNS) & set(ALL_COLUMNS)

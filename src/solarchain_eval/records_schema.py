@@ -88,6 +88,21 @@ AGENTIC_COLUMNS = (
     Column("auditor", "text", "auditor kind", numeric=False),
 )
 
+#: Columns added by the LLM agent (``llm-agent``, docs/llm.md#llm-as-the-agent): its model calls
+#: in the episode. A cache hit counts as a call with its recorded latency and tokens, so a replay
+#: writes the same values as the recording.
+LLM_AGENT_COLUMNS = (
+    Column("llm_agent_call_count", "count", "the LLM agent's model calls (one per step)"),
+    Column("llm_agent_input_tokens", "LLM tokens", "prompt tokens of those calls, rejected replies included"),
+    Column("llm_agent_output_tokens", "LLM tokens", "completion tokens of those calls, rejected replies included"),
+    Column("llm_agent_latency_s", "s", "summed latency of the calls, every attempt included"),
+    Column("llm_agent_max_latency_s", "s", "the slowest call's latency"),
+    Column(
+        "llm_agent_retry_count", "count", "failed attempts that a retry recovered (transport errors, rejected replies)"
+    ),
+    Column("llm_agent_invalid_reply_count", "count", "replies rejected by validation (out of range, malformed)"),
+)
+
 #: Columns renamed in a schema version: old name -> new name (readers map old files on load).
 RENAMED_COLUMNS = {"llm_failure_count": "llm_retry_count"}
 #: Columns removed in a schema version (readers drop them on load): name -> why.
@@ -102,10 +117,11 @@ def names(columns: tuple[Column, ...]) -> tuple[str, ...]:
 EPISODE_KEYS = names(EPISODE_KEY_COLUMNS)
 METRIC_NAMES = names(EPISODE_METRIC_COLUMNS)
 AGENTIC_METRIC_NAMES = names(AGENTIC_COLUMNS)
+LLM_AGENT_METRIC_NAMES = names(LLM_AGENT_COLUMNS)
 #: The numeric agentic columns (those a report averages).
 AGENTIC_NUMERIC_NAMES = tuple(c.name for c in AGENTIC_COLUMNS if c.numeric)
 #: Every column ``metrics.csv`` may hold, by name.
-ALL_COLUMNS = {c.name: c for c in (*EPISODE_KEY_COLUMNS, *EPISODE_METRIC_COLUMNS, *AGENTIC_COLUMNS)}
+ALL_COLUMNS = {c.name: c for c in (*EPISODE_KEY_COLUMNS, *EPISODE_METRIC_COLUMNS, *AGENTIC_COLUMNS, *LLM_AGENT_COLUMNS)}
 
 #: Columns a sweep's tidy ``results.csv`` (docs/stress.md) adds to the ``metrics.csv`` columns of
 #: each episode, besides one column per sweep axis.

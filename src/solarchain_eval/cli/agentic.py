@@ -20,7 +20,7 @@ import typer
 from rich.table import Table
 
 from ..common.errors import flag_of
-from ..governance import AgenticOptions
+from ..governance import AgenticOptions, LLMOptions
 from ..governance.request import AGENTIC_MODES, GovernanceRequest, GovernanceRequestError
 from ..llm import LLMError
 from ..llm.serving import local_server
@@ -29,7 +29,7 @@ from .common import CliError, register_user_error
 # An LLM failure fails the run with its one-line message (policy, episode, step).
 register_user_error(LLMError, GovernanceRequestError)
 
-__all__ = ["AGENTIC_MODES", "agentic_options", "governance_options", "serving", "agentic_table"]
+__all__ = ["AGENTIC_MODES", "agentic_options", "agentic_table", "governance_options", "llm_agent_options", "serving"]
 #: The help panel of the governance options (and of options that go with them, e.g. evaluate's --llm-concurrency).
 PANEL = "Planner/Auditor (agentic settings)"
 #: Default of a command's ``governance`` parameter, which :func:`governance_options` replaces.
@@ -98,6 +98,17 @@ def agentic_options(**values: Any) -> AgenticOptions | None:
     return resolve(GovernanceRequest(**values))
 
 
+def llm_agent_options(governance: GovernanceRequest) -> LLMOptions:
+    """The LLM agent's endpoint settings and cache (``--policies llm-agent``), from the same
+    ``--llm-*`` options as ``--planner llm`` (``--llm-backend``, ``--llm-api``, ``--llm-model``,
+    ``--llm-cache``, ...) but without ``--agentic``; option errors named by flag (a :class:`CliError`).
+    With ``--llm-backend local`` it names the port of the server :func:`serving` starts."""
+    try:
+        return governance.llm_options()
+    except GovernanceRequestError as error:
+        raise CliError(error.message_for(flag_of)) from None
+
+
 def local_server_spec(params: dict[str, Any], options: AgenticOptions | None) -> local_server.ServerSpec | None:
     """The server to start for option values by field name (see :meth:`GovernanceRequest.server_spec`);
     ``llm_concurrency`` (evaluate's, not a request field) sets the server's parallel requests."""
@@ -106,12 +117,14 @@ def local_server_spec(params: dict[str, Any], options: AgenticOptions | None) ->
     return request.server_spec(options, parallel=int(params.get("llm_concurrency") or 1))
 
 
-def serving(request: GovernanceRequest, options: AgenticOptions | None, *, parallel: int = 1):
+def serving(request: GovernanceRequest, options: AgenticOptions | None, *, parallel: int = 1, needs_llm: bool = False):
     """Context manager: the local model server the command needs, running (or nothing); it takes
-    ``parallel`` requests at once (``evaluate --llm-concurrency``) without interrupting one."""
+    ``parallel`` requests at once (``evaluate --llm-concurrency``) without interrupting one.
+    ``needs_llm``: a policy calls the model (the LLM agent), so ``--llm-backend local`` starts the
+    server even without an LLM planner or auditor (one server for all of them)."""
     import tempfile
 
-    spec = request.server_spec(options, parallel=parallel)
+    spec = request.server_spec(options, parallel=parallel, needs_llm=needs_llm)
     log = Path(tempfile.gettempdir()) / f"solarchain-llm-server-{spec.port}.log" if spec is not None else None
     return local_server.serving(spec, log_path=log)
 

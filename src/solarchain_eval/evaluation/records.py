@@ -141,7 +141,8 @@ def _finite_or_none(value: float) -> float | None:
 
 
 def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
-    """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric.
+    """Per (policy, setting): n, distinct episodes behind it, and mean/std/min/max of each metric
+    the policy has (a column only other policies of the run write, e.g. the LLM agent's, is left out).
 
     ``std`` is the sample standard deviation (ddof=1), as in the paper's tables. Of a single
     episode it is undefined: NaN, written as ``null`` (strict JSON), as the report's
@@ -172,6 +173,7 @@ def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
                     "max": float(group[name].max()),
                 }
                 for name in numeric
+                if group[name].notna().any()  # a column another policy adds (the LLM agent's) is absent here
             },
         }
         if setting in static_slippage and "mean_slippage" in group:

@@ -1,4 +1,4 @@
-"""Fixed prompt templates of the LLM Planner and Auditor.
+"""Fixed prompt templates of the LLM Planner and Auditor, and of the LLM agent.
 
 The templates never change between runs; only the context (a JSON object built from the
 episode or the step) is substituted. The context is serialised compactly and in a fixed key
@@ -88,4 +88,68 @@ def auditor_messages(context: dict[str, Any]) -> list[dict[str, str]]:
     return [
         {"role": "system", "content": AUDITOR_SYSTEM},
         {"role": "user", "content": _user_message(AUDITOR_INSTRUCTION, context)},
+    ]
+
+
+# --- the LLM agent ----------------------------------------------------------------------------
+#: The observation fields the agent's prompt shows, with their units (docs/environment.md); the
+#: context states ``hour_of_day`` instead of ``hour_sin``/``hour_cos``.
+AGENT_OBSERVATION_UNITS = {
+    "verified_supply_MWh": "MWh, verified reported energy of the hour, all cities",
+    "reported_supply_MWh": "MWh, all reported energy of the hour",
+    "pmax_MWh": "MWh, physical upper bound of the hour's generation",
+    "supply_gap": "dimensionless, (verified supply - demand) / demand; negative means shortfall",
+    "liquidity": "MWh, liquidity pool before this hour",
+    "token_price": "dimensionless, relative to 1 at the start",
+    "raw_physics_record_rate": "fraction of the hour's records that violate physics",
+    "static_slippage": "dimensionless, the hour's market slippage",
+    "prev_reward_ratio": "alpha of the previous hour's executed action",
+    "prev_liquidity_ratio": "l of the previous hour's executed action",
+}
+#: The previous hour's outcome the agent's prompt shows (``info`` keys), with their units.
+AGENT_OUTCOME_UNITS = {
+    "reward": "the hour's reward",
+    "matched_energy_MWh": "MWh of demand matched",
+    "unmet_demand_MWh": "MWh of demand not matched",
+    "liquidity": "MWh, liquidity pool after the hour",
+    "token_price": "dimensionless, token price after the hour",
+    "slippage": "dimensionless, execution slippage",
+    "physics_violation_rate": "fraction of backed supply that violates physics",
+    "artificial_liquidity_MWh": "MWh of liquidity backed by invalid supply",
+    "reward_ratio": "executed alpha",
+    "liquidity_ratio": "executed l",
+    "burn_rate": "executed b",
+}
+
+
+def _units(fields: dict[str, str]) -> str:
+    return "\n".join(f"- {name}: {unit}" for name, unit in fields.items())
+
+
+AGENT_SYSTEM = f"""SolarChain-Eval is a benchmark in which an agent governs a decentralised solar-energy \
+market hour by hour over a 24-hour episode. You are that agent. Each hour you choose an action of three numbers:
+- reward_ratio (alpha): share of backed supply paid out as reward tokens;
+- liquidity_ratio (l): share of backed supply added to the liquidity pool;
+- burn_rate (b): fraction of demand burned (reduces clearing demand).
+Each number must lie inside its range in action_ranges; if alpha + l exceeds max_total_allocation both \
+are scaled down to it. Supply that violates physics (reported above the physical maximum, or flagged as \
+false data) is backed in proportion to alpha + l and creates artificial liquidity, which is unsafe.
+The reward of an hour is the matched energy minus penalties for liquidity drawdown, for the change from \
+the previous action, for unmet demand, for unequal rewards across cities and (in the main setting) for backing invalid supply.
+The context gives the hour of day, this hour's observation and the previous hour's outcome (null at the \
+first hour).
+Observation fields:
+{_units(AGENT_OBSERVATION_UNITS)}
+Previous hour's outcome fields:
+{_units(AGENT_OUTCOME_UNITS)}
+Answer only with the structured output required by the response schema."""
+
+AGENT_INSTRUCTION = "You are the agent. Choose this hour's action."
+
+
+def agent_messages(context: dict[str, Any]) -> list[dict[str, str]]:
+    """System and user messages for the LLM agent, with the step context substituted."""
+    return [
+        {"role": "system", "content": AGENT_SYSTEM},
+        {"role": "user", "content": _user_message(AGENT_INSTRUCTION, context)},
     ]

@@ -9,6 +9,7 @@ Errors name the fields (``llm_cache_mode``); the command line shows them as flag
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
@@ -145,6 +146,32 @@ class GovernanceRequest:
                     got=kind,
                     kinds=", ".join(kinds),
                 )
+        self._check_llm_fields()
+        llm = self.llm_options() if "llm" in (planner, auditor) else None
+        return AgenticOptions(planner=planner, auditor=auditor, llm=llm, diagnostics=self.diagnostics is not False)
+
+    def llm_options(self) -> LLMOptions:
+        """The endpoint settings and cache of the ``--llm-*`` options, whatever ``agentic`` says:
+        those of an LLM planner or auditor, and of the LLM agent (``--policies llm-agent``).
+
+        With ``llm_backend="local"`` every call on one request names the same port, so the
+        Planner/Auditor and the agent share the one server :meth:`server_spec` starts.
+
+        Raises
+        ------
+        GovernanceRequestError
+            Inconsistent options (e.g. ``--llm-threads`` with the remote backend).
+        LLMError
+            LLM settings that cannot be resolved (no model, no API, ...).
+        """
+        self._check_llm_fields()
+        mode = self.cache_mode
+        settings = self._local_settings() if self.llm_backend == "local" else self._remote_settings()
+        if mode != "off" and self.llm_cache is None:
+            raise GovernanceRequestError.about("{opt_llm_cache_mode} {mode} needs {opt_llm_cache} DIR", mode=mode)
+        return LLMOptions(settings=settings, cache_dir=self.llm_cache, cache_mode=mode)
+
+    def _check_llm_fields(self) -> None:
         mode = self.cache_mode
         if mode not in CACHE_MODES:
             raise GovernanceRequestError.about(
@@ -174,13 +201,11 @@ class GovernanceRequest:
                 )
             if self.llm_backend != "local":
                 raise GovernanceRequestError.about("{opt_llm_decoding} is for {opt_llm_backend} local")
-        llm = None
-        if "llm" in (planner, auditor):
-            settings = self._local_settings() if self.llm_backend == "local" else self._remote_settings()
-            if mode != "off" and self.llm_cache is None:
-                raise GovernanceRequestError.about("{opt_llm_cache_mode} {mode} needs {opt_llm_cache} DIR", mode=mode)
-            llm = LLMOptions(settings=settings, cache_dir=self.llm_cache, cache_mode=mode)
-        return AgenticOptions(planner=planner, auditor=auditor, llm=llm, diagnostics=self.diagnostics is not False)
+
+    @functools.cached_property
+    def _local_port(self) -> int:
+        """The local server's port, chosen once per request (every settings object names it)."""
+        return local_server.free_port()
 
     @property
     def cache_mode(self) -> str:
@@ -211,7 +236,7 @@ class GovernanceRequest:
                 api=local_server.LOCAL_API,
             )
         name, _ = local_server.resolve_model(self.llm_model)
-        port = local_server.free_port()
+        port = self._local_port
         tokens = self.llm_max_output_tokens
         settings = resolve_llm_settings(
             api=api,
@@ -226,13 +251,19 @@ class GovernanceRequest:
         )
         return replace(settings, decoding=self.llm_decoding or local_server.DEFAULT_DECODING)
 
-    def server_spec(self, options: AgenticOptions | None, *, parallel: int = 1) -> local_server.ServerSpec | None:
+    def server_spec(
+        self, options: AgenticOptions | None, *, parallel: int = 1, needs_llm: bool = False
+    ) -> local_server.ServerSpec | None:
         """The local model server this request needs (None: remote backend, no LLM component, or a
         pure replay, which needs no server), taking ``parallel`` requests at once (one per episode
-        in flight) so that concurrent requests never interrupt each other."""
-        if self.llm_backend != "local" or options is None or options.llm is None or options.llm.cache_mode == "replay":
+        in flight) so that concurrent requests never interrupt each other. ``needs_llm``: a policy
+        (the LLM agent) calls the model even without an LLM planner or auditor."""
+        llm = options.llm if options is not None and options.llm is not None else None
+        if llm is None and needs_llm:
+            llm = self.llm_options()
+        if self.llm_backend != "local" or llm is None or llm.cache_mode == "replay":
             return None
-        settings = options.llm.settings
+        settings = llm.settings
         _, path = local_server.resolve_model(self.llm_model)
         if path is None:
             local_server.default_model_path()  # raises with the install hint

@@ -1,4 +1,4 @@
-"""Structured outputs of the Planner and the Auditor, and their validation (docs/planner_auditor.md#schemas).
+"""Structured outputs of the Planner, the Auditor and the LLM agent, and their validation (docs/planner_auditor.md#schemas).
 
 The pydantic models below are what a model must return; the JSON schema sent to it is the
 one the OpenAI SDK derives from them in strict mode (see :func:`~solarchain_eval.llm.response_format.response_format`). Parsing is
@@ -11,11 +11,12 @@ sanitised with the environment's :class:`~solarchain_eval.market.actions.ActionC
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
 import numpy as np
-from pydantic import BaseModel, ConfigDict, Field
+from pydantic import BaseModel, ConfigDict, Field, create_model
 
 from ..market.actions import ActionCodec
 
@@ -105,6 +106,40 @@ class AuditorOutput(_StrictOutput):
     final_action: ActionValues = Field(description="The action to execute when revising (market units).")
     risk_assessment: RiskAssessment
     reason: str = Field(description="Why (logged, never executed).")
+
+
+class AgentAction(_StrictOutput):
+    """This hour's action, in market units, each value inside its range."""
+
+    # The docstring is the schema's description, which a hosted model reads. Build the class with
+    # agent_action_model(): its fields carry the market's ranges as minimum and maximum, so the
+    # schema bounds each number and a reply outside them fails validation.
+
+    reward_ratio: float
+    liquidity_ratio: float
+    burn_rate: float
+
+
+#: The field descriptions of :class:`AgentAction` (part of the schema a hosted model sees).
+AGENT_FIELD_DESCRIPTIONS = {
+    "reward_ratio": "Reward ratio alpha: share of backed supply paid out as reward tokens.",
+    "liquidity_ratio": "Liquidity ratio l: share of backed supply added to the liquidity pool.",
+    "burn_rate": "Burn rate b: fraction of demand burned.",
+}
+
+
+def agent_action_model(codec: ActionCodec) -> type[AgentAction]:
+    """:class:`AgentAction` with each field bounded to ``codec``'s range (``ge``/``le``)."""
+    return _bounded_agent_action(tuple(codec.lo), tuple(codec.hi))
+
+
+@functools.cache  # one class per range: the same schema (and cache keys) for every agent
+def _bounded_agent_action(lo: tuple[float, ...], hi: tuple[float, ...]) -> type[AgentAction]:
+    fields: dict[str, Any] = {
+        name: (float, Field(ge=low, le=high, description=AGENT_FIELD_DESCRIPTIONS[name]))
+        for name, low, high in zip(ACTION_FIELDS, lo, hi, strict=True)
+    }
+    return create_model("AgentAction", __base__=AgentAction, __doc__=AgentAction.__doc__, **fields)
 
 
 # --- validated forms -------------------------------------------------------------------------

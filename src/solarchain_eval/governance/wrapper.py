@@ -230,6 +230,9 @@ class GovernedPolicy:
         hook = self._base_hooks["end_episode"]
         if hook is not None:
             extras.update(hook() or {})
+        # The base policy's own metrics columns (the LLM agent's calls) follow the layer's.
+        base_metrics = extras.get(EXTRA_METRICS_KEY, {})
+        metrics = {**metrics, **{k: v for k, v in base_metrics.items() if k not in metrics}}
         extras.update({EXTRA_METRICS_KEY: metrics, EXTRA_LOG_KEY: self._rows})
         if self.diagnostics:
             extras[EXTRA_DIAGNOSTICS_KEY] = self._diagnostics_rows

@@ -16,7 +16,10 @@ Modes (``--llm-cache-mode``):
   recording replays without credentials or network.
 - ``replay``: never builds a client; a miss is a hard error.
 
-Only accepted responses (valid structured output) are recorded. Entries are strict JSON
+Only accepted responses (valid structured output) are recorded: an entry exists only for an
+exchange that ended in one. When the caller lets the model answer again after an invalid reply
+(:mod:`~solarchain_eval.llm.retry`), the entry also keeps the rejected replies before it
+(``rejected``), so a replay reports the same retries and tokens. Entries are strict JSON
 (``NaN``/``Infinity`` are refused on write and on read) and never hold the API key: the client
 removes it from response bodies before they reach the cache.
 """

@@ -32,6 +32,7 @@ from .cache import CACHE_MODES, ResponseCache, request_key
 from .envelopes import READERS
 from .errors import CallSite, LLMCacheMissError, LLMConfigError, LLMError, LLMSchemaError, LLMTransportError, redact
 from .response_format import response_format
+from .retry import exchange, total_tokens
 
 T = TypeVar("T", bound=BaseModel)
 
@@ -212,10 +213,19 @@ class StructuredLLM:
             self._client = self._build_client()  # fail fast on missing credentials
 
     # --- public ---------------------------------------------------------------------------
-    def request(self, messages: list[dict[str, str]], output_type: type[T], site: CallSite) -> LLMReply:
-        """One structured call (or cache hit) for ``site``; raises a located LLMError."""
+    def request(
+        self, messages: list[dict[str, str]], output_type: type[T], site: CallSite, *, invalid_retries: int = 0
+    ) -> LLMReply:
+        """One structured call (or cache hit) for ``site``; raises a located LLMError.
+
+        ``invalid_retries`` > 0 asks again, up to that many times, when a reply does not validate
+        (:class:`LLMSchemaError`, e.g. a number out of its range): each new attempt is the request
+        followed by the rejected reply and a message naming the problem. The cache entry keeps
+        the rejected replies with the accepted one, under the request's key, so a replay gives
+        the same output, retries and tokens; ``meta["invalid_replies"]`` counts them.
+        """
         try:
-            return self._request(messages, output_type, site)
+            return self._request(messages, output_type, site, invalid_retries)
         except LLMError as error:
             raise error.at(site) from None
 
@@ -240,29 +250,32 @@ class StructuredLLM:
         }
 
     # --- internals --------------------------------------------------------------------------
-    def _request(self, messages: list[dict[str, str]], output_type: type[T], site: CallSite) -> LLMReply:
+    def _request(
+        self, messages: list[dict[str, str]], output_type: type[T], site: CallSite, invalid_retries: int = 0
+    ) -> LLMReply:
         request = self.canonical_request(messages, output_type)
         key = request_key(request)
         entry = self.cache.get(key, request) if self.cache is not None else None
         if entry is None:
             if self.cache_mode == "replay":
                 raise LLMCacheMissError(f"key {key} is not in {self.cache.root if self.cache else '?'}")
-            entry = self._call(request)
-            _, usage = READERS[self.settings.api](entry["response"], output_type)  # record accepted outputs only
-            entry["usage"] = {"input_tokens": usage.input_tokens, "output_tokens": usage.output_tokens}
+            entry = exchange(self._call, request, self.settings.api, output_type, invalid_retries)  # accepted only
             if self.cache is not None:
                 entry = self.cache.put(key, entry)
         output, usage = READERS[self.settings.api](entry["response"], output_type)
+        rejected = entry.get("rejected", [])
         meta = {
             "kind": site.kind,
             "cache_key": key,
             "latency_s": entry["latency_s"],
-            "input_tokens": usage.input_tokens,
-            "output_tokens": usage.output_tokens,
+            "input_tokens": total_tokens(usage.input_tokens, [r["usage"]["input_tokens"] for r in rejected]),
+            "output_tokens": total_tokens(usage.output_tokens, [r["usage"]["output_tokens"] for r in rejected]),
             "request_id": entry.get("request_id"),
             "model": entry.get("model"),
             "retries": int(entry["retries"]),
         }
+        if invalid_retries > 0:  # only for callers that retry, so other logs keep their fields
+            meta["invalid_replies"] = len(rejected)
         return LLMReply(output, meta)
 
     def _secret(self) -> str | None:

@@ -100,3 +100,34 @@ def read_responses(body: Any, output_type: type[T]) -> tuple[T, Usage]:
 
 #: ``chat-json-object`` answers in the Chat Completions envelope.
 READERS = {"chat": read_chat, "responses": read_responses, "chat-json-object": read_chat}
+
+
+def reply_usage(api: str, body: Any) -> Usage:
+    """The token usage a body reports (also of a reply that was rejected)."""
+    usage = body.get("usage") if isinstance(body, dict) else None
+    if api == "responses":
+        return Usage(_tokens(usage, "input_tokens"), _tokens(usage, "output_tokens"))
+    return Usage(_tokens(usage, "prompt_tokens"), _tokens(usage, "completion_tokens"))
+
+
+def reply_text(api: str, body: Any) -> str | None:
+    """The answer text of a body, or None when it has none (to show a model its rejected reply)."""
+    if not isinstance(body, dict):
+        return None
+    if api != "responses":
+        choices = body.get("choices")
+        message = (
+            choices[0].get("message")
+            if isinstance(choices, list) and choices and isinstance(choices[0], dict)
+            else None
+        )
+        content = message.get("content") if isinstance(message, dict) else None
+        return content if isinstance(content, str) else None
+    texts = [
+        part["text"]
+        for item in body.get("output") or []
+        if isinstance(item, dict) and item.get("type") == "message"
+        for part in item.get("content") or []
+        if isinstance(part, dict) and part.get("type") == "output_text" and isinstance(part.get("text"), str)
+    ]
+    return "".join(texts) if texts else None

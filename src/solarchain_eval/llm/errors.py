@@ -1,6 +1,6 @@
 """Typed LLM errors. Each one fails the run; nothing is ever substituted for a failed call.
 
-Messages name the call site (planner or auditor, policy, run seed, episode, step) and never
+Messages name the call site (planner, auditor or agent, policy, run seed, episode, step) and never
 contain the API key: :func:`redact` removes it from any text that came from the server.
 """
 
@@ -16,7 +16,7 @@ from ..common.errors import NamesOptions, flag_of, render
 class CallSite:
     """Where an LLM call was made: ``step`` is None for the planner (called before step 0)."""
 
-    kind: str  # "planner" | "auditor"
+    kind: str  # "planner" | "auditor" | "agent" (the LLM agent)
     policy: str
     run_seed: int
     episode: int

@@ -8,9 +8,11 @@ and lets the model choose only the values, one token at a time, each checked by 
 :meth:`Value.accepts`. The replies are compact JSON ("," and ":" separators, no spaces).
 
 Supported: objects (nested or by ``$ref`` into ``$defs``), strings (with ``enum``, ``maxLength``
-and a ``pattern`` of the form ``^[class]{0,N}$``), numbers, integers, booleans and ``enum``/``const``
-of those. Anything else raises :class:`UnsupportedSchema`, and the server answers that request
-with llama-cpp-python's grammar-constrained sampling instead.
+and a ``pattern`` of the form ``^[class]{0,N}$``), numbers and integers (with ``minimum`` and
+``maximum``: a bounded value is written without an exponent, and every prefix the model writes can
+still end inside the bounds), booleans and ``enum``/``const`` of those. Anything else raises
+:class:`UnsupportedSchema`, and the server answers that request with llama-cpp-python's
+grammar-constrained sampling instead (whose grammar does not enforce numeric bounds).
 """
 
 from __future__ import annotations
@@ -19,6 +21,7 @@ import functools
 import json
 import re
 from dataclasses import dataclass
+from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 from typing import Any
 
 #: Digits allowed in a number's integer part, fraction and exponent: those of llama.cpp's JSON
@@ -49,6 +52,8 @@ _NUMERIC = {
 }
 #: The one ``pattern`` form understood: a character class repeated 0..N times.
 _CLASS_PATTERN = re.compile(r"\^(\[[^\]\\]*(?:\\.[^\]\\]*)*\])\{0,(\d+)\}\$\Z")
+#: Keywords of a number the template cannot enforce (the grammar path answers such schemas).
+_UNSUPPORTED_NUMERIC = ("exclusiveMinimum", "exclusiveMaximum", "multipleOf")
 
 
 @functools.cache
@@ -83,17 +88,28 @@ class Value:
         character but ``"``, ``\\`` and control characters (so no escapes are ever written).
     options : tuple of str
         The texts a ``choice`` may take.
+    minimum, maximum : str or None
+        A number's inclusive bounds, as decimal text (exact, unlike a float); a bounded number
+        is written without an exponent.
     """
 
     kind: str
     max_chars: int | None = None
     char_class: str | None = None
     options: tuple[str, ...] = ()
+    minimum: str | None = None
+    maximum: str | None = None
+
+    @property
+    def bounded(self) -> bool:
+        return self.minimum is not None or self.maximum is not None
 
     def accepts(self, text: str) -> bool:
         """Whether ``text`` can begin (or be) a value of this slot."""
         if self.kind in _NUMERIC:
-            return _NUMERIC[self.kind][0].match(text) is not None
+            if _NUMERIC[self.kind][0].match(text) is None:
+                return False
+            return not self.bounded or self._reaches_bounds(text)
         if self.kind == "choice":
             return any(option.startswith(text) for option in self.options)
         if self.max_chars is not None and len(text) > self.max_chars:
@@ -105,10 +121,30 @@ class Value:
     def complete(self, text: str) -> bool:
         """Whether ``text`` is a whole value of this slot."""
         if self.kind in _NUMERIC:
-            return _NUMERIC[self.kind][1].match(text) is not None
+            if _NUMERIC[self.kind][1].match(text) is None:
+                return False
+            return not self.bounded or (self._reaches_bounds(text) and self._inside(Decimal(text)))
         if self.kind == "choice":
             return text in self.options
         return self.accepts(text)
+
+    def _inside(self, value: Decimal) -> bool:
+        return (self.minimum is None or value >= Decimal(self.minimum)) and (
+            self.maximum is None or value <= Decimal(self.maximum)
+        )
+
+    def _reaches_bounds(self, text: str) -> bool:
+        """Whether the number prefix ``text`` can still become a value inside the bounds."""
+        if "e" in text or "E" in text:
+            return False  # bounded values are written without an exponent
+        low = Decimal("-Infinity") if self.minimum is None else Decimal(self.minimum)
+        high = Decimal("Infinity") if self.maximum is None else Decimal(self.maximum)
+        if self.kind == "integer":  # the integers inside the bounds
+            low = low if low.is_infinite() else low.to_integral_value(ROUND_CEILING)
+            high = high if high.is_infinite() else high.to_integral_value(ROUND_FLOOR)
+        if low > high:
+            return False
+        return any(a <= high and b >= low for a, b in reachable_values(text, integer=self.kind == "integer"))
 
     def forced_rest(self, text: str) -> str | None:
         """The rest of the value when ``text`` leaves no choice (a unique choice, a full string),
@@ -120,6 +156,32 @@ class Value:
         if self.kind == "string" and self.max_chars is not None and len(text) == self.max_chars:
             return ""
         return None
+
+
+def reachable_values(text: str, *, integer: bool) -> list[tuple[Decimal, Decimal]]:
+    """Closed intervals holding every value a number written as ``text`` so far (a valid prefix
+    without an exponent) can still become, within the digit limits of this module."""
+    negative = text.startswith("-")
+    body = text[1:] if negative else text
+    step = Decimal(1) if integer else Decimal(10) ** -MAX_FRACTION_DIGITS  # the finest last digit
+    largest = Decimal(10) ** MAX_INTEGER_DIGITS - step
+    if not text:  # a sign may still come
+        return [(-largest, largest)]
+    if not body:
+        spans = [(Decimal(0), largest)]
+    elif "." in body:
+        whole, fraction = body.split(".")
+        value = Decimal(f"{whole}.{fraction}" if fraction else whole)
+        room = Decimal(10) ** -len(fraction) - step if len(fraction) < MAX_FRACTION_DIGITS else Decimal(0)
+        spans = [(value, value + room)]
+    elif body == "0":  # no digit may follow a leading zero
+        spans = [(Decimal(0), Decimal(0) if integer else Decimal(1) - step)]
+    else:  # more integer digits (each one ten times the value), then a fraction
+        start = Decimal(body)
+        spans = [
+            (start * 10**extra, (start + 1) * 10**extra - step) for extra in range(MAX_INTEGER_DIGITS - len(body) + 1)
+        ]
+    return [(-b, -a) for a, b in spans] if negative else spans
 
 
 Segment = Literal | Value
@@ -166,7 +228,7 @@ def _emit(schema: Any, defs: dict[str, Any], out: list[Segment]) -> None:
     elif kind == "string":
         out.extend([Literal('"'), _string_value(schema), Literal('"')])
     elif kind in ("number", "integer"):
-        out.append(Value(kind))
+        out.append(_number_value(kind, schema))
     elif kind == "boolean":
         out.append(Value("choice", options=("true", "false")))
     else:
@@ -196,6 +258,29 @@ def _emit_choice(options: list[Any], out: list[Segment]) -> None:
         out.append(Value("choice", options=tuple(json.dumps(option) for option in options)))
     else:
         raise UnsupportedSchema("an enum must hold only strings or only numbers, booleans and null")
+
+
+def _bound_text(schema: dict[str, Any], keyword: str) -> str | None:
+    bound = schema.get(keyword)
+    if bound is None:
+        return None
+    if isinstance(bound, bool) or not isinstance(bound, int | float) or bound != bound or abs(bound) == float("inf"):
+        raise UnsupportedSchema(f"{keyword} {bound!r} is not a finite number")
+    # repr is the shortest text that reads back as the same float: the value a JSON parser sees.
+    return str(bound) if isinstance(bound, int) else repr(float(bound))
+
+
+def _number_value(kind: str, schema: dict[str, Any]) -> Value:
+    unsupported = [keyword for keyword in _UNSUPPORTED_NUMERIC if keyword in schema]
+    if unsupported:
+        raise UnsupportedSchema(f"{', '.join(unsupported)} on a number is not supported")
+    minimum, maximum = _bound_text(schema, "minimum"), _bound_text(schema, "maximum")
+    if minimum is not None and maximum is not None and Decimal(minimum) > Decimal(maximum):
+        raise UnsupportedSchema(f"minimum {minimum} is above maximum {maximum}")
+    value = Value(kind, minimum=minimum, maximum=maximum)
+    if value.bounded and not value.accepts(""):
+        raise UnsupportedSchema(f"no {kind} of at most {MAX_INTEGER_DIGITS} digits lies inside the bounds")
+    return value
 
 
 def _string_value(schema: dict[str, Any]) -> Value:

@@ -1,8 +1,11 @@
 """``python -m solarchain_eval.llm.serving.model_server [--requantize TYPE] [llama-cpp-python server options]``.
 
 llama-cpp-python's OpenAI-compatible server with one more chat format,
-:data:`~.jump_forward.CHAT_FORMAT` (jump-forward decoding of schema-constrained replies). Its
-options are those of ``python -m llama_cpp.server``; :class:`~.local_server.LocalServer` starts it.
+:data:`~.jump_forward.CHAT_FORMAT` (jump-forward decoding of schema-constrained replies), behind
+:class:`~.openai_compat.OpenAICompat` (``json_schema`` response formats as the OpenAI SDK's
+``.parse()`` sends them, and HTTP 400 with OpenAI's error body for a malformed request). Its
+options are those of ``python -m llama_cpp.server`` (command-line options only: no config file);
+:class:`~.local_server.LocalServer` starts it.
 
 ``--requantize Q4_0 [--requantize_dir DIR]`` first converts the ``--model`` file to that llama.cpp
 type in DIR (which the caller deletes: :class:`~.local_server.LocalServer` does when it stops the
@@ -14,6 +17,7 @@ and llama.cpp's CPU kernels for Q4_0 (repacked for AVX2/AVX-512) read a prompt a
 
 from __future__ import annotations
 
+import argparse
 import contextlib
 import ctypes
 import logging
@@ -23,6 +27,7 @@ from collections.abc import Iterator
 from pathlib import Path
 
 from .jump_forward import register
+from .openai_compat import OpenAICompat, llama_cpp_checks
 
 #: llama.cpp file types (``enum llama_ftype``) ``--requantize`` converts to.
 FILE_TYPES = {"Q4_0": 2, "Q8_0": 7}
@@ -76,13 +81,31 @@ def served_arguments(args: list[str]) -> Iterator[list[str]]:
         yield rest
 
 
+def serve(args: list[str]) -> None:
+    """Run llama-cpp-python's server app for the options ``args``, behind :class:`OpenAICompat`."""
+    import uvicorn
+    from llama_cpp.server.app import create_app
+    from llama_cpp.server.cli import add_args_from_model, parse_model_from_args
+    from llama_cpp.server.settings import ModelSettings, ServerSettings, Settings
+
+    parser = argparse.ArgumentParser(prog="python -m solarchain_eval.llm.serving.model_server")
+    add_args_from_model(parser, Settings)
+    options = parser.parse_args(args)
+    server_settings = parse_model_from_args(ServerSettings, options)
+    app = create_app(server_settings=server_settings, model_settings=[parse_model_from_args(ModelSettings, options)])
+    uvicorn.run(
+        OpenAICompat(app, **llama_cpp_checks()),
+        host=server_settings.host,
+        port=server_settings.port,
+        ssl_keyfile=server_settings.ssl_keyfile,
+        ssl_certfile=server_settings.ssl_certfile,
+    )
+
+
 def main() -> None:
     register()
-    from llama_cpp.server.__main__ import main as serve
-
     with served_arguments(sys.argv[1:]) as args:
-        sys.argv = [sys.argv[0], *args]
-        serve()
+        serve(args)
 
 
 if __name__ == "__main__":
