@@ -298,3 +298,31 @@ def test_a_run_with_the_agent_and_a_baseline_writes_each_policys_columns(tiny_da
     assert (
         "llm_agent_call_count" not in summary["static"] and summary["llm-agent"]["llm_agent_call_count"]["mean"] == 24
     )
+
+
+def test_evaluate_runs_the_llm_agent_beside_a_baseline_and_replays_it_byte_for_byte(
+    tiny_dataset, tmp_path, monkeypatch
+):
+    from typer.testing import CliRunner
+
+    from solarchain_eval.cli import app
+
+    def evaluate(out, mode, base_url):
+        args = ["evaluate", "--data", str(tiny_dataset), "--seeds", "3", "--episodes", "1", "--out", str(out)]
+        llm = ["--llm-api", "chat", "--llm-model", "fake-model", "--llm-base-url", base_url]
+        cache = ["--llm-cache", str(tmp_path / "cache"), "--llm-cache-mode", mode]
+        return CliRunner().invoke(app, [*args, "--policies", "static,llm-agent", *llm, *cache])
+
+    monkeypatch.setenv("SOLARCHAIN_LLM_API_KEY", "none")
+    with FakeOpenAI(responder=responder) as server:
+        recorded = evaluate(tmp_path / "a", "record", server.base_url)
+    assert recorded.exit_code == 0, recorded.output
+    monkeypatch.delenv("SOLARCHAIN_LLM_API_KEY")
+    replayed = evaluate(tmp_path / "b", "replay", "http://127.0.0.1:9")  # nothing listens there
+    assert replayed.exit_code == 0, replayed.output
+    for name in ("metrics.csv", "actions.csv", "city_hour_policy.csv", "summary.json"):
+        assert (tmp_path / "a" / name).read_bytes() == (tmp_path / "b" / name).read_bytes(), name
+    metrics = pd.read_csv(tmp_path / "a" / "metrics.csv").set_index("policy")
+    assert metrics.loc["llm-agent", "llm_agent_call_count"] == 24
+    meta = json.loads((tmp_path / "a" / "run_metadata.json").read_text())
+    assert meta["llm_agent"]["model"] == "fake-model" and meta["policy_access"]["llm-agent"] == "public"

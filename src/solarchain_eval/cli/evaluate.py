@@ -151,8 +151,9 @@ def evaluate(
     except ValueError as error:
         raise cli_error(error) from None
     options = agentic_cli.resolve(governance)
-    if llm_concurrency > 1 and options is None:
-        raise CliError("--llm-concurrency needs --agentic planner_auditor")
+    llm_agent = any(s.kind == "llm" for s in specs)
+    if llm_concurrency > 1 and options is None and not llm_agent:
+        raise CliError("--llm-concurrency needs --agentic planner_auditor or the llm-agent")
     spec = EvaluationSpec(
         policies=[s.text for s in specs],
         run_seeds=parse_seeds(seeds),
@@ -165,6 +166,8 @@ def evaluate(
         concurrency=llm_concurrency,
         agent_args=agent_args,
         vecnormalize=parse_vecnormalize(vecnormalize or [], named),
+        # llm-agent: the model endpoint of the same --llm-* options as an LLM planner's
+        llm=agentic_cli.llm_agent_options(governance) if llm_agent else None,
     )
     try:
         check_agents(spec)  # unknown names, imports, models, names used twice, action shapes: before any work
@@ -172,7 +175,7 @@ def evaluate(
         raise cli_error(error) from None
     label = "evaluate" if options is None else f"evaluate-{spec.setting}"
     # --llm-backend local: started here, always stopped; one server slot per episode in flight
-    with agentic_cli.serving(governance, options, parallel=llm_concurrency):
+    with agentic_cli.serving(governance, options, parallel=llm_concurrency, needs_llm=llm_agent):
         _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite)
 
 

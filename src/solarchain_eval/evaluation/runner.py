@@ -338,6 +338,8 @@ def _metadata(
         "protocol": protocol,
         "protocol_id": protocol_id(protocol),
         "agentic": spec.agentic.describe() if spec.agentic is not None else None,
+        # the llm-agent's endpoint and cache (what replays it), when it is among the policies
+        "llm_agent": spec.llm.describe() if spec.llm is not None else None,
         "concurrency": int(spec.concurrency),
         "run_seeds": [int(s) for s in spec.run_seeds],
         "episodes": int(spec.episodes),
