@@ -37,6 +37,7 @@ from solarchain_eval.report.leaderboard_html import render_html, render_markdown
 from solarchain_eval.report.leaderboard_inputs import LeaderboardError, open_inputs
 from solarchain_eval.report.naming import policy_label
 from solarchain_eval.report.options import DEFAULT_SEED, LeaderboardOptions
+from solarchain_eval.report.paper_reference import paper_value
 from solarchain_eval.report.statistics import bootstrap_mean
 
 SEED, EPISODES = 20260511, 3
@@ -217,7 +218,15 @@ def test_a_tarball_is_read_as_its_run(runs, tmp_path):
 
 
 def test_paper_protocol_and_reference_rows(runs):
-    assert reference_rows("main") is None  # nothing connected yet
+    main = reference_rows("main").set_index("policy")
+    stored = paper_value("main-performance:static:cumulative_reward:mean")["value"]
+    assert list(main.index) == ["static", "random", "myopic", "ppo", "sac", "dqn"]  # the paper's rows, no pooled row
+    assert main.loc["static", "cumulative_reward_mean"] == stored == -23.38
+    assert (
+        main.loc["sac", "physics_violation_rate_mean"]
+        == paper_value("main-performance:sac:physics_violation_rate:mean")["value"]
+    )
+    assert set(reference_rows("no_physics")["policy"]) == {"ppo", "sac", "dqn"}  # not the ablation's differences
     assert is_paper_protocol(paper_protocol("no_physics"))
     for field, value in (("episodes", 3), ("run_seeds", [SEED]), ("episode_seed_rule", "independent")):
         assert not is_paper_protocol({**paper_protocol("main"), field: value})

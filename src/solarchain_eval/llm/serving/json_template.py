@@ -135,16 +135,7 @@ class Value:
 
     def _reaches_bounds(self, text: str) -> bool:
         """Whether the number prefix ``text`` can still become a value inside the bounds."""
-        if "e" in text or "E" in text:
-            return False  # bounded values are written without an exponent
-        low = Decimal("-Infinity") if self.minimum is None else Decimal(self.minimum)
-        high = Decimal("Infinity") if self.maximum is None else Decimal(self.maximum)
-        if self.kind == "integer":  # the integers inside the bounds
-            low = low if low.is_infinite() else low.to_integral_value(ROUND_CEILING)
-            high = high if high.is_infinite() else high.to_integral_value(ROUND_FLOOR)
-        if low > high:
-            return False
-        return any(a <= high and b >= low for a, b in reachable_values(text, integer=self.kind == "integer"))
+        return _reaches_bounds(self.kind, self.minimum, self.maximum, text)
 
     def forced_rest(self, text: str) -> str | None:
         """The rest of the value when ``text`` leaves no choice (a unique choice, a full string),
@@ -156,6 +147,22 @@ class Value:
         if self.kind == "string" and self.max_chars is not None and len(text) == self.max_chars:
             return ""
         return None
+
+
+@functools.lru_cache(maxsize=1 << 16)
+def _reaches_bounds(kind: str, minimum: str | None, maximum: str | None, text: str) -> bool:
+    # Cached: decoding asks this of every candidate token at every position, and the same
+    # prefixes recur across the values and requests of a run.
+    if "e" in text or "E" in text:
+        return False  # bounded values are written without an exponent
+    low = Decimal("-Infinity") if minimum is None else Decimal(minimum)
+    high = Decimal("Infinity") if maximum is None else Decimal(maximum)
+    if kind == "integer":  # the integers inside the bounds
+        low = low if low.is_infinite() else low.to_integral_value(ROUND_CEILING)
+        high = high if high.is_infinite() else high.to_integral_value(ROUND_FLOOR)
+    if low > high:
+        return False
+    return any(a <= high and b >= low for a, b in reachable_values(text, integer=kind == "integer"))
 
 
 def reachable_values(text: str, *, integer: bool) -> list[tuple[Decimal, Decimal]]:
