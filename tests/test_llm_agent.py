@@ -326,3 +326,14 @@ def test_evaluate_runs_the_llm_agent_beside_a_baseline_and_replays_it_byte_for_b
     assert metrics.loc["llm-agent", "llm_agent_call_count"] == 24
     meta = json.loads((tmp_path / "a" / "run_metadata.json").read_text())
     assert meta["llm_agent"]["model"] == "fake-model" and meta["policy_access"]["llm-agent"] == "public"
+    # verify re-runs the agent from the recorded settings and the cache (replay: no server, no key),
+    # and Static's row, whose llm_agent_* cells are empty, verifies beside it
+    from solarchain_eval.evaluation.verify import VerifyOptions, verify_run
+
+    without = verify_run(tmp_path / "a", VerifyOptions(episodes=1))
+    assert {p.policy: p.status for p in without.policies}["llm-agent"] != "verified"
+    checked = verify_run(tmp_path / "a", VerifyOptions(episodes=1, llm_cache=tmp_path / "cache"))
+    assert checked.ok and {p.policy: p.status for p in checked.policies} == {
+        "static": "verified",
+        "llm-agent": "verified",
+    }

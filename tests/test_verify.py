@@ -156,6 +156,15 @@ def test_changed_missing_and_extra_files_fail_the_checksum_step(run, agent_spec)
     assert out[-1] == f"checksums FAIL (3 problem(s)); protocol {metadata(run)['protocol_id']}"
 
 
+def test_the_report_folder_is_not_an_extra_file_but_another_folder_is(run, agent_spec):
+    report = invoke("report", run, "--format", "md")  # writes RUN/report, derived from the vouched files
+    assert report.exit_code == 0, report.output
+    assert invoke("verify", run, "--agent", agent_spec).exit_code == 0
+    (run / "extra").mkdir()
+    result = invoke("verify", run, "--agent", agent_spec)
+    assert result.exit_code == 1 and f"{run / 'extra'} is not a file" in result.output
+
+
 def test_user_agent_needs_its_spec_and_agent_args(run, agent_spec):
     without = invoke("verify", run)
     assert without.exit_code == 0, without.output

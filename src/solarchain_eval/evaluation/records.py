@@ -25,6 +25,9 @@ SUMMARY_FILE = "summary.json"
 METADATA_FILE = "run_metadata.json"
 AGENTIC_LOG_FILE = "agentic_logs.jsonl"
 DIAGNOSTICS_FILE = "governance_diagnostics.csv"
+#: The folder ``report`` writes into a run directory or a paper root by default: derived from the
+#: run's files, so not among the files ``run_metadata.json`` vouches for.
+REPORT_DIR = "report"
 
 
 def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:

@@ -32,7 +32,7 @@ from ..agents.specs import AgentSpecError, parse_agent_spec
 from ..config import BenchmarkConfig
 from ..data.table import HourlyTable, load_table
 from ..envs.env import SolarChainEnv
-from ..governance.factory import AgenticOptions, Governance
+from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..llm.errors import LLMError
 from ..protocol import EPISODE_SEED_RULES
 from .inflight import is_stateless
@@ -256,7 +256,12 @@ def _builder(text: str, config: BenchmarkConfig, models: dict[str, Path], option
 
 
 def _recorded_builder(
-    text: str, config: BenchmarkConfig, models: dict[str, Path], options: VerifyOptions, stack: ExitStack
+    text: str,
+    config: BenchmarkConfig,
+    models: dict[str, Path],
+    options: VerifyOptions,
+    stack: ExitStack,
+    llm_agent: Mapping[str, Any] | None = None,
 ) -> Callable[[], Policy] | str:
     """How to rebuild a policy from its recorded spec, or why it cannot be rebuilt."""
     if text.startswith("<"):
@@ -268,7 +273,17 @@ def _recorded_builder(
     if parsed.kind == "builtin":
         return _builder(text, config, models, options, stack)
     if parsed.kind == "llm":
-        return "the llm-agent's endpoint is not recorded in the run"
+        if not llm_agent:
+            return "the llm-agent's endpoint is not recorded in the run"
+        if options.llm_cache is None:
+            return "LLM calls; pass --llm-cache"
+        spec = EvaluationSpec(
+            policies=[text],
+            config=config,
+            no_physics_penalty=config.no_physics_penalty,
+            llm=LLMOptions.replaying(llm_agent, options.llm_cache),
+        )
+        return lambda: make_policies(spec, stack)[0]
     return f"a user agent ({text}); pass its spec with --agent to rebuild it"
 
 
@@ -405,7 +420,7 @@ def _verify_policies(
     modes = protocol.get("action_modes") or {}
     results = []
     for name, text in zip(names, specs, strict=True):
-        build = given.get(name) or _recorded_builder(text, config, models, options, stack)
+        build = given.get(name) or _recorded_builder(text, config, models, options, stack, metadata.get("llm_agent"))
         if isinstance(build, str):
             results.append(PolicyVerification(name, CANNOT_REBUILD, reason=build))
             continue

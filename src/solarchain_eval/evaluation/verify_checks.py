@@ -22,7 +22,7 @@ from ..config import BenchmarkConfig
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
 from .fingerprint import protocol_fingerprint, protocol_id
-from .records import METADATA_FILE, metrics_frame
+from .records import METADATA_FILE, REPORT_DIR, metrics_frame
 from .rollout import EpisodeResult
 from .rundir import verify_files
 
@@ -69,10 +69,15 @@ def check_checksums(run_dir: Path, metadata: Mapping[str, Any], grid_files: Sequ
     path = run_dir / METADATA_FILE
     problems = [] if metadata.get("complete") is True else [f"{path} does not mark the run complete"]
     skipped = {METADATA_FILE, *grid_files}
-    entries = sorted(p for p in run_dir.iterdir() if p.name not in skipped)
+    # The report's folder (``solarchain-eval report RUN``) is derived from the vouched files.
+    entries = sorted(p for p in run_dir.iterdir() if p.name not in skipped and not _is_report_dir(p))
     problems += verify_files(run_dir, metadata.get("files"), path, [p.name for p in entries if p.is_file()])
     problems += [f"{p} is not a file and is not vouched for by {METADATA_FILE}" for p in entries if not p.is_file()]
     return problems
+
+
+def _is_report_dir(path: Path) -> bool:
+    return path.name == REPORT_DIR and path.is_dir()
 
 
 def check_protocol(metadata: Mapping[str, Any], config: BenchmarkConfig) -> list[str]:
@@ -172,6 +177,8 @@ def first_difference(
 ) -> Difference | None:
     for column in [*recorded, *(c for c in rerun if c not in recorded)]:
         old, new = recorded.get(column), rerun.get(column)
+        if (old is None and new == "") or (new is None and old == ""):
+            continue  # a column that only another policy of the run fills (e.g. the llm-agent's)
         if old is None or new is None or not same_cell(old, new):
             absent = "(no such column)"
             return Difference(run_seed, episode, column, absent if old is None else old, absent if new is None else new)

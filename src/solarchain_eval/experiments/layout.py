@@ -25,12 +25,13 @@ from pathlib import Path
 import pandas as pd
 
 from ..evaluation.records import ACTIONS_FILE, AGENTIC_LOG_FILE, CITY_HOUR_FILE, METADATA_FILE, METRICS_FILE
+from ..evaluation.records import REPORT_DIR as RUN_REPORT_DIR
 
 DONE_MARKER = "DONE"
 PAPER_METADATA_FILE = "paper_metadata.json"
 UNITS_DIR = "units"
 COMBINED_DIR = "combined"
-REPORT_DIR = "report"
+REPORT_DIR = RUN_REPORT_DIR  # the report of a paper root, as of a run directory
 
 
 def train_unit_dir(root: Path, algo: str, setting: str, seed: int | str) -> Path:

@@ -27,6 +27,14 @@ class LLMOptions:
     cache_dir: Path | None = None
     cache_mode: str = "off"
 
+    @classmethod
+    def replaying(cls, described: Mapping[str, Any], cache_dir: Path | str) -> LLMOptions:
+        """Options that replay, from ``cache_dir``, the calls of a run whose settings
+        :meth:`describe` recorded (no endpoint, no key)."""
+        names = {f.name for f in fields(LLMSettings)} - {"api_key"}
+        settings = LLMSettings(**{k: v for k, v in described.items() if k in names})
+        return cls(settings=settings, cache_dir=Path(cache_dir), cache_mode="replay")
+
     def describe(self) -> dict[str, Any]:
         return {
             **self.settings.describe(),
@@ -131,9 +139,7 @@ class AgenticOptions:
         if isinstance(described_llm, Mapping):
             if llm_cache is None:
                 raise LLMConfigError.about("the run's LLM calls can only be replayed: pass {opt_llm_cache} DIR")
-            names = {f.name for f in fields(LLMSettings)} - {"api_key"}
-            settings = LLMSettings(**{k: v for k, v in described_llm.items() if k in names})
-            llm = LLMOptions(settings=settings, cache_dir=Path(llm_cache), cache_mode="replay")
+            llm = LLMOptions.replaying(described_llm, llm_cache)
         controls = record.get("controls") or {}
         rate = record.get("random_audit_rate")
         counts = record.get("random_audit_counts") or None
