@@ -80,6 +80,10 @@ class GridSpec:
     lagrangian: LagrangianSettings = field(default_factory=lambda: LagrangianSettings(DEFAULT_COST_LIMIT))
     #: Per-setting policy lists ((setting, policies), ...) that override ``policies`` there.
     policies_by_setting: tuple[tuple[str, tuple[str, ...]], ...] = ()
+    #: JAX train units: env steps per compiled chunk, after which progress is reported and the
+    #: train state checkpointed (None: the algorithm's default). The models do not depend on it,
+    #: so it is not part of the grid's identity.
+    chunk_steps: int | None = None
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         listed = KNOWN_SETTINGS[setting].policies
@@ -118,6 +122,8 @@ class GridSpec:
         unknown = [s for s in self.settings if s not in KNOWN_SETTINGS]
         if unknown:
             raise ValueError(f"unknown setting(s) {', '.join(unknown)} (registered: {', '.join(KNOWN_SETTINGS)})")
+        if self.chunk_steps is not None and (self.chunk_steps < 1 or self.backend != "jax"):
+            raise ValueError(f"chunk_steps ({self.chunk_steps}) must be at least 1 and needs the jax backend")
         if self.backend != "sb3" and self.uses_lagrangian:
             raise ValueError("ppo-lag trains with the sb3 backend only")
         if self.policies is not None:

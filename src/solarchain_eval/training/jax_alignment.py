@@ -73,6 +73,10 @@ def sb3_variant(algo: str) -> type:
       done False (SB3's ``handle_timeout_termination``; :func:`_step_for_buffer`).
     - The replay minibatches (SAC, DQN): SB3 draws them uniformly with replacement; rejax
       without replacement, at a cost that grows with the buffer (:mod:`.replay`).
+
+    Not an alignment, but here because this is where rejax's state is defined: the train state
+    also carries the training episodes' returns (``episode_returns``, :mod:`.jax_episodes`),
+    which the trainer reports between chunks; they only read the rewards.
     """
     import jax.numpy as jnp
     import optax
@@ -83,6 +87,14 @@ def sb3_variant(algo: str) -> type:
     base = rejax.get_algo(algo)
 
     class SB3Variant(base):  # type: ignore[misc, valid-type]
+        @register_init
+        def initialize_training_returns(self, rng):
+            # rejax calls the inits in name order, each with the next split of the key: this name
+            # sorts last, so every other part of the state gets the key it had without it.
+            from .jax_episodes import EpisodeReturns
+
+            return {"episode_returns": EpisodeReturns.empty(self.num_envs)}
+
         @register_init
         def initialize_network_params(self, rng):
             state = super().initialize_network_params(rng)
@@ -128,7 +140,9 @@ def sb3_variant(algo: str) -> type:
                 _check_unnormalised(self)
                 ts, batch = super().collect_transitions(ts, *args, **kwargs)
                 observe = jax.vmap(self.env.get_obs, in_axes=(0, None))
-                return ts.replace(last_obs=observe(ts.env_state, self.env_params)), batch
+                ended = ts.env_state.time == 0  # gymnax reset the env after the episode's last hour
+                returns = ts.episode_returns.record(batch.reward, ended)
+                return ts.replace(last_obs=observe(ts.env_state, self.env_params), episode_returns=returns), batch
 
     SB3Variant.__name__ = f"{base.__name__}SB3Variant"
     return SB3Variant
@@ -192,10 +206,15 @@ def _bootstrapped_rollout(self: Any, ts: Any) -> tuple[Any, Any]:
         action = unclipped_action if self.discrete else jnp.clip(unclipped_action, space.low, space.high)
         next_obs, env_state, reward, done, info = self.vmap_step(rng_steps, ts.env_state, action, self.env_params)
         terminal_value = self.critic.apply(ts.critic_ts.params, info["terminal_obs"])
+        returns = ts.episode_returns.record(reward, done)  # the env's rewards, without the bootstrap
         reward = jnp.where(info["truncated"], reward + self.gamma * terminal_value, reward)
         transition = Trajectory(ts.last_obs, unclipped_action, log_prob, reward, value, done)
         ts = ts.replace(
-            env_state=env_state, last_obs=next_obs, last_done=done, global_step=ts.global_step + self.num_envs
+            env_state=env_state,
+            last_obs=next_obs,
+            last_done=done,
+            global_step=ts.global_step + self.num_envs,
+            episode_returns=returns,
         )
         return ts, transition
 
