@@ -23,6 +23,7 @@ from __future__ import annotations
 import hashlib
 import json
 import time
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass
 from pathlib import Path
@@ -112,9 +113,12 @@ class ChunkedTraining:
         self._advance: Any = None
 
     def compile(self) -> float:
-        """Compile both programs (or load them from the persistent cache); returns seconds."""
+        """Compile both programs (or load them from the persistent cache); returns seconds (0
+        when they are compiled already)."""
         import warnings
 
+        if self._advance is not None:
+            return 0.0
         use_compilation_cache()
         instance = self.instance
         start = time.perf_counter()
@@ -192,7 +196,7 @@ def load_checkpoint(path: Path, template: Any, sha256: str) -> tuple[Any, dict[s
             leaves = [stored[f"leaf_{i:05d}"] for i in range(len(specs))]
             if f"leaf_{len(specs):05d}" in stored.files:
                 return None, {}, "it holds more state than this training has"
-    except (OSError, ValueError, KeyError, EOFError) as error:  # a truncated or foreign file
+    except (OSError, ValueError, KeyError, EOFError, zipfile.BadZipFile) as error:  # a truncated or foreign file
         return None, {}, f"it cannot be read ({type(error).__name__}: {error})"
     restored = []
     for i, (spec, leaf) in enumerate(zip(specs, leaves, strict=True)):
