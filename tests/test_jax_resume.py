@@ -1,7 +1,7 @@
 """The JAX backend trains in compiled chunks with a checkpoint after each: a run interrupted
 after a chunk and resumed ends with the same train state, bit for bit, as one that was not,
-which is the same as the whole training in one compiled call; a checkpoint that does not belong
-to the training is ignored. ``paper --backend jax`` resumes a killed train unit from its last
+which is the same as the whole training in one compiled call and as rejax's own ``train`` (the
+trainer before chunks); a checkpoint that does not belong to the training is ignored. ``paper --backend jax`` resumes a killed train unit from its last
 chunk and shows the trainings' progress in plain lines when stderr is not a terminal.
 
 SAC is the algorithm under test: its state is the largest (the replay buffer) and its training
@@ -38,7 +38,9 @@ class Interrupted(Exception):
 
 def _leaves(states) -> list[np.ndarray]:
     leaves = jax.tree.leaves(states)
-    return [np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x) for x in leaves]
+    return [
+        np.asarray(jax.random.key_data(x) if jax.dtypes.issubdtype(x.dtype, jax.dtypes.prng_key) else x) for x in leaves
+    ]
 
 
 def _paths(states) -> list[str]:
@@ -59,6 +61,7 @@ def runs(tmp_path_factory, tiny_dataset) -> dict:
     from solarchain_eval.config import BenchmarkConfig
     from solarchain_eval.envs.jax_env import make_env_params
     from solarchain_eval.training.jax_chunks import ChunkedTraining
+    from solarchain_eval.training.jax_trainer import compile_training
 
     root = tmp_path_factory.mktemp("jax-resume")
     spec = JaxTrainSpec("sac", SEEDS, STEPS, data_dir=tiny_dataset, chunk_steps=CHUNK)
@@ -77,11 +80,12 @@ def runs(tmp_path_factory, tiny_dataset) -> dict:
     resumed = train_jax(
         spec, seed_dirs(root / "resumed", SEEDS), on_progress=resumed_reports.append, on_note=notes.append
     )
-    one_loop = ChunkedTraining(
-        "sac", SEEDS, STEPS, make_env_params(tiny_dataset, action_mode="continuous"), BenchmarkConfig(), CHUNK
-    )
+    params = make_env_params(tiny_dataset, action_mode="continuous")
+    one_loop = ChunkedTraining("sac", SEEDS, STEPS, params, BenchmarkConfig(), CHUNK)
     one_loop.compile()
+    rejax_train, _ = compile_training("sac", SEEDS, STEPS, params, BenchmarkConfig())
     return {
+        "rejax": rejax_train(one_loop.keys)[0],
         "root": root,
         "whole": whole,
         "resumed": resumed,
@@ -98,7 +102,9 @@ def test_resumed_training_equals_the_uninterrupted_one_bit_for_bit(runs, tiny_da
 
     whole, resumed, root = runs["whole"], runs["resumed"], runs["root"]
     assert resumed.resumed_from == 300 and resumed.steps_this_session == 300 and whole.resumed_from is None
-    assert runs["notes"] == [f"resuming from the checkpoint at step 300 ({root / 'resumed' / 'checkpoints' / 'jax_chunks.npz'})"]
+    assert runs["notes"] == [
+        f"resuming from the checkpoint at step 300 ({root / 'resumed' / 'checkpoints' / 'jax_chunks.npz'})"
+    ]
     assert [p.chunk for p in runs["resumed_reports"]] == [3, 4]
     # every leaf: parameters, optimiser states, replay buffer, RNG keys, env states, step counter
     _assert_same_state(whole.states, resumed.states)
@@ -112,7 +118,11 @@ def test_resumed_training_equals_the_uninterrupted_one_bit_for_bit(runs, tiny_da
         assert meta["resumed_from"] == (300 if name == "resumed" else None)
         out = root / f"eval-{name}"
         spec = EvaluationSpec(
-            policies=["sac"], run_seeds=[20260511], episodes=2, data_dir=tiny_dataset, models={"sac": directory / "seed_3"}
+            policies=["sac"],
+            run_seeds=[20260511],
+            episodes=2,
+            data_dir=tiny_dataset,
+            models={"sac": directory / "seed_3"},
         )
         run_evaluation(spec, out, command=["test"])
         metrics.append(pd.read_csv(out / "metrics.csv"))
@@ -123,16 +133,27 @@ def test_resumed_training_equals_the_uninterrupted_one_bit_for_bit(runs, tiny_da
     assert metrics[0]["cumulative_reward"].notna().all() and len(metrics[0]) == 2
 
 
-def test_chunked_training_equals_the_whole_training_in_one_call(runs):
-    """The simple path: the whole budget in one call of the compiled loop, no host round trips."""
+def test_chunked_training_equals_the_whole_training_in_one_call_and_rejax_train(runs):
+    """The simple paths: the whole budget in one call of the compiled loop (no host round trips),
+    and rejax's own ``train``, one program that also computes the initial state."""
     training, whole = runs["training"], runs["whole"]
     assert training.plan.chunks == 4 and training.plan.chunk_steps == CHUNK
-    _assert_same_state(training.run(), whole.states)
+    _assert_same_state(training.tree(training.run()), whole.states)
     # a chunk size that does not divide the budget: the same program, other stops
     state = training.initial_state()
     for iterations in (250, 250, 100):
         state = training.advance(state, iterations)
-    _assert_same_state(state, whole.states)
+    _assert_same_state(training.tree(state), whole.states)
+    # rejax's train returns every leaf per seed; the trainer keeps seed-invariant ones once
+    paths, shared = _paths(whole.states), []
+    assert paths == _paths(runs["rejax"])
+    for path, ours, theirs in zip(paths, _leaves(whole.states), _leaves(runs["rejax"]), strict=True):
+        if ours.shape != theirs.shape:
+            assert theirs.shape == (len(SEEDS), *ours.shape), path
+            shared.append(path)
+            theirs = theirs[0]
+        assert np.array_equal(ours, theirs), path
+    assert ".global_step" in shared and ".replay_buffer.index" in shared and ".rng" not in shared
     reports = runs["whole_reports"]
     assert [(p.chunk, p.chunks, p.steps_done, p.total_steps) for p in reports] == [
         (k, 4, 150 * k, STEPS) for k in (1, 2, 3, 4)
@@ -140,7 +161,7 @@ def test_chunked_training_equals_the_whole_training_in_one_call(runs):
     assert reports[-1].eta_s == 0 and all(p.steps_per_s > 0 for p in reports)
     # 25 episodes of 24 hours per seed; the recent return is the mean of each env's last ten
     returns = jax.device_get(whole.states.episode_returns)
-    assert np.asarray(returns.finished).tolist() == [[STEPS // 24]] * len(SEEDS)
+    assert np.all(np.asarray(returns.finished) == STEPS // 24) and np.shape(returns.recent) == (len(SEEDS), 1, 10)
     assert reports[-1].recent_return == pytest.approx(float(np.mean(returns.recent)), rel=1e-6)
     assert -30 < reports[-1].recent_return < 0 and reports[0].recent_return != reports[-1].recent_return
 
@@ -154,7 +175,7 @@ def test_a_checkpoint_of_another_training_or_a_broken_one_is_ignored(runs, tmp_p
         arrays = {name: stored[name] for name in stored.files}
     assert meta["chunk"] == 2 and meta["iterations_done"] == 300
     state, _, why = load_checkpoint(saved, training.template, meta["config_sha256"])
-    assert why is None and int(np.asarray(state.global_step)[0]) == 300
+    assert why is None and int(training.tree(state).global_step) == 300
     _, _, why = load_checkpoint(saved, training.template, config_sha256({"seeds": [5, 6]}))
     assert "another training" in why
     truncated = tmp_path / "truncated.npz"

@@ -140,9 +140,17 @@ def sb3_variant(algo: str) -> type:
                 _check_unnormalised(self)
                 ts, batch = super().collect_transitions(ts, *args, **kwargs)
                 observe = jax.vmap(self.env.get_obs, in_axes=(0, None))
-                ended = ts.env_state.time == 0  # gymnax reset the env after the episode's last hour
-                returns = ts.episode_returns.record(batch.reward, ended)
-                return ts.replace(last_obs=observe(ts.env_state, self.env_params), episode_returns=returns), batch
+                return ts.replace(last_obs=observe(ts.env_state, self.env_params)), batch
+
+            def train_iteration(self, ts):
+                # The episode returns, from the rewards the iteration stored in the buffer. Summed
+                # inside collect_transitions, they make XLA compile the step differently and the
+                # trained networks change in their last bits; read back here, they do not.
+                ts = super().train_iteration(ts)
+                buffer = ts.replay_buffer
+                rows = (buffer.index - self.num_envs + jnp.arange(self.num_envs)) % buffer.size
+                ended = ts.env_state.time == 0
+                return ts.replace(episode_returns=ts.episode_returns.record(buffer.data.reward[rows], ended))
 
     SB3Variant.__name__ = f"{base.__name__}SB3Variant"
     return SB3Variant
@@ -206,19 +214,41 @@ def _bootstrapped_rollout(self: Any, ts: Any) -> tuple[Any, Any]:
         action = unclipped_action if self.discrete else jnp.clip(unclipped_action, space.low, space.high)
         next_obs, env_state, reward, done, info = self.vmap_step(rng_steps, ts.env_state, action, self.env_params)
         terminal_value = self.critic.apply(ts.critic_ts.params, info["terminal_obs"])
-        returns = ts.episode_returns.record(reward, done)  # the env's rewards, without the bootstrap
         reward = jnp.where(info["truncated"], reward + self.gamma * terminal_value, reward)
         transition = Trajectory(ts.last_obs, unclipped_action, log_prob, reward, value, done)
         ts = ts.replace(
-            env_state=env_state,
-            last_obs=next_obs,
-            last_done=done,
-            global_step=ts.global_step + self.num_envs,
-            episode_returns=returns,
+            env_state=env_state, last_obs=next_obs, last_done=done, global_step=ts.global_step + self.num_envs
         )
         return ts, transition
 
-    return jax.lax.scan(env_step, ts, None, self.num_steps)
+    start = ts
+    ts, trajectories = jax.lax.scan(env_step, ts, None, self.num_steps)
+    return ts.replace(episode_returns=_rollout_returns(self, start, trajectories)), trajectories
+
+
+def _rollout_returns(self: Any, start: Any, trajectories: Any) -> Any:
+    """The episode returns after a PPO rollout, from the env's own rewards (without the bootstrap).
+
+    The rollout's rewards carry the bootstrap at truncations, so the env is stepped again from
+    the rollout's first state with its keys and actions. Summing the rewards inside the rollout
+    instead makes XLA compile it differently, and the trained networks would change in their
+    last bits; this way the training is the same computation as without the record.
+    """
+    import jax.numpy as jnp
+
+    space = self.env.action_space(self.env_params)
+
+    def replay(carry: tuple[Any, Any, Any], action: Any) -> tuple[tuple[Any, Any, Any], None]:
+        rng, env_state, returns = carry
+        rng, new_rng = jax.random.split(rng)  # the key schedule of env_step above
+        rng_steps, _ = jax.random.split(new_rng, 2)
+        rng_steps = jax.random.split(rng_steps, self.num_envs)
+        action = action if self.discrete else jnp.clip(action, space.low, space.high)
+        _, env_state, reward, done, _ = self.vmap_step(rng_steps, env_state, action, self.env_params)
+        return (rng, env_state, returns.record(reward, done)), None
+
+    (_, _, returns), _ = jax.lax.scan(replay, (start.rng, start.env_state, start.episode_returns), trajectories.action)
+    return returns
 
 
 def _step_for_buffer(step: Any) -> Any:

@@ -11,11 +11,13 @@ last chunk.
 
 The iteration count is an argument of ``advance``, not a constant: every chunk, the last
 (shorter) one and a whole training in one call run the same compiled program, so the trained
-parameters do not depend on the chunk size nor on where a run was interrupted (bit for bit;
-``tests/test_jax_resume.py``). They do differ, in the last bits, from rejax's own ``train``,
-which computes the initial state inside the training program: XLA then fuses the loop body
-differently (e.g. it contracts SAC's Polyak averaging into a fused multiply-add in one program
-and not in the other), and training amplifies the one-ulp differences.
+parameters do not depend on the chunk size nor on where a run was interrupted. The state is
+laid out as in rejax's own ``train`` (``jit(vmap(train))``), where the parts that do not depend
+on the seed's key (the step counter, the optimisers' step counts, the replay buffer's write
+position, ...) are one value for all seeds rather than one per seed: batched, the step counter
+would turn rejax's ``lax.cond`` on it into a select that computes both branches, which is about
+10 % slower for SAC and compiles to other roundings. Laid out the same way, the chunks compute
+exactly what rejax's ``train`` computes, bit for bit (``tests/test_jax_resume.py``).
 """
 
 from __future__ import annotations
@@ -85,6 +87,10 @@ def plan_chunks(algo: str, settings: dict[str, Any], timesteps: int, chunk_steps
 class ChunkedTraining:
     """The compiled ``init`` and ``advance`` programs of one algorithm for one seed group.
 
+    States passed between them are flat lists of the train state's leaves (rejax makes a new
+    state class each time it builds one, so the tree is rebuilt by :meth:`tree`); a leaf that
+    is the same for every seed has no seed axis (:func:`seed_invariant_leaves`).
+
     Parameters
     ----------
     algo, seeds, timesteps, params, config
@@ -109,6 +115,7 @@ class ChunkedTraining:
         self.instance = make_algo(algo, params, config, timesteps, buffer_timesteps=buffer_timesteps)
         self.plan = plan_chunks(algo, rejax_config(algo, config, timesteps, buffer_timesteps), timesteps, chunk_steps)
         self.keys = seed_keys(self.seeds)
+        self._treedef: Any = None
         self._init: Any = None
         self._advance: Any = None
 
@@ -125,30 +132,57 @@ class ChunkedTraining:
         with warnings.catch_warnings():
             # rejax asks for int64 indices, which JAX truncates to int32 without x64: harmless here.
             warnings.filterwarnings("ignore", message="Explicitly requested dtype int64")
-            self._init = jax.jit(jax.vmap(instance.init_state)).lower(self.keys).compile()
+            self._treedef = jax.tree.structure(jax.eval_shape(instance.init_state, self.keys[0]))
+            axes = [None if shared else 0 for shared in seed_invariant_leaves(instance, self.keys)]
 
-            def advance(ts: Any, iterations: jax.Array) -> Any:
-                return jax.lax.fori_loop(0, iterations, lambda _, t: instance.train_iteration(t), ts)
+            def init(key: jax.Array) -> list[jax.Array]:
+                return jax.tree.leaves(instance.init_state(key))
 
-            advance_batch = jax.vmap(advance, in_axes=(0, None))
+            def advance(leaves: list[jax.Array], iterations: jax.Array) -> list[jax.Array]:
+                ts = jax.tree.unflatten(self._treedef, leaves)
+                return jax.tree.leaves(jax.lax.fori_loop(0, iterations, lambda _, t: instance.train_iteration(t), ts))
+
+            self._init = jax.jit(jax.vmap(init, out_axes=axes)).lower(self.keys).compile()
+            advance_batch = jax.vmap(advance, in_axes=(axes, None), out_axes=axes)
             self._advance = jax.jit(advance_batch).lower(self._init.out_info, np.int32(0)).compile()
         return time.perf_counter() - start
 
     @property
-    def template(self) -> Any:
-        """The train states' shapes and dtypes (a pytree of ``ShapeDtypeStruct``)."""
+    def template(self) -> list[Any]:
+        """The state's leaves' shapes and dtypes (``ShapeDtypeStruct``)."""
         return self._init.out_info
 
-    def initial_state(self) -> Any:
+    def tree(self, leaves: list[Any]) -> Any:
+        """The train state (rejax's) of a flat list of leaves."""
+        return jax.tree.unflatten(self._treedef, leaves)
+
+    def initial_state(self) -> list[jax.Array]:
         return self._init(self.keys)
 
-    def advance(self, state: Any, iterations: int) -> Any:
+    def advance(self, leaves: list[jax.Array], iterations: int) -> list[jax.Array]:
         """``iterations`` training iterations further (waits for the result)."""
-        return jax.block_until_ready(self._advance(state, np.int32(iterations)))
+        return jax.block_until_ready(self._advance(leaves, np.int32(iterations)))
 
-    def run(self, iterations: int | None = None) -> Any:
+    def run(self, iterations: int | None = None) -> list[jax.Array]:
         """The whole training (or its first ``iterations``) in one call: the simple path."""
         return self.advance(self.initial_state(), self.plan.total_iterations if iterations is None else iterations)
+
+
+def seed_invariant_leaves(instance: Any, keys: jax.Array) -> tuple[bool, ...]:
+    """Which leaves of ``instance``'s train state ``jit(vmap(train))`` keeps as one value for
+    all seeds: those that never depend on a seed's key, found as JAX's ``vmap`` finds them
+    (tracing a training loop under ``vmap`` and asking which results carry the seed axis)."""
+    from jax._src.interpreters.batching import BatchTracer  # no public way to ask a value
+
+    found: list[bool] = []
+
+    def probe(key: jax.Array) -> Any:
+        ts = jax.lax.fori_loop(0, 2, lambda _, t: instance.train_iteration(t), instance.init_state(key))
+        found.extend(not isinstance(leaf, BatchTracer) for leaf in jax.tree.leaves(ts))
+        return ts
+
+    jax.eval_shape(jax.vmap(probe), keys)
+    return tuple(found)
 
 
 def config_sha256(record: dict[str, Any]) -> str:
@@ -209,7 +243,11 @@ def load_checkpoint(path: Path, template: Any, sha256: str) -> tuple[Any, dict[s
 
 @dataclass(frozen=True)
 class ChunkRun:
-    """What :func:`run_chunks` did in this session."""
+    """What :func:`run_chunks` did in this session.
+
+    ``states`` is the final train state of all seeds (rejax's state class): a leaf has a
+    leading seed axis unless it is the same for every seed (:func:`seed_invariant_leaves`).
+    """
 
     states: Any
     compile_s: float
@@ -272,14 +310,14 @@ def run_chunks(
         train_s += time.perf_counter() - started
         if on_progress is not None:
             on_progress(_progress(training, state, done, start_done, train_s, resumed_from))
-    return ChunkRun(state, compile_s, train_s, checkpoint_s, chunks_run, resumed_from)
+    return ChunkRun(training.tree(state), compile_s, train_s, checkpoint_s, chunks_run, resumed_from)
 
 
 def _progress(
     training: ChunkedTraining, state: Any, done: int, start_done: int, train_s: float, resumed_from: int | None
 ) -> ChunkProgress:
     plan = training.plan
-    returns = jax.device_get(state.episode_returns)
+    returns = jax.device_get(training.tree(state).episode_returns)
     per_s = (done - start_done) * plan.steps_per_iteration / max(train_s, 1e-9)
     remaining = (plan.total_iterations - done) * plan.steps_per_iteration
     return ChunkProgress(

@@ -88,9 +88,10 @@ def recent_return(recent: np.ndarray, finished: np.ndarray) -> float | None:
     ----------
     recent : array (..., RECENT_EPISODES)
         Each environment's ring of returns of its last finished episodes.
-    finished : int array (...)
+    finished : int array, broadcastable to ``recent.shape[:-1]``
         Episodes each environment finished (the ring holds ``min(finished, RECENT_EPISODES)``).
     """
-    recent, finished = np.asarray(recent, dtype=np.float64), np.asarray(finished)
+    recent = np.asarray(recent, dtype=np.float64)
+    finished = np.broadcast_to(np.asarray(finished), recent.shape[:-1])  # one count for all seeds, or one each
     filled = np.arange(recent.shape[-1]) < np.minimum(finished, recent.shape[-1])[..., None]
     return float(recent[filled].mean()) if filled.any() else None

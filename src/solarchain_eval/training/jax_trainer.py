@@ -225,7 +225,8 @@ class JaxTrainOutcome:
     already_complete: bool = False
     resumed_from: int | None = None  # env steps per model at which this session resumed
     steps_this_session: int = 0  # env steps per model trained in this session
-    #: The final train states of all seeds (leading axis: the seed), for tests and analyses.
+    #: The final train states of all seeds, for tests and analyses (leading axis: the seed, except
+    #: on leaves that are the same for every seed; see :class:`~.jax_chunks.ChunkRun`).
     states: Any = field(default=None, repr=False, compare=False)
 
     @property
@@ -361,7 +362,7 @@ def train_jax(
     for i, seed in enumerate(spec.seeds):
         directory = Path(out_dirs[seed])
         paths.append(save_network(directory / JAX_MODEL_FILE, algo, states, i))
-        steps_done = int(np.asarray(states.global_step)[i])
+        steps_done = int(np.max(states.global_step))  # one counter for all seeds (rejax's layout)
         atomic_write_json(
             directory / TRAIN_METADATA_FILE,
             {
