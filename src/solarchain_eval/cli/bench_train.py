@@ -35,6 +35,14 @@ def bench_train(
         "and estimate the paper preset with the JAX backend. XLA settings come from XLA_FLAGS.",
     ),
     jax_seeds: int = typer.Option(1, "--jax-seeds", min=1, help="Seeds vmapped together in the JAX measurement."),
+    chunk_steps: int | None = typer.Option(
+        None,
+        "--chunk-steps",
+        min=0,
+        help="jax: also measure what training in chunks costs: 3 chunks of this many env steps (0: each "
+        "algorithm's default) with a checkpoint each, against the same steps in one call and rejax's own train, "
+        "alternately (the grid's 3-seed groups, the paper's replay buffer).",
+    ),
 ) -> None:
     """Measure steady-state SB3 training speed (one torch thread) per algorithm on this env and on
     a trivial env with the same spaces, then estimate the paper preset's wall time (300,000 steps,
@@ -44,6 +52,8 @@ def bench_train(
     """
     if backend not in ("sb3", "jax"):
         raise CliError(f"unknown backend '{backend}' (choose from sb3, jax)")
+    if chunk_steps is not None and (backend != "jax" or from_root is not None):
+        raise CliError("--chunk-steps measures JAX trainings: it needs --backend jax and no --from-root")
     from ..data.default import resolve_data_dir
     from ..perf import train_bench as measure
     from ..perf.env_bench import Throughput
@@ -96,6 +106,10 @@ def bench_train(
 
         sb3_cpu = {a: statistics.median(r) for a, r in cpu_rates.items()}
         bench_jax(names, data_dir, repeats, times, sb3_cpu, workers, jax_seeds)
+        if chunk_steps is not None:
+            from .bench_train_jax import bench_chunks
+
+            bench_chunks(names, data_dir, repeats, chunk_steps or None)
 
 
 def _print_estimate(times: Any, workers: int) -> None:

@@ -147,3 +147,34 @@ def _seed_group_rates(
             f"({group * speed.throughput.median:,.0f} in total; {speed.steps_per_cpu_s:,.0f} per CPU second in total)"
         )
     return wall, per_cpu, compile_s
+
+
+def bench_chunks(names: list[str], data_dir: Path, repeats: int, chunk_steps: int | None) -> None:
+    """Steps/s per model of the chunked training against one call (``bench-train --chunk-steps``)."""
+    from ..experiments.grid import GridSpec
+    from ..perf.jax_train_bench import chunking_cost
+
+    paper = GridSpec.from_preset("paper", backend="jax")
+    table = Table(
+        title=f"JAX training in chunks vs one call, steps/s per model ({len(paper.seeds)} seeds vmapped, "
+        f"replay buffer for {paper.timesteps:,} steps; median of {repeats})",
+        title_justify="left",
+    )
+    columns = ("algorithm", "chunk steps", "chunked", "one call", "chunked / one call", "rejax train", "checkpoint")
+    for column in columns:
+        table.add_column(column, justify="left" if column == "algorithm" else "right")
+    for algo in names:
+        err_console.print(f"measuring {algo.upper()} in chunks against one call ({repeats} × 3 ways)...")
+        cost = chunking_cost(
+            algo, data_dir, repeats, chunk_steps=chunk_steps, seeds=len(paper.seeds), buffer_timesteps=paper.timesteps
+        )
+        table.add_row(
+            algo.upper(),
+            f"{cost.chunk_steps:,} × 3",
+            f"{cost.chunked.median:,.0f}",
+            f"{cost.one_loop.median:,.0f}",
+            f"{cost.chunked.median / cost.one_loop.median:.3f}×",
+            f"{cost.rejax_train.median:,.0f}",
+            f"{cost.checkpoint_mb:,.0f} MB in {cost.checkpoint_s:.2f} s",
+        )
+    console.print(table)

@@ -20,10 +20,11 @@ from ..evaluation.settings import KNOWN_SETTINGS
 from ..experiments.grid import GridSpec, Unit, plan_units
 from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
-from ..experiments.units import UnitResult
+from ..experiments.units import UnitProgress, UnitResult
 from ..experiments.user_agents import PolicyChoice, resolve_agents, split_policies
 from ..governance.request import GovernanceRequest
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS
+from ..training.jax_progress import DEFAULT_CHUNK_STEPS
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 from . import agentic as agentic_cli
 from . import app
@@ -35,12 +36,12 @@ from .common import (
     err_console,
     invoked_command,
     parse_seeds,
-    progress_bar,
     register_user_error,
     reports_errors,
     results_table,
 )
 from .evaluate import AGENT_ARG, USER_AGENTS_HELP, VECNORMALIZE
+from .progress import TrainingProgress
 
 register_user_error(GridError)
 
@@ -88,18 +89,27 @@ def _policies(text: str | None, extra: str | None, settings: tuple[str, ...]) ->
 
 
 def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
-    """``run_paper`` with a progress bar over the units and a line per finished unit."""
+    """``run_paper`` with progress: a line per finished unit and, for JAX train units, their
+    steps, recent return, steps/s and ETA after every chunk (a live display on a terminal, with
+    a bar over the units; plain lines otherwise)."""
     from ..experiments.ray_executor import RayUnavailableError
 
-    with progress_bar("units", len(plan_units(spec))) as advance:
+    with TrainingProgress(units=len(plan_units(spec))) as display:
 
         def on_plan(units: list[Unit], already: list[str]) -> None:
             if already:
                 err_console.print(f"{len(already)} of {len(units)} units already done: skipped")
-                advance(len(already))
+                display.advance_units(len(already))
+
+        def on_progress(news: UnitProgress) -> None:
+            if news.progress is not None:
+                display.update(news.unit, news.progress)
+            if news.note is not None:
+                display.note(news.unit, news.note)
 
         def on_result(result: UnitResult) -> None:
-            advance(1)
+            display.finish(result.unit)
+            display.advance_units(1)
             if result.ok:
                 err_console.print(
                     Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True
@@ -111,7 +121,15 @@ def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
                 )
 
         try:
-            return run_paper(spec, out, on_plan=on_plan, on_result=on_result, command=invoked_command(), **run_options)
+            return run_paper(
+                spec,
+                out,
+                on_plan=on_plan,
+                on_result=on_result,
+                on_progress=on_progress,
+                command=invoked_command(),
+                **run_options,
+            )
         except RayUnavailableError as error:
             raise cli_error(error) from None
 
@@ -197,7 +215,7 @@ def paper(
         "sb3",
         "--backend",
         help="Train units' backend: sb3 (Stable-Baselines3, the reference) or jax (rejax; needs the jax extra; "
-        "one seed per unit, no checkpoints; docs/jax.md).",
+        "one unit per seed group, trained in checkpointed chunks; docs/jax.md).",
     ),
     ray_address: str | None = typer.Option(
         None,
@@ -211,7 +229,17 @@ def paper(
     ),
     keep_going: bool = typer.Option(False, "--keep-going", help="Record failing units and carry on with the others."),
     checkpoint_every: int | None = typer.Option(
-        None, "--checkpoint-every", min=0, help="Training steps between checkpoints (default 25,000; 0: none)."
+        None,
+        "--checkpoint-every",
+        min=0,
+        help="Training steps between checkpoints (default 25,000; 0: none; SB3 only: JAX checkpoints every chunk).",
+    ),
+    chunk_steps: int | None = typer.Option(
+        None,
+        "--chunk-steps",
+        min=1,
+        help="JAX backend: env steps per compiled chunk, after which progress is shown and the state "
+        f"checkpointed (default: {', '.join(f'{a.upper()} {n:,}' for a, n in DEFAULT_CHUNK_STEPS.items())}).",
     ),
     config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
     write_report: bool = typer.Option(
@@ -239,7 +267,8 @@ def paper(
 
     Every unit (a trained model, or one policy × setting × seed evaluation) is a directory under
     ROOT/units with a DONE marker written last: re-running the same command skips finished units
-    and redoes the ones that were in flight (training resumes from its last checkpoint).
+    and redoes the ones that were in flight (training resumes from its last checkpoint; with
+    --backend jax, from its last chunk).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     options = agentic_cli.resolve(governance)
@@ -265,7 +294,10 @@ def paper(
             lagrangian=LagrangianSettings(cost_limit, multiplier_lr),
             agent_args=agent_args,
             vecnormalize=stats,
+            chunk_steps=chunk_steps,
         )
+        if chunk_steps is not None and spec.backend != "jax":
+            raise CliError("--chunk-steps applies to --backend jax (SB3 checkpoints every --checkpoint-every steps)")
         # User agents are named by building them once, which also checks imports, models and
         # action shapes on the grid's dataset before any unit runs.
         agents = resolve_agents(

@@ -11,6 +11,7 @@ import typer
 from ..agents.checkpoints import TRAINABLE_ALGOS
 from ..config import BenchmarkConfig, load_config
 from ..protocol import PAPER_SEED
+from ..training.jax_progress import DEFAULT_CHUNK_STEPS
 from ..training.lagrangian import DEFAULT_MULTIPLIER_LR, LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 from ..training.sb3_trainer import (
     DEFAULT_CHECKPOINT_EVERY,
@@ -31,6 +32,7 @@ from .common import (
     register_user_error,
     reports_errors,
 )
+from .progress import TrainingProgress
 
 register_user_error(TrainingError)
 
@@ -80,7 +82,15 @@ def train_command(
         DEFAULT_CHECKPOINT_EVERY,
         "--checkpoint-every",
         min=0,
-        help="Timesteps between checkpoints (0: none; SB3 only: a JAX training is one compiled program).",
+        help="Timesteps between checkpoints (0: none; SB3 only: a JAX training checkpoints after every chunk).",
+    ),
+    chunk_steps: int | None = typer.Option(
+        None,
+        "--chunk-steps",
+        min=1,
+        help="JAX backend: env steps per compiled chunk, after which progress is shown and the state "
+        f"checkpointed (default: {', '.join(f'{a.upper()} {n:,}' for a, n in DEFAULT_CHUNK_STEPS.items())}; "
+        "the models do not depend on it).",
     ),
     torch_threads: int = typer.Option(
         1, "--torch-threads", min=1, help="torch threads (1 is fastest for these MLPs; SB3 only)."
@@ -131,7 +141,9 @@ def train_command(
         if key == LAGRANGIAN_ALGO:
             raise CliError(f"--algo {LAGRANGIAN_ALGO} trains with Stable-Baselines3 only (not --backend jax)")
         run_seeds = parse_seeds(seeds) if seeds else [cfg.seed if seed is None else seed]
-        return _train_jax(key, run_seeds, steps, no_physics_penalty, data, cfg, out_dir, overwrite)
+        return _train_jax(key, run_seeds, steps, no_physics_penalty, data, cfg, out_dir, overwrite, chunk_steps)
+    if chunk_steps is not None:
+        raise CliError("--chunk-steps applies to --backend jax (SB3 checkpoints every --checkpoint-every steps)")
     spec = TrainSpec(
         algo=key,
         seed=cfg.seed if seed is None else seed,
@@ -177,33 +189,38 @@ def _train_jax(
     cfg: BenchmarkConfig,
     out_dir: Path,
     overwrite: bool,
+    chunk_steps: int | None,
 ) -> None:
-    """``train --backend jax``: every seed in one compiled vmap (see docs/jax.md)."""
+    """``train --backend jax``: every seed in one compiled vmap, run in chunks (see docs/jax.md)."""
     try:
         from ..training.jax_trainer import JaxTrainSpec, seed_dirs, train_jax
     except ImportError as error:
         raise CliError(str(error)) from None
-    spec = JaxTrainSpec(algo, tuple(seeds), steps, no_physics_penalty, data, cfg)
+    spec = JaxTrainSpec(algo, tuple(seeds), steps, no_physics_penalty, data, cfg, chunk_steps)
     dirs = seed_dirs(out_dir, spec.seeds)
     err_console.print(
-        f"training {algo.upper()} with JAX for {steps:,} steps × {len(seeds)} seed(s) into {out_dir} "
+        f"training {algo.upper()} with JAX for {spec.timesteps:,} steps × {len(spec.seeds)} seed(s) into {out_dir} "
         "(compiling first: seconds on an idle CPU, up to minutes on a busy one)",
         soft_wrap=True,
     )
-    with progress_bar(f"training {algo} (jax)", steps) as advance:
-        done = [0]
-
-        def report(now: int) -> None:
-            advance(max(now - done[0], 0))
-            done[0] = max(done[0], now)
-
-        outcome = train_jax(spec, dirs, on_progress=report, overwrite=overwrite, command=invoked_command())
+    label = f"{algo} (jax, seed{'s' if len(spec.seeds) > 1 else ''} {'+'.join(map(str, spec.seeds))})"
+    with TrainingProgress() as display:
+        outcome = train_jax(
+            spec,
+            dirs,
+            on_progress=lambda progress: display.update(label, progress),
+            on_note=lambda text: display.note(label, text),
+            overwrite=overwrite,
+            command=invoked_command(),
+        )
     if outcome.already_complete:
         console.print(f"{out_dir} already holds this finished training (pass --overwrite to train again)")
         return
+    resumed = f", resumed at step {outcome.resumed_from:,}" if outcome.resumed_from else ""
     console.print(
-        f"{algo.upper()} (jax): {len(seeds)} model(s) × {steps:,} steps in {outcome.train_s:.1f} s after "
-        f"{outcome.compile_s:.1f} s of compilation ({outcome.steps_per_s:,.0f} env-steps/s over all seeds)"
+        f"{algo.upper()} (jax): {len(spec.seeds)} model(s) × {outcome.steps_this_session:,} steps in "
+        f"{outcome.train_s:.1f} s after {outcome.compile_s:.1f} s of compilation "
+        f"({outcome.steps_per_s:,.0f} env-steps/s over all seeds{resumed})"
     )
     for path in outcome.model_paths:
         console.print(f"model: {path}", soft_wrap=True)

@@ -91,6 +91,10 @@ class GridSpec:
     agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
     #: VecNormalize statistics of ``sb3:`` user agents by name (None: the only one).
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
+    #: JAX train units: env steps per compiled chunk, after which progress is reported and the
+    #: train state checkpointed (None: the algorithm's default). The models do not depend on it,
+    #: so it is not part of the grid's identity.
+    chunk_steps: int | None = None
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         """The built-in policies evaluated in ``setting`` (:meth:`setting_agents` adds the user agents)."""
@@ -139,6 +143,8 @@ class GridSpec:
         unknown = [s for s in self.settings if s not in KNOWN_SETTINGS]
         if unknown:
             raise ValueError(f"unknown setting(s) {', '.join(unknown)} (registered: {', '.join(KNOWN_SETTINGS)})")
+        if self.chunk_steps is not None and (self.chunk_steps < 1 or self.backend != "jax"):
+            raise ValueError(f"chunk_steps ({self.chunk_steps}) must be at least 1 and needs the jax backend")
         if self.backend != "sb3" and self.uses_lagrangian:
             raise ValueError("ppo-lag trains with the sb3 backend only")
         if self.agents:

@@ -41,7 +41,7 @@ from .combine import combine_setting
 from .grid import GridSpec, Unit, eval_model_path, plan_units
 from .layout import PAPER_METADATA_FILE
 from .pool import Executor, InlineExecutor, LocalPool, RunReport, run_units
-from .units import UNIT_FILE, UnitResult, UnitTask, model_digest, read_done, undo
+from .units import UNIT_FILE, UnitProgress, UnitResult, UnitTask, model_digest, read_done, undo
 from .user_agents import absolute_paths, agent_identity, worker_spec
 
 
@@ -165,8 +165,12 @@ def run_paper(
     on_plan: Callable[[list[Unit], list[str]], None] | None = None,
     command: list[str] | None = None,
     ray_transfer: str = "auto",
+    on_progress: Callable[[UnitProgress], None] | None = None,
 ) -> PaperOutcome:
     """Run (or resume) the grid ``spec`` into ``root``; see the module docstring.
+
+    ``on_progress`` receives the JAX train units' progress after each chunk (local executors;
+    a Ray task's goes to its ``unit.log`` only).
 
     Raises
     ------
@@ -205,7 +209,7 @@ def run_paper(
         def make_task(unit: Unit) -> UnitTask:
             return _task(spec, root, data_dir, identity, unit, command)
 
-        executor = _executor(ray_address, root, data_dir, ray_transfer, workers)
+        executor = _executor(ray_address, root, data_dir, ray_transfer, workers, on_progress)
         report = run_units(
             units, done, make_task, executor, keep_going=keep_going, on_result=on_result, on_start=on_start
         )
@@ -227,12 +231,19 @@ def _finished_units(root: Path, units: list[Unit], spec: GridSpec) -> set[str]:
     return done
 
 
-def _executor(ray_address: str | None, root: Path, data_dir: Path, ray_transfer: str, workers: int) -> Executor:
+def _executor(
+    ray_address: str | None,
+    root: Path,
+    data_dir: Path,
+    ray_transfer: str,
+    workers: int,
+    on_progress: Callable[[UnitProgress], None] | None = None,
+) -> Executor:
     if ray_address:
         from .ray_executor import RayExecutor
 
         return RayExecutor(ray_address, root, data_dir, transfer=ray_transfer, workers=workers)
-    return LocalPool(workers) if workers > 1 else InlineExecutor()
+    return LocalPool(workers, on_progress=on_progress) if workers > 1 else InlineExecutor(on_progress)
 
 
 def _combine_and_record(spec: GridSpec, outcome: PaperOutcome, done: set[str], meta: dict, started: float) -> None:
@@ -330,6 +341,7 @@ def _task(
         agent_spec=worker_spec(unit.policy, agent) if agent is not None else None,
         agent_args=spec.agent_args if agent is not None else {},
         vecnormalize=absolute_paths(spec.vecnormalize) if agent is not None else {},
+        chunk_steps=spec.chunk_steps,
     )
 
 

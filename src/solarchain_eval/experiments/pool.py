@@ -29,7 +29,10 @@ from typing import Protocol
 
 from ..common.cpus import available_cpus, can_pin, pin_to_cpu
 from .grid import Unit
-from .units import UnitResult, UnitTask, execute_unit
+from .units import UnitProgress, UnitResult, UnitTask, execute_unit
+
+#: Receives the running units' progress (JAX trainings' chunks) as they come.
+ProgressHandler = Callable[[UnitProgress], None]
 
 
 class Executor(Protocol):
@@ -49,14 +52,15 @@ class InlineExecutor:
 
     capacity = 1
 
-    def __init__(self) -> None:
+    def __init__(self, on_progress: ProgressHandler | None = None) -> None:
         self._queue: list[UnitTask] = []
+        self.on_progress = on_progress
 
     def submit(self, task: UnitTask) -> None:
         self._queue.append(task)
 
     def wait(self) -> list[UnitResult]:
-        return [execute_unit(self._queue.pop(0))]
+        return [execute_unit(self._queue.pop(0), on_progress=self.on_progress)]
 
     def abort(self) -> list[str]:
         names = [t.unit.name for t in self._queue]
@@ -103,7 +107,7 @@ def _worker_main(conn: Connection, parent_pid: int, cpu: int | None = None) -> N
             return
         if task is None:
             return
-        conn.send(execute_unit(task))
+        conn.send(execute_unit(task, on_progress=conn.send))  # progress messages, then the result
 
 
 @dataclass
@@ -116,10 +120,15 @@ class _Worker:
 
 @dataclass
 class LocalPool:
-    """``workers`` long-lived worker processes, one unit at a time each."""
+    """``workers`` long-lived worker processes, one unit at a time each.
+
+    A worker sends its unit's :class:`~.units.UnitProgress` messages before the result; they
+    go to ``on_progress`` as :meth:`wait` reads them.
+    """
 
     workers: int
     context: str = "spawn"
+    on_progress: ProgressHandler | None = None
     _pool: list[_Worker] = field(default_factory=list)
 
     def __post_init__(self) -> None:
@@ -142,6 +151,7 @@ class LocalPool:
         worker.task = task
 
     def wait(self) -> list[UnitResult]:
+        """The results that came in (none when only progress did)."""
         busy = [w for w in self._pool if w.task is not None]
         ready = wait([w.conn for w in busy] + [w.process.sentinel for w in busy])
         results = []
@@ -151,11 +161,17 @@ class LocalPool:
             if worker.conn in ready or worker.process.sentinel in ready:
                 if worker.conn.poll():
                     try:
-                        results.append(worker.conn.recv())
+                        message = worker.conn.recv()
+                    except EOFError:
+                        message = None
+                    if isinstance(message, UnitProgress):  # the unit runs on; its result comes later
+                        if self.on_progress is not None:
+                            self.on_progress(message)
+                        continue
+                    if message is not None:
+                        results.append(message)
                         worker.task = None
                         continue
-                    except EOFError:
-                        pass
                 worker.process.join(timeout=5)
                 code = worker.process.exitcode
                 results.append(UnitResult(task.unit.name, False, 0.0, f"worker process died (exit code {code})", None))

@@ -4,7 +4,8 @@ A unit directory is written in this order: ``unit.json`` (what the unit is), the
 (each file atomically), then the done-marker ``DONE`` (a small JSON with the unit's wall time).
 ``unit.log`` is an append-only, human-readable log (start, progress, result, traceback) that no
 later stage reads. Redoing a unit first removes the outputs of an earlier, unfinished attempt;
-a train unit keeps its files, so training resumes from its checkpoint.
+a train unit keeps its files, so training resumes from its checkpoint (SB3's, or the JAX
+backend's last chunk).
 """
 
 from __future__ import annotations
@@ -14,6 +15,7 @@ import os
 import shutil
 import time
 import traceback
+from collections.abc import Callable
 from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
@@ -23,6 +25,7 @@ from ..common.atomic_files import atomic_write_json, sha256_file
 from ..config import BenchmarkConfig
 from ..governance.factory import AgenticOptions
 from ..protocol import EPISODE_SEED_RULES
+from ..training.jax_progress import ChunkProgress
 from ..training.lagrangian import LagrangianSettings
 from ..training.sb3_trainer import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
 from .grid import Unit
@@ -54,6 +57,16 @@ class UnitTask:
     agent_spec: str | None = None
     agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
+    chunk_steps: int | None = None  # JAX train units: env steps per chunk (None: the algorithm's default)
+
+
+@dataclass(frozen=True)
+class UnitProgress:
+    """A running unit's news for the driver: a JAX training's chunk done, or a note (a resume)."""
+
+    unit: str
+    progress: ChunkProgress | None = None
+    note: str | None = None
 
 
 @dataclass(frozen=True)
@@ -123,7 +136,9 @@ class _UnitLog:
         return None
 
 
-def execute_unit(task: UnitTask, *, mark_done: bool = True) -> UnitResult:
+def execute_unit(
+    task: UnitTask, *, mark_done: bool = True, on_progress: Callable[[UnitProgress], None] | None = None
+) -> UnitResult:
     """Run one unit into ``task.unit_dir``; never raises for a failing unit.
 
     Parameters
@@ -131,6 +146,9 @@ def execute_unit(task: UnitTask, *, mark_done: bool = True) -> UnitResult:
     task : UnitTask
     mark_done : bool
         Write ``DONE`` at the end (False when the caller moves the files elsewhere first).
+    on_progress : callable, optional
+        Receives a :class:`UnitProgress` after each chunk of a JAX train unit (and its notes);
+        ``unit.log`` gets the same lines either way.
 
     Returns
     -------
@@ -147,7 +165,7 @@ def execute_unit(task: UnitTask, *, mark_done: bool = True) -> UnitResult:
         set_torch_threads(1)
         atomic_write_json(unit_dir / UNIT_FILE, {"unit": unit.name, **task.identity})
         if unit.kind == "train":
-            _train_unit(task, log)
+            _train_unit(task, log, on_progress)
         else:
             _evaluate_unit(task)
         wall_s = time.perf_counter() - started
@@ -163,10 +181,10 @@ def execute_unit(task: UnitTask, *, mark_done: bool = True) -> UnitResult:
         log.close()
 
 
-def _train_unit(task: UnitTask, log: _UnitLog) -> None:
+def _train_unit(task: UnitTask, log: _UnitLog, on_progress: Callable[[UnitProgress], None] | None) -> None:
     unit = task.unit
     if unit.backend == "jax":
-        return _train_jax_unit(task, log)
+        return _train_jax_unit(task, log, on_progress)
     spec = TrainSpec(
         algo=unit.policy,
         seed=unit.seed,
@@ -191,18 +209,39 @@ def _train_unit(task: UnitTask, log: _UnitLog) -> None:
     log.write(f"{outcome.timesteps_done:,} steps at {outcome.steps_per_s:,.0f} steps/s")
 
 
-def _train_jax_unit(task: UnitTask, log: _UnitLog) -> None:
-    """A seed group with the JAX backend, one vmap, each model in ``seed_<s>/`` (no checkpoints:
-    a redone unit trains again unless it had finished)."""
+def _train_jax_unit(task: UnitTask, log: _UnitLog, on_progress: Callable[[UnitProgress], None] | None) -> None:
+    """A seed group with the JAX backend, one vmap, each model in ``seed_<s>/``; trained in
+    chunks with a checkpoint after each in ``checkpoints/``, so a redone unit continues from
+    its last chunk."""
     from ..training.jax_trainer import JaxTrainSpec, train_jax
 
     unit = task.unit
     seeds = unit.seed_group or (unit.seed,)
-    spec = JaxTrainSpec(unit.policy, seeds, task.timesteps, task.no_physics_penalty, task.data_dir, task.config)
+    spec = JaxTrainSpec(
+        unit.policy, seeds, task.timesteps, task.no_physics_penalty, task.data_dir, task.config, task.chunk_steps
+    )
     out_dirs = {seed: seed_model_dir(task.unit_dir, seed) for seed in seeds}
     for directory in out_dirs.values():
         directory.mkdir(parents=True, exist_ok=True)
-    outcome = train_jax(spec, out_dirs, command=list(task.command))
+
+    def report(progress: ChunkProgress) -> None:
+        log.write(f"trained {progress.describe()}")
+        if on_progress is not None:
+            on_progress(UnitProgress(unit.name, progress=progress))
+
+    def note(text: str) -> None:
+        log.write(text)
+        if on_progress is not None:
+            on_progress(UnitProgress(unit.name, note=text))
+
+    outcome = train_jax(
+        spec,
+        out_dirs,
+        on_progress=report,
+        on_note=note,
+        command=list(task.command),
+        checkpoint_dir=task.unit_dir / CHECKPOINT_DIR,
+    )
     if outcome.already_complete:
         log.write("the finished training was already there")
     else:

@@ -119,3 +119,77 @@ def describe_flags() -> dict[str, Any]:
     import os
 
     return {"XLA_FLAGS": os.environ.get("XLA_FLAGS", ""), "devices": [str(d) for d in jax.devices()]}
+
+
+@dataclass(frozen=True)
+class ChunkingCost:
+    """Steps/s per model of one training run three ways, alternately in one process."""
+
+    algo: str
+    seeds: int
+    steps: int  # env steps per model and run
+    chunk_steps: int
+    one_loop: Throughput  # the trainer's loop program, the whole run in one call
+    chunked: Throughput  # the same program per chunk, a checkpoint and a progress report after each
+    rejax_train: Throughput  # rejax's own train (the initial state computed inside the program)
+    checkpoint_mb: float
+    checkpoint_s: float  # median seconds to write one checkpoint
+
+
+def chunking_cost(
+    algo: str,
+    data_dir: Path,
+    repeats: int,
+    *,
+    chunk_steps: int | None = None,
+    chunks: int = 3,
+    seeds: int = 3,
+    buffer_timesteps: int | None = None,
+    config: BenchmarkConfig | None = None,
+) -> ChunkingCost:
+    """What training in chunks costs: ``chunks`` chunks of ``chunk_steps`` env steps per model
+    (default: the trainer's) against the same steps in one call, ``repeats`` times each.
+
+    The chunked run is the trainer's own (:func:`~..training.jax_chunks.run_chunks`): each
+    chunk's state is fetched, written as a checkpoint into a temporary directory and reported.
+    """
+    from ..training.jax_chunks import ChunkedTraining, config_sha256, run_chunks
+    from ..training.jax_progress import DEFAULT_CHUNK_STEPS
+
+    cfg = config or BenchmarkConfig()
+    params = make_env_params(data_dir, config=cfg, action_mode=ACTION_MODES[algo])
+    batch = tuple(range(seeds))
+    per_chunk = chunk_steps or DEFAULT_CHUNK_STEPS[algo]
+    probe = ChunkedTraining(algo, batch, per_chunk, params, cfg, per_chunk, buffer_timesteps)
+    steps = chunks * probe.plan.chunk_steps  # whole iterations (PPO rollouts, DQN's 4 envs)
+    training = ChunkedTraining(algo, batch, steps, params, cfg, per_chunk, buffer_timesteps)
+    training.compile()
+    rejax, _ = compile_training(algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps)
+    one_loop, chunked, rejax_train, writes = [], [], [], []
+    with tempfile.TemporaryDirectory() as tmp:
+        checkpoint = Path(tmp) / "jax_chunks.npz"
+        for _ in range(repeats):
+            start = time.perf_counter()
+            training.run()
+            one_loop.append(steps / (time.perf_counter() - start))
+            checkpoint.unlink(missing_ok=True)  # each chunked run starts from scratch
+            start = time.perf_counter()
+            run = run_chunks(training, checkpoint, config_sha256({"bench": algo}), on_progress=lambda p: None)
+            chunked.append(steps / (time.perf_counter() - start))
+            writes.append(run.checkpoint_s / max(run.chunks_run, 1))
+            start = time.perf_counter()
+            jax.block_until_ready(rejax(training.keys))
+            rejax_train.append(steps / (time.perf_counter() - start))
+        size_mb = checkpoint.stat().st_size / 1e6
+    label = f"{algo.upper()} ({seeds} seed(s) vmapped, per model)"
+    return ChunkingCost(
+        algo,
+        seeds,
+        steps,
+        training.plan.chunk_steps,
+        Throughput(f"{label}, one call", "steps/s", tuple(one_loop)),
+        Throughput(f"{label}, chunked", "steps/s", tuple(chunked)),
+        Throughput(f"{label}, rejax train", "steps/s", tuple(rejax_train)),
+        size_mb,
+        statistics.median(writes),
+    )

@@ -73,6 +73,10 @@ def sb3_variant(algo: str) -> type:
       done False (SB3's ``handle_timeout_termination``; :func:`_step_for_buffer`).
     - The replay minibatches (SAC, DQN): SB3 draws them uniformly with replacement; rejax
       without replacement, at a cost that grows with the buffer (:mod:`.replay`).
+
+    Not an alignment, but here because this is where rejax's state is defined: the train state
+    also carries the training episodes' returns (``episode_returns``, :mod:`.jax_episodes`),
+    which the trainer reports between chunks; they only read the rewards.
     """
     import jax.numpy as jnp
     import optax
@@ -83,6 +87,14 @@ def sb3_variant(algo: str) -> type:
     base = rejax.get_algo(algo)
 
     class SB3Variant(base):  # type: ignore[misc, valid-type]
+        @register_init
+        def initialize_training_returns(self, rng):
+            # rejax calls the inits in name order, each with the next split of the key: this name
+            # sorts last, so every other part of the state gets the key it had without it.
+            from .jax_episodes import EpisodeReturns
+
+            return {"episode_returns": EpisodeReturns.empty(self.num_envs)}
+
         @register_init
         def initialize_network_params(self, rng):
             state = super().initialize_network_params(rng)
@@ -129,6 +141,16 @@ def sb3_variant(algo: str) -> type:
                 ts, batch = super().collect_transitions(ts, *args, **kwargs)
                 observe = jax.vmap(self.env.get_obs, in_axes=(0, None))
                 return ts.replace(last_obs=observe(ts.env_state, self.env_params)), batch
+
+            def train_iteration(self, ts):
+                # The episode returns, from the rewards the iteration stored in the buffer. Summed
+                # inside collect_transitions, they make XLA compile the step differently and the
+                # trained networks change in their last bits; read back here, they do not.
+                ts = super().train_iteration(ts)
+                buffer = ts.replay_buffer
+                rows = (buffer.index - self.num_envs + jnp.arange(self.num_envs)) % buffer.size
+                ended = ts.env_state.time == 0
+                return ts.replace(episode_returns=ts.episode_returns.record(buffer.data.reward[rows], ended))
 
     SB3Variant.__name__ = f"{base.__name__}SB3Variant"
     return SB3Variant
@@ -199,7 +221,34 @@ def _bootstrapped_rollout(self: Any, ts: Any) -> tuple[Any, Any]:
         )
         return ts, transition
 
-    return jax.lax.scan(env_step, ts, None, self.num_steps)
+    start = ts
+    ts, trajectories = jax.lax.scan(env_step, ts, None, self.num_steps)
+    return ts.replace(episode_returns=_rollout_returns(self, start, trajectories)), trajectories
+
+
+def _rollout_returns(self: Any, start: Any, trajectories: Any) -> Any:
+    """The episode returns after a PPO rollout, from the env's own rewards (without the bootstrap).
+
+    The rollout's rewards carry the bootstrap at truncations, so the env is stepped again from
+    the rollout's first state with its keys and actions. Summing the rewards inside the rollout
+    instead makes XLA compile it differently, and the trained networks would change in their
+    last bits; this way the training is the same computation as without the record.
+    """
+    import jax.numpy as jnp
+
+    space = self.env.action_space(self.env_params)
+
+    def replay(carry: tuple[Any, Any, Any], action: Any) -> tuple[tuple[Any, Any, Any], None]:
+        rng, env_state, returns = carry
+        rng, new_rng = jax.random.split(rng)  # the key schedule of env_step above
+        rng_steps, _ = jax.random.split(new_rng, 2)
+        rng_steps = jax.random.split(rng_steps, self.num_envs)
+        action = action if self.discrete else jnp.clip(action, space.low, space.high)
+        _, env_state, reward, done, _ = self.vmap_step(rng_steps, env_state, action, self.env_params)
+        return (rng, env_state, returns.record(reward, done)), None
+
+    (_, _, returns), _ = jax.lax.scan(replay, (start.rng, start.env_state, start.episode_returns), trajectories.action)
+    return returns
 
 
 def _step_for_buffer(step: Any) -> Any:

@@ -7,12 +7,15 @@ so is PPO's value loss (unclipped); the remaining differences between the librar
 listed in docs/jax.md. Each seed's acting network (actor, or
 Q-network for DQN) is written to ``jax_model.msgpack`` in its directory with
 ``train_config.json`` and ``train_metadata.json`` beside it; ``evaluate --models`` loads it
-through :class:`~solarchain_eval.agents.jax_checkpoint.JaxPolicy`.
+through :class:`~solarchain_eval.agents.jax_checkpoint.JaxPolicy`. The training runs in
+compiled chunks with progress and a checkpoint after each (:mod:`.jax_chunks`).
 """
 
 from __future__ import annotations
 
+import contextlib
 import json
+import os
 import sys
 import time
 import warnings
@@ -34,7 +37,8 @@ from ..common.versions import git_commit, package_versions
 from ..config import BenchmarkConfig
 from ..envs.jax_env import EnvParams, SolarChainJaxEnv, make_env_params
 from .jax_alignment import SB3_ALIGNMENT, sb3_variant
-from .sb3_trainer import TRAIN_METADATA_FILE, TrainSpec, differences, dqn_learning_starts
+from .jax_progress import ChunkProgress
+from .sb3_trainer import CHECKPOINT_DIR, TRAIN_METADATA_FILE, TrainSpec, differences, dqn_learning_starts
 
 
 def rejax_config(
@@ -114,23 +118,19 @@ def iteration_steps(algo: str, settings: dict[str, Any]) -> int:
 
 
 def progress_chunks(iterations: int, most: int = 10) -> int:
-    """The largest divisor of ``iterations`` up to ``most``: progress reports that keep the step count exact."""
+    """The largest divisor of ``iterations`` up to ``most``: blocks of rejax's ``train`` that keep the step count exact."""
     return max(k for k in range(1, min(most, iterations) + 1) if iterations % k == 0)
 
 
 def make_algo(
-    algo: str,
-    params: EnvParams,
-    config: BenchmarkConfig,
-    timesteps: int,
-    on_progress: Callable[[int], None] | None = None,
-    buffer_timesteps: int | None = None,
+    algo: str, params: EnvParams, config: BenchmarkConfig, timesteps: int, buffer_timesteps: int | None = None
 ) -> Any:
-    """The rejax algorithm, reporting the steps done ``progress_chunks`` times through ``on_progress``.
+    """The rejax algorithm (SB3-aligned, :func:`~.jax_alignment.sb3_variant`) for ``timesteps`` steps.
 
-    rejax runs ``ceil(total / eval_freq)`` chunks of ``ceil(eval_freq / iteration)`` iterations
-    with an evaluation callback after each; ``eval_freq`` is set to a whole number of iterations
-    so that the chunks add up to exactly SB3's step count, and the callback only reports progress.
+    rejax's own ``train`` runs ``ceil(total / eval_freq)`` blocks of ``ceil(eval_freq / iteration)``
+    iterations with an evaluation callback after each; ``eval_freq`` is set to a whole number of
+    iterations so that the blocks add up to exactly SB3's step count, and the callback does nothing.
+    The backend's trainer runs the iterations in chunks instead (:mod:`.jax_chunks`).
     """
     import jax.numpy as jnp
 
@@ -139,13 +139,7 @@ def make_algo(
     iterations = -(-int(timesteps) // per_iteration)
     settings["eval_freq"] = iterations // progress_chunks(iterations) * per_iteration
     instance = sb3_variant(algo).create(env=SolarChainJaxEnv(params), env_params=params, **settings)
-
-    def report(algo_instance: Any, ts: Any, rng: Any) -> Any:
-        if on_progress is not None:
-            jax.debug.callback(lambda step: on_progress(int(np.max(step))), ts.global_step)
-        return jnp.zeros(())
-
-    return instance.replace(eval_callback=report)
+    return instance.replace(eval_callback=lambda algo_instance, ts, rng: jnp.zeros(()))
 
 
 def use_compilation_cache() -> None:
@@ -166,12 +160,13 @@ def compile_training(
     timesteps: int,
     params: EnvParams,
     config: BenchmarkConfig,
-    on_progress: Callable[[int], None] | None = None,
     buffer_timesteps: int | None = None,
 ) -> tuple[Any, float]:
-    """``jit(vmap(train))`` over the seeds' keys, compiled; returns (compiled function, compile s)."""
+    """rejax's own ``train`` as one program, ``jit(vmap(train))`` over the seeds' keys, compiled;
+    returns (compiled function, compile s). ``bench-train`` times it; the trainer runs
+    :class:`~.jax_chunks.ChunkedTraining`."""
     use_compilation_cache()
-    instance = make_algo(algo, params, config, timesteps, on_progress, buffer_timesteps)
+    instance = make_algo(algo, params, config, timesteps, buffer_timesteps)
     keys = seed_keys(seeds)
     start = time.perf_counter()
     with warnings.catch_warnings():
@@ -183,21 +178,6 @@ def compile_training(
 
 def seed_keys(seeds: tuple[int, ...]) -> jax.Array:
     return jax.vmap(jax.random.key)(np.asarray(seeds, dtype=np.uint32))
-
-
-def train_seeds(
-    algo: str,
-    seeds: tuple[int, ...],
-    timesteps: int,
-    params: EnvParams,
-    config: BenchmarkConfig,
-    on_progress: Callable[[int], None] | None = None,
-) -> tuple[Any, float, float]:
-    """Train one model per seed in one jitted vmap; returns (train states, compile s, train s)."""
-    compiled, compile_s = compile_training(algo, seeds, timesteps, params, config, on_progress)
-    start = time.perf_counter()
-    states, _ = jax.block_until_ready(compiled(seed_keys(seeds)))
-    return states, compile_s, time.perf_counter() - start
 
 
 @dataclass(frozen=True)
@@ -216,6 +196,10 @@ class JaxTrainSpec:
     no_physics_penalty : bool
     data_dir : path, optional
     config : BenchmarkConfig
+    chunk_steps : int, optional
+        Env steps per model in one compiled chunk, between which progress is reported and the
+        train state checkpointed (default per algorithm:
+        :data:`~.jax_progress.DEFAULT_CHUNK_STEPS`). It does not change the trained models.
     """
 
     algo: str
@@ -224,6 +208,7 @@ class JaxTrainSpec:
     no_physics_penalty: bool = False
     data_dir: Path | None = None
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    chunk_steps: int | None = None
 
     def seed_spec(self, seed: int) -> TrainSpec:
         return TrainSpec(self.algo, seed, self.timesteps, self.no_physics_penalty, self.data_dir, self.config)
@@ -238,11 +223,16 @@ class JaxTrainOutcome:
     train_s: float
     model_paths: tuple[Path, ...]
     already_complete: bool = False
+    resumed_from: int | None = None  # env steps per model at which this session resumed
+    steps_this_session: int = 0  # env steps per model trained in this session
+    #: The final train states of all seeds, for tests and analyses (leading axis: the seed, except
+    #: on leaves that are the same for every seed; see :class:`~.jax_chunks.ChunkRun`).
+    states: Any = field(default=None, repr=False, compare=False)
 
     @property
     def steps_per_s(self) -> float:
-        """Env steps of all seeds per second of training (compilation excluded)."""
-        return self.timesteps * len(self.seeds) / max(self.train_s, 1e-9)
+        """Env steps of all seeds per second of training in this session (compilation excluded)."""
+        return self.steps_this_session * len(self.seeds) / max(self.train_s, 1e-9)
 
 
 def seed_dirs(out_dir: Path, seeds: tuple[int, ...]) -> dict[int, Path]:
@@ -300,9 +290,11 @@ def train_jax(
     spec: JaxTrainSpec,
     out_dirs: dict[int, Path],
     *,
-    on_progress: Callable[[int], None] | None = None,
+    on_progress: Callable[[ChunkProgress], None] | None = None,
+    on_note: Callable[[str], None] | None = None,
     overwrite: bool = False,
     command: list[str] | None = None,
+    checkpoint_dir: Path | None = None,
 ) -> JaxTrainOutcome:
     """Train ``spec.algo`` for every seed at once and write each seed's directory.
 
@@ -310,8 +302,18 @@ def train_jax(
     flax msgpack), ``train_config.json`` (identity, rejax settings; written first) and
     ``train_metadata.json`` (times, steps/s, versions; ``"complete": true``, written last).
     A directory that already holds the same finished training is left as it is; when every
-    seed's is, nothing is trained (``already_complete``). There are no checkpoints: a killed
-    run trains again from the start.
+    seed's is, nothing is trained (``already_complete``).
+
+    The training runs in chunks (:mod:`.jax_chunks`); after each, the whole train state is
+    written to ``checkpoint_dir/jax_chunks.npz`` and ``on_progress`` receives a
+    :class:`~.jax_progress.ChunkProgress`. A killed run resumes from that checkpoint when
+    called again with the same spec (a checkpoint of another training is ignored, with a note
+    to ``on_note``); the checkpoint is removed once the models are written.
+
+    Parameters
+    ----------
+    checkpoint_dir : path, optional
+        Default: ``checkpoints/`` in the directory that holds every seed's directory.
 
     Raises
     ------
@@ -321,10 +323,13 @@ def train_jax(
     from ..data.default import resolve_data_dir
     from ..data.provenance import dataset_provenance
     from ..data.table import load_table
+    from .jax_chunks import CHECKPOINT_FILE, ChunkedTraining, config_sha256, run_chunks
 
     algo = check_algo(spec.algo)
     if algo not in ACTION_MODES or spec.timesteps < 1 or not spec.seeds or set(out_dirs) != set(spec.seeds):
         raise TrainingError(f"cannot train {algo} with the JAX backend for seeds {list(spec.seeds)}")
+    if spec.chunk_steps is not None and spec.chunk_steps < 1:
+        raise TrainingError(f"chunk_steps must be at least 1, got {spec.chunk_steps}")
     cfg = spec.config
     data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir)
     table = load_table(data_dir)
@@ -335,6 +340,10 @@ def train_jax(
         return JaxTrainOutcome(algo, tuple(spec.seeds), int(spec.timesteps), 0.0, 0.0, paths, already_complete=True)
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     settings = rejax_config(algo, cfg, spec.timesteps)
+    checkpoint = Path(checkpoint_dir or Path(os.path.commonpath([Path(d) for d in out_dirs.values()])) / CHECKPOINT_DIR)
+    checkpoint = checkpoint / CHECKPOINT_FILE
+    if overwrite:
+        checkpoint.unlink(missing_ok=True)
     for seed in spec.seeds:
         directory = Path(out_dirs[seed])
         for name in (JAX_MODEL_FILE, TRAIN_METADATA_FILE):
@@ -344,12 +353,16 @@ def train_jax(
     params = make_env_params(
         table=table, config=cfg, action_mode=ACTION_MODES[algo], no_physics_penalty=spec.no_physics_penalty
     )
-    states, compile_s, train_s = train_seeds(algo, tuple(spec.seeds), spec.timesteps, params, cfg, on_progress)
+    training = ChunkedTraining(algo, tuple(spec.seeds), spec.timesteps, params, cfg, spec.chunk_steps)
+    sha256 = config_sha256({"seeds": list(spec.seeds), "identities": [identities[s] for s in spec.seeds]})
+    run = run_chunks(training, checkpoint, sha256, on_progress=on_progress, on_note=on_note)
+    states, plan = run.states, training.plan
+    steps_now = plan.total_steps - (run.resumed_from or 0)
     paths = []
     for i, seed in enumerate(spec.seeds):
         directory = Path(out_dirs[seed])
         paths.append(save_network(directory / JAX_MODEL_FILE, algo, states, i))
-        steps_done = int(np.asarray(states.global_step)[i])
+        steps_done = int(np.max(states.global_step))  # one counter for all seeds (rejax's layout)
         atomic_write_json(
             directory / TRAIN_METADATA_FILE,
             {
@@ -360,10 +373,14 @@ def train_jax(
                 "seeds_in_batch": [int(s) for s in spec.seeds],
                 "timesteps_requested": int(spec.timesteps),
                 "timesteps_done": steps_done,
-                "compile_s": round(compile_s, 3),
-                "train_s": round(train_s, 3),
-                "wall_s": round(compile_s + train_s, 3),
-                "steps_per_s": round(steps_done / max(train_s, 1e-9), 2),
+                "compile_s": round(run.compile_s, 3),
+                "train_s": round(run.train_s, 3),
+                "wall_s": round(run.compile_s + run.train_s, 3),
+                "steps_per_s": round(steps_now / max(run.train_s, 1e-9), 2),
+                "chunk_steps": plan.chunk_steps,
+                "chunks_this_session": run.chunks_run,
+                "checkpoint_s": round(run.checkpoint_s, 3),
+                "resumed_from": run.resumed_from,
                 "jax_devices": [str(d) for d in jax.devices()],
                 "started_at": started_at,
                 "command": redact_command(command if command is not None else sys.argv),
@@ -371,4 +388,10 @@ def train_jax(
                 "package_versions": package_versions(),
             },
         )
-    return JaxTrainOutcome(algo, tuple(spec.seeds), int(spec.timesteps), compile_s, train_s, tuple(paths))
+    checkpoint.unlink(missing_ok=True)  # the models are written: nothing to resume any more
+    with contextlib.suppress(OSError):
+        checkpoint.parent.rmdir()  # only if empty
+    return JaxTrainOutcome(
+        algo, tuple(spec.seeds), int(spec.timesteps), run.compile_s, run.train_s, tuple(paths),
+        resumed_from=run.resumed_from, steps_this_session=steps_now, states=states,
+    )  # fmt: skip
