@@ -205,6 +205,7 @@ def _train_jax(
     )
     label = f"{algo} (jax, seed{'s' if len(spec.seeds) > 1 else ''} {'+'.join(map(str, spec.seeds))})"
     with TrainingProgress() as display:
+        display.start(label, steps)
         outcome = train_jax(
             spec,
             dirs,
