@@ -101,7 +101,7 @@ def test_resumed_training_equals_the_uninterrupted_one_bit_for_bit(runs, tiny_da
     from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
 
     whole, resumed, root = runs["whole"], runs["resumed"], runs["root"]
-    assert resumed.resumed_from == 300 and resumed.steps_this_session == 300 and whole.resumed_from is None
+    assert resumed.resumed_from == 300 and resumed.steps_trained == 300 and whole.resumed_from is None
     assert runs["notes"] == [
         f"resuming from the checkpoint at step 300 ({root / 'resumed' / 'checkpoints' / 'jax_chunks.npz'})"
     ]

@@ -101,6 +101,10 @@ def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
                 err_console.print(f"{len(already)} of {len(units)} units already done: skipped")
                 display.advance_units(len(already))
 
+        def on_start(unit: Unit) -> None:
+            if unit.kind == "train" and unit.backend == "jax":
+                display.start(unit.name, spec.timesteps)
+
         def on_progress(news: UnitProgress) -> None:
             if news.progress is not None:
                 display.update(news.unit, news.progress)
@@ -125,6 +129,7 @@ def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
                 spec,
                 out,
                 on_plan=on_plan,
+                on_start=on_start,
                 on_result=on_result,
                 on_progress=on_progress,
                 command=invoked_command(),

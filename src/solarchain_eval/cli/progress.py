@@ -61,6 +61,11 @@ class TrainingProgress:
     ) -> None:
         self._progress.__exit__(kind, error, trace)
 
+    def start(self, label: str, total_steps: int, info: str = "compiling") -> None:
+        """Show ``label``'s row before its first chunk (live display only)."""
+        if self.live and label not in self._tasks:
+            self._tasks[label] = self._progress.add_task(label, total=total_steps, info=info)
+
     def update(self, label: str, progress: ChunkProgress) -> None:
         """``label``'s training finished a chunk: a new row state, or a plain line."""
         if not self.live:
@@ -68,7 +73,9 @@ class TrainingProgress:
             return
         if label not in self._tasks:
             self._tasks[label] = self._progress.add_task(label, total=progress.total_steps, info="")
-        self._progress.update(self._tasks[label], completed=progress.steps_done, info=_summary(progress))
+        self._progress.update(
+            self._tasks[label], total=progress.total_steps, completed=progress.steps_done, info=_summary(progress)
+        )
 
     def note(self, label: str, text: str) -> None:
         self.console.print(Text.assemble((label, "bold"), f": {text}"), soft_wrap=True)

@@ -205,6 +205,7 @@ def _train_jax(
     )
     label = f"{algo} (jax, seed{'s' if len(spec.seeds) > 1 else ''} {'+'.join(map(str, spec.seeds))})"
     with TrainingProgress() as display:
+        display.start(label, steps)
         outcome = train_jax(
             spec,
             dirs,
@@ -218,7 +219,7 @@ def _train_jax(
         return
     resumed = f", resumed at step {outcome.resumed_from:,}" if outcome.resumed_from else ""
     console.print(
-        f"{algo.upper()} (jax): {len(spec.seeds)} model(s) × {outcome.steps_this_session:,} steps in "
+        f"{algo.upper()} (jax): {len(spec.seeds)} model(s) × {outcome.steps_trained:,} steps in "
         f"{outcome.train_s:.1f} s after {outcome.compile_s:.1f} s of compilation "
         f"({outcome.steps_per_s:,.0f} env-steps/s over all seeds{resumed})"
     )

@@ -243,7 +243,7 @@ def load_checkpoint(path: Path, template: Any, sha256: str) -> tuple[Any, dict[s
 
 @dataclass(frozen=True)
 class ChunkRun:
-    """What :func:`run_chunks` did in this session.
+    """What one call of :func:`run_chunks` did.
 
     ``states`` is the final train state of all seeds (rejax's state class): a leaf has a
     leading seed axis unless it is the same for every seed (:func:`seed_invariant_leaves`).

@@ -40,11 +40,12 @@ class ChunkProgress:
         Mean return of the last :data:`RECENT_EPISODES` finished training episodes of every
         environment of every seed (None before the first episode ends).
     steps_per_s : float
-        Env steps per model per second in this session (compilation excluded, checkpoints included).
+        Env steps per model per second since this call started (compilation excluded, checkpoints
+        included).
     eta_s : float or None
         Seconds to the end at ``steps_per_s``.
     resumed_from : int or None
-        The step this session resumed from (None: it started from scratch).
+        The step this call resumed from (None: it started from scratch).
     """
 
     algo: str

@@ -223,16 +223,16 @@ class JaxTrainOutcome:
     train_s: float
     model_paths: tuple[Path, ...]
     already_complete: bool = False
-    resumed_from: int | None = None  # env steps per model at which this session resumed
-    steps_this_session: int = 0  # env steps per model trained in this session
+    resumed_from: int | None = None  # env steps per model at which this call resumed
+    steps_trained: int = 0  # env steps per model trained by this call
     #: The final train states of all seeds, for tests and analyses (leading axis: the seed, except
     #: on leaves that are the same for every seed; see :class:`~.jax_chunks.ChunkRun`).
     states: Any = field(default=None, repr=False, compare=False)
 
     @property
     def steps_per_s(self) -> float:
-        """Env steps of all seeds per second of training in this session (compilation excluded)."""
-        return self.steps_this_session * len(self.seeds) / max(self.train_s, 1e-9)
+        """Env steps of all seeds per second of training in this call (compilation excluded)."""
+        return self.steps_trained * len(self.seeds) / max(self.train_s, 1e-9)
 
 
 def seed_dirs(out_dir: Path, seeds: tuple[int, ...]) -> dict[int, Path]:
@@ -378,7 +378,7 @@ def train_jax(
                 "wall_s": round(run.compile_s + run.train_s, 3),
                 "steps_per_s": round(steps_now / max(run.train_s, 1e-9), 2),
                 "chunk_steps": plan.chunk_steps,
-                "chunks_this_session": run.chunks_run,
+                "chunks_run": run.chunks_run,
                 "checkpoint_s": round(run.checkpoint_s, 3),
                 "resumed_from": run.resumed_from,
                 "jax_devices": [str(d) for d in jax.devices()],
@@ -393,5 +393,5 @@ def train_jax(
         checkpoint.parent.rmdir()  # only if empty
     return JaxTrainOutcome(
         algo, tuple(spec.seeds), int(spec.timesteps), run.compile_s, run.train_s, tuple(paths),
-        resumed_from=run.resumed_from, steps_this_session=steps_now, states=states,
+        resumed_from=run.resumed_from, steps_trained=steps_now, states=states,
     )  # fmt: skip
