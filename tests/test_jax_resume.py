@@ -232,3 +232,23 @@ def test_paper_resumes_a_killed_jax_train_unit_from_its_last_chunk(tiny_dataset,
     for seed in seeds.split(","):
         model = f"seed_{seed}/jax_model.msgpack"
         assert (unit / model).read_bytes() == (tmp_path / "alone" / model).read_bytes()
+
+
+@pytest.mark.parametrize(
+    "args",
+    [
+        ("train", "--algo", "ppo", "--chunk-steps", "100"),
+        ("paper", "--preset", "smoke", "--chunk-steps", "100"),
+        ("bench-train", "--algos", "sac", "--chunk-steps", "0"),
+    ],
+)
+def test_chunk_steps_is_refused_without_the_jax_backend(args, tmp_path):
+    from typer.testing import CliRunner
+
+    from solarchain_eval.cli import app
+
+    out = () if args[0] == "bench-train" else ("--out", str(tmp_path / "out"))
+    result = CliRunner().invoke(app, [*args, *out])
+    assert result.exit_code == 2, result.output
+    assert "--chunk-steps" in result.output and "--backend jax" in result.output
+    assert not (tmp_path / "out").exists()
