@@ -5,6 +5,8 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
+import re
 import signal
 import subprocess
 import sys
@@ -85,6 +87,7 @@ def smoke_root(tmp_path_factory, tiny_dataset) -> Path:
     done = subprocess.run(_paper_cmd(root, tiny_dataset, "--workers", "2"), capture_output=True, text=True, timeout=600)
     assert done.returncode == 0, done.stderr
     root.joinpath("elapsed_s").write_text(f"{time.monotonic() - started:.1f}")
+    root.parent.joinpath("stdout.txt").write_text(done.stdout)
     return root
 
 
@@ -94,6 +97,12 @@ def test_smoke_preset_end_to_end_with_two_workers(smoke_root):
     meta = json.loads((smoke_root / "paper_metadata.json").read_text())
     assert meta["complete"] and meta["status"] == "complete" and meta["execution"]["workers"] == 2
     assert all(entry["status"] == "done" and entry["wall_s"] > 0 for entry in meta["units"].values())
+    # Each unit's CPU time: spent by its worker, so positive and within its wall time on every core.
+    cores = os.cpu_count() or 1
+    assert all(0 < entry["cpu_s"] <= entry["wall_s"] * cores + 0.1 for entry in meta["units"].values())
+    cpu_total = sum(entry["cpu_s"] for entry in meta["units"].values())
+    printed = (smoke_root.parent / "stdout.txt").read_text()
+    assert abs(float(re.search(r"units run now: 24, ([0-9.]+) CPU s\)", printed).group(1)) - cpu_total) < 0.07
     for setting in ("main", "no_physics"):
         combined = smoke_root / "combined" / setting
         metrics = pd.read_csv(combined / "metrics.csv")

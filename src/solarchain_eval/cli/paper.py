@@ -115,8 +115,9 @@ def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
             display.finish(result.unit)
             display.advance_units(1)
             if result.ok:
+                cpu = f", {result.cpu_s:.1f} CPU s" if result.cpu_s is not None else ""
                 err_console.print(
-                    Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s)"), soft_wrap=True
+                    Text.assemble(("done", "green"), f" {result.unit} ({result.wall_s:.1f} s{cpu})"), soft_wrap=True
                 )
             else:
                 err_console.print(
@@ -148,8 +149,10 @@ def _show_outcome(outcome) -> None:
         protocol = outcome.protocols.get(setting, {}).get("protocol_id")
         if protocol:
             console.print(f"setting {setting}: protocol {protocol}", soft_wrap=True)
+    cpu_s = sum(r.cpu_s for r in report.finished if r.cpu_s is not None)
     console.print(
-        f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s)",
+        f"paper root: {outcome.root} ({'complete' if outcome.complete else 'INCOMPLETE'}, {outcome.wall_s:.1f} s; "
+        f"units run now: {len(report.finished)}, {cpu_s:.1f} CPU s)",
         soft_wrap=True,
     )
     if report.failed:

@@ -389,7 +389,7 @@ def _unit_table(root: Path, units: list[Unit], report: RunReport) -> dict[str, d
     for unit in units:
         marker = read_done(unit.directory(root))
         if marker is not None:
-            table[unit.name] = {"status": "done", "wall_s": marker.get("wall_s")}
+            table[unit.name] = {"status": "done", "wall_s": marker.get("wall_s"), "cpu_s": marker.get("cpu_s")}
         elif unit.name in failed:
             table[unit.name] = {"status": "failed", "error": failed[unit.name].error, "log": failed[unit.name].log}
         elif unit.name in report.blocked:

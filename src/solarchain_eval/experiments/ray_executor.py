@@ -155,7 +155,7 @@ class RayExecutor:
             atomic_write_bytes(unit_dir / rel, data)
         log = str(unit_dir / "unit.log")
         if result.ok:
-            write_done(unit_dir, task.unit.name, result.wall_s)
+            write_done(unit_dir, task.unit.name, result.wall_s, result.cpu_s)
         return replace(result, log=log)
 
     def abort(self) -> list[str]:

@@ -1,7 +1,8 @@
 """Running one grid unit (in whatever process the executor chose) and its on-disk markers.
 
 A unit directory is written in this order: ``unit.json`` (what the unit is), the outputs
-(each file atomically), then the done-marker ``DONE`` (a small JSON with the unit's wall time).
+(each file atomically), then the done-marker ``DONE`` (a small JSON with the unit's wall time and
+the CPU time of the process that ran it).
 ``unit.log`` is an append-only, human-readable log (start, progress, result, traceback) that no
 later stage reads. Redoing a unit first removes the outputs of an earlier, unfinished attempt;
 a train unit keeps its files, so training resumes from its checkpoint (SB3's, or the JAX
@@ -76,6 +77,8 @@ class UnitResult:
     wall_s: float
     error: str | None = None
     log: str | None = None
+    #: CPU seconds (user + system, every thread) the unit's process spent on it; None if unknown.
+    cpu_s: float | None = None
 
 
 def read_done(unit_dir: Path) -> dict[str, Any] | None:
@@ -89,11 +92,17 @@ def read_done(unit_dir: Path) -> dict[str, Any] | None:
         return {}
 
 
-def write_done(unit_dir: Path, unit: str, wall_s: float) -> Path:
+def write_done(unit_dir: Path, unit: str, wall_s: float, cpu_s: float | None = None) -> Path:
+    """Mark a unit done, recording its wall time and (when known) its CPU time in seconds.
+
+    Both cover this attempt only: a train unit resumed from a checkpoint records the last attempt
+    (its ``train_metadata.json`` holds the training's wall time over every attempt).
+    """
     finished = datetime.now(UTC).isoformat(timespec="seconds")
-    return atomic_write_json(
-        Path(unit_dir) / DONE_MARKER, {"unit": unit, "wall_s": round(wall_s, 3), "finished_at": finished}
-    )
+    marker: dict[str, Any] = {"unit": unit, "wall_s": round(wall_s, 3)}
+    if cpu_s is not None:
+        marker["cpu_s"] = round(cpu_s, 3)
+    return atomic_write_json(Path(unit_dir) / DONE_MARKER, {**marker, "finished_at": finished})
 
 
 def undo(unit_dir: Path) -> None:
@@ -161,6 +170,8 @@ def execute_unit(
     log = _UnitLog(unit_dir / UNIT_LOG)
     log.write(f"start {unit.name} (pid {os.getpid()})")
     started = time.perf_counter()
+    # The worker process runs one unit at a time, so its CPU clock's advance is this unit's.
+    cpu_started = time.process_time()
     try:
         set_torch_threads(1)
         atomic_write_json(unit_dir / UNIT_FILE, {"unit": unit.name, **task.identity})
@@ -169,10 +180,11 @@ def execute_unit(
         else:
             _evaluate_unit(task)
         wall_s = time.perf_counter() - started
+        cpu_s = time.process_time() - cpu_started
         if mark_done:
-            write_done(unit_dir, unit.name, wall_s)
-        log.write(f"done in {wall_s:.1f} s")
-        return UnitResult(unit.name, True, wall_s, log=str(unit_dir / UNIT_LOG))
+            write_done(unit_dir, unit.name, wall_s, cpu_s)
+        log.write(f"done in {wall_s:.1f} s ({cpu_s:.1f} CPU s)")
+        return UnitResult(unit.name, True, wall_s, log=str(unit_dir / UNIT_LOG), cpu_s=cpu_s)
     except Exception as error:  # a failing unit is reported, not raised: the grid decides
         log.write(f"FAILED: {type(error).__name__}: {error}\n{traceback.format_exc()}")
         message = f"{type(error).__name__}: {error}".strip().splitlines()[-1]
