@@ -21,6 +21,7 @@ import solarchain_eval
 from chromium import find_chromium, open_page
 from solarchain_eval.cli import app
 from solarchain_eval.data.default import default_dataset_dir
+from solarchain_eval.evaluation.fingerprint import protocol_id
 from solarchain_eval.report.figures.pareto import pareto_front
 from solarchain_eval.report.leaderboard import (
     REFERENCE,
@@ -205,6 +206,21 @@ def test_a_run_without_a_recorded_protocol(runs, tmp_path):
     (legacy / "run_metadata.json").write_text(json.dumps(metadata))
     with pytest.raises(LeaderboardError, match="records no config"), open_inputs([legacy]):
         pass
+
+
+def test_units_of_one_setting_under_different_protocols_are_refused(runs, tmp_path):
+    root = tmp_path / "root"
+    shutil.copytree(runs.root, root)
+    path = root / "units" / "eval" / "static-no_physics-20260511" / "run_metadata.json"
+    metadata = json.loads(path.read_text())
+    metadata["protocol"]["episodes"] = EPISODES + 1  # what another budget would record
+    metadata["protocol_id"] = protocol_id(metadata["protocol"])
+    path.write_text(json.dumps(metadata))
+    with pytest.raises(LeaderboardError) as refused, open_inputs([root]):
+        pass
+    message = str(refused.value)
+    assert "static-no_physics-20260511 were evaluated under different protocols" in message
+    assert f"protocol field 'episodes': {EPISODES} vs {EPISODES + 1}" in message
 
 
 def test_a_tarball_is_read_as_its_run(runs, tmp_path):

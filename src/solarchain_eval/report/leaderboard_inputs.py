@@ -29,7 +29,13 @@ from pydantic import ValidationError
 
 from ..common.errors import NamesOptions
 from ..config import BenchmarkConfig
-from ..evaluation.fingerprint import protocol_difference, protocol_fingerprint, protocol_id, task_config_sha256
+from ..evaluation.fingerprint import (
+    merge_fingerprints,
+    protocol_difference,
+    protocol_fingerprint,
+    protocol_id,
+    task_config_sha256,
+)
 from ..experiments.layout import METADATA_FILE, UNITS_DIR, is_done
 from ..protocol import EPISODE_SEED_RULES
 from ..records_schema import RECORDS_SCHEMA_VERSION
@@ -213,22 +219,18 @@ def _paper_sections(source: str, root: Path, data) -> list[Section]:
                 f"{source}: no finished evaluation unit under {UNITS_DIR}/eval records the protocol of setting "
                 f"{setting!r}; a leaderboard needs every run's protocol"
             )
-        where, fingerprint, board, _ = group[0]
-        seeds: set[int] = set()
-        modes: dict[str, str] = {}
+        where, merged, board, _ = group[0]
         access: dict[str, str] = {}
         for unit_where, unit_fp, _, unit_access in group:
             # A unit evaluates one run seed: the setting's run seeds are the units' together.
-            differs = protocol_difference({**fingerprint, "run_seeds": []}, {**unit_fp, "run_seeds": []})
-            if differs is not None:
+            try:
+                merged = merge_fingerprints([merged, unit_fp])
+            except ValueError as error:
                 raise LeaderboardError(
-                    f"{where} and {unit_where} were evaluated under different protocols: {differs} differs"
-                )
-            seeds |= {int(s) for s in unit_fp["run_seeds"]}
-            modes.update(unit_fp.get("action_modes", {}))
+                    f"{where} and {unit_where} were evaluated under different protocols: {error}"
+                ) from None
             access.update(unit_access)
-        merged = {**fingerprint, "run_seeds": sorted(seeds), "action_modes": dict(sorted(modes.items()))}
-        board = {**board, "run_seeds": sorted(seeds), "action_modes": merged["action_modes"]}
+        board = {**board, "run_seeds": merged["run_seeds"], "action_modes": merged["action_modes"]}
         metrics = data.rollouts(setting).reset_index(drop=True)
         unrecorded = sorted(set(metrics["policy"].astype(str)) - set(access))
         if unrecorded:
