@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import hashlib
 import json
 import sys
 import textwrap
@@ -23,6 +24,7 @@ from solarchain_eval.data.table import load_table
 from solarchain_eval.envs.env import SolarChainEnv
 from solarchain_eval.evaluation.fingerprint import protocol_id
 from solarchain_eval.evaluation.rollout import run_policy
+from solarchain_eval.experiments.user_agents import agent_identity
 from solarchain_eval.market.baselines import make_baseline
 
 SEED = 20260511
@@ -326,3 +328,19 @@ def test_installed_plugins_are_found_by_name(tiny_dataset: Path, agent_file: Pat
     result = _evaluate(["--data", str(tiny_dataset), "--policies", "constant-plugin", "--out", str(out)])
     assert result.exit_code == 0, result.output
     assert set(pd.read_csv(out / "metrics.csv")["policy"]) == {"constant-plugin"}
+
+
+def test_a_plugin_agents_record_holds_its_module_files_sha256_and_version(agent_file: Path, tmp_path, monkeypatch):
+    site = tmp_path / "site"
+    dist = site / "my_plugin-1.0.dist-info"
+    dist.mkdir(parents=True)
+    (dist / "METADATA").write_text("Metadata-Version: 2.1\nName: my-plugin\nVersion: 1.0\n")
+    (dist / "entry_points.txt").write_text("[solarchain_eval.agents]\nconstant-plugin = my_agent:make\n")
+    monkeypatch.syspath_prepend(str(site))
+    monkeypatch.syspath_prepend(str(agent_file.parent))
+    monkeypatch.delitem(sys.modules, "my_agent", raising=False)  # imported from another test's folder
+    record = agent_identity("constant-plugin", "constant-plugin", {}, {})
+    assert record["sha256"] == {"source": hashlib.sha256(agent_file.read_bytes()).hexdigest()}
+    assert record["plugin"] == {"entry_point": "my_agent:make", "version": "1.0"}
+    agent_file.write_text(agent_file.read_text() + "\n# changed\n")  # a grid resumed now redoes its units
+    assert agent_identity("constant-plugin", "constant-plugin", {}, {})["sha256"] != record["sha256"]

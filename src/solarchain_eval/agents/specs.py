@@ -186,10 +186,21 @@ def plugin_names() -> tuple[str, ...]:
     return tuple(sorted({ep.name for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP)}))
 
 
+def plugin_entry_point(name: str) -> importlib.metadata.EntryPoint:
+    """The entry point that registers plugin agent ``name`` (the first, if several packages do)."""
+    found = sorted(
+        (ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP) if ep.name == name),
+        key=lambda ep: ep.value,
+    )
+    if not found:
+        raise AgentSpecError(f"no installed package registers the agent {name!r} (group {ENTRY_POINT_GROUP})")
+    return found[0]
+
+
 def load_target(spec: AgentSpec) -> tuple[Any, str]:
     """The Python object a ``python``, ``file`` or ``plugin`` spec points at, and its attribute name."""
     if spec.kind == "plugin":
-        (entry,) = [ep for ep in importlib.metadata.entry_points(group=ENTRY_POINT_GROUP) if ep.name == spec.target]
+        entry = plugin_entry_point(spec.target)
         try:
             return entry.load(), spec.target
         except Exception as error:  # a plugin's import can fail in any way

@@ -33,6 +33,7 @@ from ..agents.specs import (
     check_unique,
     parse_agent_args,
     parse_agent_spec,
+    plugin_entry_point,
 )
 from ..common.atomic_files import sha256_file
 from ..config import BenchmarkConfig
@@ -329,22 +330,31 @@ def agent_identity(
     vecnormalize: Mapping[str | None, Path],
 ) -> dict[str, Any]:
     """What a unit of user agent ``name`` records (``unit.json`` → ``agent``): its spec, options
-    and the sha256 of the files it is built from (the Python file or the module's file, the SB3
-    model, the VecNormalize statistics). A done unit whose record differs is redone."""
+    and the sha256 of the files it is built from (the Python file or the module's file, a
+    plugin's module file and its distribution's version, the SB3 model, the VecNormalize
+    statistics). A done unit whose record differs is redone. An HTTP agent is recorded by its
+    URL only: what the server runs is outside the grid's view."""
     spec = _parse(text)
     files: dict[str, str] = {}
+    record: dict[str, Any] = {}
     if spec.kind == "file":
         files["source"] = _digest(Path(spec.target.rpartition(":")[0]))
     elif spec.kind == "python":
         origin = _module_file(spec.target.rpartition(":")[0])
         if origin is not None:
             files["source"] = _digest(origin)
+    elif spec.kind == "plugin":
+        entry = plugin_entry_point(spec.target)
+        origin = _module_file(entry.module)
+        if origin is not None:
+            files["source"] = _digest(origin)
+        record["plugin"] = {"entry_point": entry.value, "version": entry.dist.version if entry.dist else None}
     elif spec.kind == "sb3":
         files["model"] = _digest(Path(spec.target.partition(":")[2]))
         stats = vecnormalize.get(name) or vecnormalize.get(None)
         if stats is not None:
             files["vecnormalize"] = _digest(Path(stats))
-    return {"spec": text, "kind": spec.kind, "args": agent_kwargs(name, agent_args), "sha256": files}
+    return {"spec": text, "kind": spec.kind, "args": agent_kwargs(name, agent_args), "sha256": files, **record}
 
 
 def _module_file(module: str) -> Path | None:
