@@ -156,15 +156,19 @@ def test_the_governed_setting_wraps_user_agents_and_labels_them_privileged(tiny_
     assert len(agent.begin_calls) == 1 and "env" not in agent.begin_calls[0]
 
 
+def _executed_actions(result) -> np.ndarray:
+    """The first episode's executed (α, ℓ, b) per step, one row each."""
+    steps = result.episodes[0].steps
+    return np.column_stack([np.asarray(steps[c]) for c in ("reward_ratio", "liquidity_ratio", "burn_rate")])
+
+
 def test_sb3_model_objects_act_deterministically(tiny_dataset: Path) -> None:
     from stable_baselines3 import PPO
 
     env = SolarChainEnv(config=BenchmarkConfig(), table=load_table(tiny_dataset))
     model = PPO("MlpPolicy", env, seed=0, n_steps=64, batch_size=32, device="cpu")
     result = solarchain_eval.evaluate(model, data=tiny_dataset, seeds=[SEED], episodes=1, name="my-ppo")
-    actions = np.column_stack(
-        [np.asarray(result.episodes[0].steps[c]) for c in ("reward_ratio", "liquidity_ratio", "burn_rate")]
-    )
+    actions = _executed_actions(result)
     obs, _ = env.reset(seed=SEED)
     expected = env.codec.decode(model.predict(obs, deterministic=True)[0])
     np.testing.assert_allclose(actions[0], expected, rtol=0, atol=1e-7)
@@ -176,9 +180,7 @@ def test_recurrent_models_carry_their_state_through_an_episode(tiny_dataset: Pat
     env = SolarChainEnv(config=BenchmarkConfig(), table=load_table(tiny_dataset))
     model = RecurrentPPO("MlpLstmPolicy", env, seed=0, n_steps=32, batch_size=32, device="cpu")
     result = solarchain_eval.evaluate(model, data=tiny_dataset, seeds=[SEED], episodes=1, name="lstm")
-    executed = np.column_stack(
-        [np.asarray(result.episodes[0].steps[c]) for c in ("reward_ratio", "liquidity_ratio", "burn_rate")]
-    )
+    executed = _executed_actions(result)
     obs, _ = env.reset(seed=SEED)
     state, start, expected = None, np.ones((1,), dtype=bool), []
     for _ in range(env.episode_steps):
