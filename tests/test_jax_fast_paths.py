@@ -30,7 +30,7 @@ def vector_decode(action, params):
 
     u = jnp.fmin(jnp.fmax(jnp.asarray(action, jnp.float32).reshape(3), jnp.float32(0.0)), jnp.float32(1.0))
     market = jnp.maximum(u * params.width32, jnp.float32(0.0)) + params.lo32 * jnp.array([1, 1, 0], jnp.float32)
-    a = jnp.minimum(jnp.maximum(market.astype(params.action_lo.dtype), params.action_lo), params.action_hi)
+    a = jnp.minimum(jnp.maximum(market, params.action_lo), params.action_hi).astype(params.verified_mwh.dtype)
     scale = jnp.minimum(params.weights.max_total_allocation / (a[0] + a[1]), 1.0)
     return jnp.stack([a[0] * scale, a[1] * scale, a[2]]).astype(jnp.float32)
 
@@ -50,7 +50,7 @@ def test_componentwise_decode_equals_the_numpy_batch_decode(tiny_dataset) -> Non
     got = np.stack([np.asarray(component) for component in decoded])  # (3, N) like decode_batch
     expected = codec.decode_batch(actions)
     assert got.dtype == np.float32 and got.shape == expected.shape
-    # float32 sanitising here, float64 in the numpy codec: the scaled components are rounded
+    # float32 scaling here, float64 in the numpy codec: the scaled components are rounded
     # twice in float32 (the scale, then the product), so they may be two float32 ulps apart
     np.testing.assert_array_max_ulp(got, expected, maxulp=2)
     # and bit for bit the (3,)-vector formulation it replaced

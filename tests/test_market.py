@@ -28,14 +28,22 @@ WEIGHTS = RewardWeights.from_config(BenchmarkConfig())
 
 def test_decoding_the_corners_of_the_action_box():
     assert CODEC.decode(np.zeros(3, F32)) == (float(F32(0.05)), float(F32(0.2)), 0.0)
-    # u = 1: float32 decoding gives α = 0.65000004 (> 0.65, clipped in float64, docs/reproducing.md)
-    # and ℓ = 0.94999999; they sum to > 0.98, so both scale by 0.98 / (α + ℓ); float32 result.
+    # u = 1: float32 decoding gives α = 0.65000004, which the float32 clip brings to
+    # float32(0.65) = 0.64999998 (as the original's np.clip of a float32 scalar does under numpy 2,
+    # docs/reproducing.md), and ℓ = 0.94999999; they sum to > 0.98, so both scale by
+    # 0.98 / (α + ℓ) in float64; float32 result.
     alpha, ell, burn = CODEC.decode(np.ones(3, F32))
     a32, l32 = float(F32(0.05) + F32(0.6)), float(F32(0.2) + F32(0.75))
-    assert a32 > 0.65 > l32 - 0.3
-    a64 = min(a32, 0.65)
-    assert alpha == float(F32(a64 * (0.98 / (a64 + l32))))
-    assert ell == float(F32(l32 * (0.98 / (a64 + l32))))
+    assert a32 == 0.6500000357627869 and float(F32(0.65)) == 0.6499999761581421
+    a_clip = float(F32(0.65))
+    assert alpha == float(F32(a_clip * (0.98 / (a_clip + l32))))
+    assert ell == float(F32(l32 * (0.98 / (a_clip + l32))))
+    # At u = (1, 0.25, ·) the float64 clip (to 0.65 itself) would execute ℓ one float32 ulp off the
+    # original's 0.36602411 (its env trace has 104 such steps per setting).
+    _, ell_quarter, _ = CODEC.decode(np.array([1, 0.25, 0], F32))
+    assert ell_quarter == 0.36602410674095154
+    l_quarter = float(F32(0.2) + F32(0.75) * F32(0.25))
+    assert float(F32(l_quarter * (0.98 / (0.65 + l_quarter)))) == 0.36602407693862915
     assert burn == float(F32(0.2))
     assert abs(alpha - 0.398125) < 1e-7 and abs(ell - 0.581875) < 1e-7
     # NaN -> 0, +inf -> 1, -inf -> 0.

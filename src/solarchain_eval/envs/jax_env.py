@@ -115,7 +115,7 @@ class EnvParams:
     hour_columns: jax.Array
     start_hours: jax.Array  # admissible starts (midnights)
     discrete_actions: jax.Array  # (levels**3, 3) float32 executed actions
-    action_lo: jax.Array  # (3,) sanitising bounds
+    action_lo: jax.Array  # (3,) float32 sanitising bounds (the ranges rounded to float32)
     action_hi: jax.Array
     lo32: jax.Array  # (3,) float32 decoding constants
     width32: jax.Array
@@ -179,8 +179,8 @@ def make_env_params(
         ),
         start_hours=jnp.asarray(start_hours(table.hours, cfg.episode_steps), jnp.int32),
         discrete_actions=jnp.asarray(np.array(codec.discrete_table(cfg.discrete_levels), dtype=f32)),
-        action_lo=jnp.asarray(codec.lo, f),
-        action_hi=jnp.asarray(codec.hi, f),
+        action_lo=jnp.asarray(codec.lo32, jnp.float32),
+        action_hi=jnp.asarray(codec.hi32, jnp.float32),
         lo32=jnp.asarray(codec.lo32, jnp.float32),
         width32=jnp.asarray(codec.width32, jnp.float32),
         initial_action=jnp.asarray(np.array(initial_action(m), dtype=f32)),
@@ -206,7 +206,7 @@ def decode_action(action: Any, params: EnvParams) -> tuple[jax.Array, jax.Array,
         row = jnp.take(params.discrete_actions, index, axis=0, mode="clip")
         return row[0], row[1], row[2]
     u = jnp.asarray(action, jnp.float32).reshape(3)
-    f = params.action_lo.dtype
+    f = params.verified_mwh.dtype  # the working float type: float64 with x64, as in the numpy codec
     market = []
     for i in range(3):
         # fmax/fmin ignore NaN: NaN -> 0, -inf -> 0, +inf -> 1, as in the numpy codec.
@@ -215,8 +215,9 @@ def decode_action(action: Any, params: EnvParams) -> tuple[jax.Array, jax.Array,
         # into one FMA (one rounding). The max with 0 (the product is >= 0 anyway) keeps them apart.
         product = jnp.maximum(u_i * params.width32[i], jnp.float32(0.0))
         value = product + params.lo32[i] if i < 2 else product  # the burn rate has no offset
-        # Sanitise in the working float type (float64 in the numpy codec and with x64).
-        market.append(jnp.minimum(jnp.maximum(value.astype(f), params.action_lo[i]), params.action_hi[i]))
+        # Sanitise: clip in float32 (the original's np.clip on a float32 scalar), scale in the
+        # working float type (float64 in the numpy codec and with x64).
+        market.append(jnp.minimum(jnp.maximum(value, params.action_lo[i]), params.action_hi[i]).astype(f))
     alpha, ell, burn = market
     scale = jnp.minimum(params.weights.max_total_allocation / (alpha + ell), 1.0)
     return (alpha * scale).astype(jnp.float32), (ell * scale).astype(jnp.float32), burn.astype(jnp.float32)

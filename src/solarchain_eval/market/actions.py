@@ -1,9 +1,12 @@
 """Action decoding, sanitising and encoding (docs/environment.md#action-space, docs/reproducing.md).
 
 Policies act in normalised space u ∈ [0, 1]^3. Decoding maps u to market units in float32
-(α = 0.05 + 0.60 u₁, ℓ = 0.20 + 0.75 u₂, b = 0.20 u₃), then sanitises in float64: clip each
-component to its range and, if α + ℓ > 0.98, scale both by 0.98 / (α + ℓ); the executed
-action is float32. Encoding is the inverse for policies that think in market units.
+(α = 0.05 + 0.60 u₁, ℓ = 0.20 + 0.75 u₂, b = 0.20 u₃), then sanitises: clip each float32
+component in float32 to its range rounded to float32, then, in float64, if α + ℓ > 0.98, scale
+both by 0.98 / (α + ℓ); the executed action is float32. This is what the original release's
+``float(np.clip(x, lo, hi))`` does on a float32 scalar under numpy 2: u₁ = 1 decodes to
+α = 0.65000004, which clips to float32(0.65) = 0.64999998 (not 0.65). Encoding is the inverse
+for policies that think in market units.
 """
 
 from __future__ import annotations
@@ -24,8 +27,9 @@ _F32 = np.float32
 class ActionCodec:
     """Ranges of (reward ratio α, liquidity ratio ℓ, burn rate b), all dimensionless.
 
-    ``lo32``/``width32`` are the float32 decoding constants; ``lo``/``hi`` the float64
-    sanitising bounds.
+    ``lo``/``hi`` are the ranges as configured (float64); ``lo32``/``width32`` the float32
+    decoding constants. Sanitising clips against the bounds rounded to float32 (``lo32`` and
+    :attr:`hi32`).
     """
 
     lo: tuple[float, float, float]
@@ -35,8 +39,10 @@ class ActionCodec:
     max_total_allocation: float
 
     def __post_init__(self) -> None:
-        object.__setattr__(self, "_lo_column", np.array(self.lo, dtype=np.float64)[:, None])
-        object.__setattr__(self, "_hi_column", np.array(self.hi, dtype=np.float64)[:, None])
+        # Clip bounds rounded to float32, as Python floats (scalar path) and (3, 1) columns (batches).
+        object.__setattr__(self, "hi32", tuple(float(_F32(v)) for v in self.hi))
+        object.__setattr__(self, "_lo_column", np.array(self.lo32, dtype=_F32)[:, None])
+        object.__setattr__(self, "_hi_column", np.array(self.hi32, dtype=_F32)[:, None])
         object.__setattr__(self, "_width32", tuple(_F32(w) for w in self.width32))
         object.__setattr__(self, "_lo32", tuple(_F32(v) for v in self.lo32))
 
@@ -77,7 +83,9 @@ class ActionCodec:
         return self._sanitize_scalar(alpha, ell, burn)
 
     def _sanitize_scalar(self, alpha: float, ell: float, burn: float) -> tuple[float, float, float]:
-        lo, hi = self.lo, self.hi
+        # The inputs are float32 values, so comparing them in float64 with the float32-rounded
+        # bounds is the float32 clip itself; the clipped values then scale in float64.
+        lo, hi = self.lo32, self.hi32
         alpha = lo[0] if alpha < lo[0] else (hi[0] if alpha > hi[0] else alpha)
         ell = lo[1] if ell < lo[1] else (hi[1] if ell > hi[1] else ell)
         burn = lo[2] if burn < lo[2] else (hi[2] if burn > hi[2] else burn)
@@ -88,13 +96,21 @@ class ActionCodec:
         return _F3.unpack(_F3.pack(alpha, ell, burn))
 
     def sanitize(self, alpha: float, ell: float, burn: float) -> tuple[float, float, float]:
-        """Sanitise an action in market units (float32 inputs are promoted); float32 result.
+        """Sanitise an action in market units; float32 result.
 
-        NaN components are rejected: sanitising is for targets a policy computed, not raw outputs.
+        The inputs are rounded to float32 first (the original release sanitised float32
+        arrays on every path: decoded actions, baseline targets, auditor revisions), then
+        clipped in float32 and scaled. NaN components are rejected: sanitising is for targets
+        a policy computed, not raw outputs.
         """
         values = (float(alpha), float(ell), float(burn))
         if any(v != v for v in values):
             raise ValueError(f"cannot sanitise an action with NaN components: {values}")
+        try:
+            values = _F3.unpack(_F3.pack(*values))
+        except OverflowError:  # beyond float32's range: ±inf, which the clip then bounds
+            with np.errstate(over="ignore"):
+                values = tuple(np.array(values, dtype=np.float64).astype(_F32).tolist())
         return self._sanitize_scalar(*values)
 
     def encode(self, alpha: float, ell: float, burn: float) -> np.ndarray:
@@ -127,10 +143,11 @@ class ActionCodec:
         return self.sanitize_batch(market)
 
     def sanitize_batch(self, actions: np.ndarray) -> np.ndarray:
-        """Sanitise a (3, N) batch in market units (float64 work); (3, N) float32."""
-        a = np.array(actions, dtype=np.float64, order="C")
-        np.maximum(a, self._lo_column, out=a)
-        np.minimum(a, self._hi_column, out=a)
+        """Sanitise a (3, N) batch in market units: clip in float32, scale in float64; (3, N) float32."""
+        clipped = np.array(actions, dtype=_F32, order="C")
+        np.maximum(clipped, self._lo_column, out=clipped)
+        np.minimum(clipped, self._hi_column, out=clipped)
+        a = clipped.astype(np.float64)
         # cap / total >= 1 exactly when no scaling is needed, and x * 1.0 == x.
         scale = np.minimum(self.max_total_allocation / (a[0] + a[1]), 1.0)
         a[0] *= scale
