@@ -74,7 +74,9 @@ def _read(path: Path) -> dict[str, dict[str, np.ndarray]]:
     for setting in SETTINGS:
         picked = [row for row in rows if row["setting"] == setting]
         out[setting] = {
-            key: np.array([float(row[key]) for row in picked]) for key in picked[0] if key not in ("setting", "action_kind")
+            key: np.array([float(row[key]) for row in picked])
+            for key in picked[0]
+            if key not in ("setting", "action_kind")
         }
     return out
 
