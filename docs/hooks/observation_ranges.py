@@ -60,7 +60,8 @@ def ranges_table(data: Path | None = None) -> str:
     for index, name in enumerate(OBSERVATION_NAMES):
         column = seen[:, index].astype(np.float64)
         values = [column.min(), *np.quantile(column, QUANTILES), column.max()]
-        lines.append(f"| {index} | `{name}` | " + " | ".join(f"{v:.3g}" for v in values) + " |")
+        # 4 decimals first, so a float's 6e-17 prints as 0 (and -0.0 as 0)
+        lines.append(f"| {index} | `{name}` | " + " | ".join(f"{round(float(v), 4) + 0.0:.3g}" for v in values) + " |")
     return "\n".join(lines) + "\n"
 
 
