@@ -29,12 +29,16 @@ def _box(ax, x, y, w, h, lines, colours):
     ax.add_patch(FancyBboxPatch((x, y), w, h, boxstyle="round,pad=0,rounding_size=0.12", fc=fill, ec=edge, lw=1.4))
     top = y + h / 2 + (len(lines) - 1) * 0.17
     for i, line in enumerate(lines):
-        ax.text(x + w / 2, top - i * 0.34, line, ha="center", va="center", fontsize=9, weight="bold" if i == 0 else None)
+        ax.text(
+            x + w / 2, top - i * 0.34, line, ha="center", va="center", fontsize=9, weight="bold" if i == 0 else None
+        )
 
 
 def _arrow(ax, start, end, label=None, label_at=None, connection="arc3"):
     ax.add_patch(
-        FancyArrowPatch(start, end, arrowstyle="-|>", mutation_scale=12, lw=1.2, color="#444", connectionstyle=connection)
+        FancyArrowPatch(
+            start, end, arrowstyle="-|>", mutation_scale=12, lw=1.2, color="#444", connectionstyle=connection
+        )
     )
     if label:
         lx, ly = label_at or ((start[0] + end[0]) / 2 + 0.1, (start[1] + end[1]) / 2)
@@ -57,8 +61,24 @@ def market_step() -> plt.Figure:
         (["Agent", "act(observation) → u ∈ [0, 1]³"], AGENT, 0.8),
         (["Decode and sanitise", "α = 0.05 + 0.60 u₁,  ℓ = 0.20 + 0.75 u₂,  b = 0.20 u₃", "α + ℓ ≤ 0.98"], MARKET, 1.1),
         (["1. Clearing demand", "Q_c = Q, or a 0.001 MWh floor in hours without trades"], MARKET, 0.8),
-        (["2. Physics gate", "invalid supply X, backing β = (α + ℓ) / 0.98", "A = β X unsafe backed,  V = A / (G_v + A)"], MARKET, 1.1),
-        (["3. Clearing", "Q̃ = Q_c · max(0.75, 1 − 0.8 b),  available = L + ℓ (G_v + A)", "matched M, unmet U, pool L, drawdown D"], MARKET, 1.1),
+        (
+            [
+                "2. Physics gate",
+                "invalid supply X, backing β = (α + ℓ) / 0.98",
+                "A = β X unsafe backed,  V = A / (G_v + A)",
+            ],
+            MARKET,
+            1.1,
+        ),
+        (
+            [
+                "3. Clearing",
+                "Q̃ = Q_c · max(0.75, 1 − 0.8 b),  available = L + ℓ (G_v + A)",
+                "matched M, unmet U, pool L, drawdown D",
+            ],
+            MARKET,
+            1.1,
+        ),
         (["4–6. Slippage, jitter, price, cities", "σ_exec, J = |a − a_prev|₁, token price p, fairness F"], MARKET, 0.8),
         (["7. Reward", "R = M − 1.5 D − 0.25 J − 0.4 U − 0.2 F − 2 (V + A)"], MARKET, 0.8),
         (["Next observation and info", "12 features; R, cost = V + A, matched energy, prices, …"], AGENT, 0.8),
@@ -85,11 +105,43 @@ def market_step() -> plt.Figure:
 
 def planner_auditor() -> plt.Figure:
     figure, ax = _canvas(9.0, 6.6)
-    _box(ax, 0.3, 5.1, 3.6, 1.2, ["Planner (once per episode)", "reads the episode's 24 hours ahead", "→ action bounds, audit policy"], GOVERN)
-    _box(ax, 4.9, 5.1, 3.8, 1.2, ["Policy (any agent)", "act(observation) → proposal a", "never sees the Planner or the data"], AGENT)
+    _box(
+        ax,
+        0.3,
+        5.1,
+        3.6,
+        1.2,
+        ["Planner (once per episode)", "reads the episode's 24 hours ahead", "→ action bounds, audit policy"],
+        GOVERN,
+    )
+    _box(
+        ax,
+        4.9,
+        5.1,
+        3.8,
+        1.2,
+        ["Policy (any agent)", "act(observation) → proposal a", "never sees the Planner or the data"],
+        AGENT,
+    )
     _box(ax, 4.9, 3.75, 3.8, 0.85, ["Clip to the Planner's bounds", "ā = bounded proposal (clips logged)"], MARKET)
-    _box(ax, 4.9, 2.2, 3.8, 1.05, ["Scheduler", "hard: ν > τ_ν, gap < τ_Δ, σ > τ_σ", "soft: jitter > τ_κ; budget, cooldown"], MARKET)
-    _box(ax, 4.9, 0.6, 3.8, 1.05, ["Auditor (audited steps)", "approve: execute ā", "revise: execute its action (clipped)"], GOVERN)
+    _box(
+        ax,
+        4.9,
+        2.2,
+        3.8,
+        1.05,
+        ["Scheduler", "hard: ν > τ_ν, gap < τ_Δ, σ > τ_σ", "soft: jitter > τ_κ; budget, cooldown"],
+        MARKET,
+    )
+    _box(
+        ax,
+        4.9,
+        0.6,
+        3.8,
+        1.05,
+        ["Auditor (audited steps)", "approve: execute ā", "revise: execute its action (clipped)"],
+        GOVERN,
+    )
     _box(ax, 0.3, 0.6, 3.6, 1.05, ["Market step", "executed action → reward, info,", "next observation"], MARKET)
     _arrow(ax, (6.8, 5.1), (6.8, 4.6))
     _arrow(ax, (6.8, 3.75), (6.8, 3.25))
@@ -103,7 +155,12 @@ def planner_auditor() -> plt.Figure:
     _arrow(ax, (8.88, 5.7), (8.7, 5.7))
     ax.text(8.8, 3.0, "next hour", rotation=90, fontsize=8, color="#333", va="center", ha="center",
             bbox={"fc": "white", "ec": "none", "pad": 1})  # fmt: skip
-    ax.text(0.3, 0.1, "Every Planner and Auditor output is parsed against a strict schema and clipped to the ranges.", fontsize=8)
+    ax.text(
+        0.3,
+        0.1,
+        "Every Planner and Auditor output is parsed against a strict schema and clipped to the ranges.",
+        fontsize=8,
+    )
     return figure
 
 
