@@ -444,3 +444,36 @@ def test_public_api_page_names_importable_objects_and_the_real_signature():
     documented = re.findall(r"^    (\w+)=", block, re.M)
     actual = [n for n, p in inspect.signature(solarchain_eval.evaluate).parameters.items() if p.kind == p.KEYWORD_ONLY]
     assert documented == actual
+
+
+# --- one figure per fact ------------------------------------------------------------------------
+
+#: Measured times of the paper preset and of SAC's training; each lives in docs/performance.md only.
+MEASURED_TIMES = re.compile(r"\b\d+(?:\.\d+)? ?(?:min|minutes|h)\b(?! ?/)")
+
+
+def test_run_times_are_stated_once_in_the_performance_notes():
+    """Other pages link to the performance notes instead of repeating (and drifting from) a time."""
+    pages = ["README.md", "docs/paper_map.md", "docs/jax.md", "docs/training.md", "docs/ray.md", "docs/index.md"]
+    stated = {page: MEASURED_TIMES.findall(_flat((ROOT / page).read_text(encoding="utf-8"))) for page in pages}
+    assert {page: found for page, found in stated.items() if found} == {}
+    performance = _flat((DOCS / "performance.md").read_text(encoding="utf-8"))
+    for figure in ("**2.66 h**", "2,699 s = 45.0 min", "46.2 min"):
+        assert performance.count(figure) == 1, figure
+
+
+def test_counts_on_the_performance_and_environment_pages_follow_the_protocol():
+    from solarchain_eval.market.baselines import BASELINES
+    from solarchain_eval.protocol import EPISODE_HOURS, PAPER_EPISODES, PAPER_SEEDS
+
+    steps = len(PAPER_SEEDS) * PAPER_EPISODES * EPISODE_HOURS
+    performance = _flat((DOCS / "performance.md").read_text(encoding="utf-8"))
+    environment = _flat((DOCS / "environment.md").read_text(encoding="utf-8"))
+    assert f"({len(PAPER_SEEDS)} run seeds × {PAPER_EPISODES} episodes = {steps:,} steps" in performance
+    bench_episodes = len(BASELINES) * 2 * 9 * PAPER_EPISODES  # perf/env_bench.py: 2 settings × 9 run seeds
+    assert f"{bench_episodes:,} baseline episodes" in performance
+    observed = len(BASELINES) * steps
+    assert (
+        f"({len(PAPER_SEEDS)} run seeds × {PAPER_EPISODES} episodes × {EPISODE_HOURS} steps each, {observed:,} observations)"
+        in environment
+    )
