@@ -88,10 +88,14 @@ def test_notebook_code_cells_run(published_dir, monkeypatch):
     monkeypatch.syspath_prepend(str(EXAMPLES))
     monkeypatch.setenv("MPLBACKEND", "Agg")
     namespace: dict = {"__name__": "notebook"}
-    for number, cell in enumerate(cells):
-        exec(compile(cell, f"quickstart.ipynb (code cell {number})", "exec"), namespace)
+    try:
+        for number, cell in enumerate(cells):
+            exec(compile(cell, f"quickstart.ipynb (code cell {number})", "exec"), namespace)
+    finally:
+        sys.modules.pop("my_agent", None)  # the next test imports examples/my_agent.py by path
+    # the notebook's last cell counts the agent's distinct actions in the episode it plots
+    assert namespace["episode"].policy == "Cautious" and namespace["distinct"] > 1
     assert len(_executed(namespace["result"])["Cautious"]) > 1
-    sys.modules.pop("my_agent", None)
 
 
 # --- the pages' sequences ---------------------------------------------------------------------
