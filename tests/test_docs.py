@@ -477,3 +477,16 @@ def test_counts_on_the_performance_and_environment_pages_follow_the_protocol():
         f"({len(PAPER_SEEDS)} run seeds × {PAPER_EPISODES} episodes × {EPISODE_HOURS} steps each, {observed:,} observations)"
         in environment
     )
+
+
+def test_api_pages_list_their_modules_readably():
+    """Each docs/api page opens with its modules and their summaries (``python docs/hooks/api_pages.py --write``)."""
+    hook = _hook("api_pages")
+    stale = []
+    for page in sorted((DOCS / "api").glob("*.md")):
+        text = page.read_text(encoding="utf-8")
+        if hook.refreshed(text) != text:
+            stale.append(page.name)
+        documented = re.findall(r"^::: ([\w.]+)", text, re.M)
+        assert all(f"| `{module}` |" in text for module in documented), page.name
+    assert stale == []
