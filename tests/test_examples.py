@@ -170,3 +170,22 @@ def test_sequence_runner_catches_a_reused_run_directory(in_a_fresh_folder):
     with pytest.raises(AssertionError, match="already holds"):
         _run_sequence([("bash", block)], "planted")
     assert os.path.isdir("runs/x")
+
+
+def test_http_page_runs_in_sequence_against_the_example_server(in_a_fresh_folder):
+    import subprocess
+
+    page = (ROOT / "docs" / "http_agents.md").read_text(encoding="utf-8")
+    quick = page.split("## Quick start", 1)[1].split("\n## ", 1)[0]
+    server = subprocess.Popen(
+        [sys.executable, str(EXAMPLES / "http_agent_server.py"), "--port", "0"], stdout=subprocess.PIPE, text=True
+    )
+    try:
+        url = server.stdout.readline().split()[-1]
+        blocks = [(language, block.replace("http://127.0.0.1:8000/act", url)) for language, block in _blocks(quick)]
+        assert _run_sequence(blocks, "http_agents.md (quick start)") == 2
+    finally:
+        server.terminate()
+        server.wait(timeout=10)
+    assert (in_a_fresh_folder / "runs" / "mine" / "metrics.csv").is_file()
+    assert (in_a_fresh_folder / "runs" / "mine-python" / "metrics.csv").is_file()
