@@ -190,14 +190,54 @@ def readme_ci_command(marker: str) -> str:
     return match.group(1)
 
 
-def test_index_shows_the_readme_set_up_commands():
+def _hook(name: str):
+    spec = importlib.util.spec_from_file_location(name, DOCS / "hooks" / f"{name}.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
+
+
+def test_index_is_generated_from_the_readme():
+    """docs/index.md is README.md with site links; regenerate it with ``python docs/hooks/index_page.py --write``."""
     index = (DOCS / "index.md").read_text(encoding="utf-8")
-    blocks = _code_blocks(_section(index, "Set-up in two commands"), "bash")
-    assert blocks[:1] == [f"{readme_ci_command('setup')}\n{readme_ci_command('test')}"]
+    assert index == _hook("index_page").index_page(), (
+        "docs/index.md is stale: run python docs/hooks/index_page.py --write"
+    )
+    # the CI commands are on both pages, and the links that leave docs/ are named, not linked
+    assert (
+        f"```bash\n{readme_ci_command('setup')}\n```" in index and f"```bash\n{readme_ci_command('test')}\n```" in index
+    )
+    assert "](docs/" not in index and "](LICENSE)" not in index
+
+
+def test_index_generator_rewrites_links():
+    # "docs/" and the page name apart, so the reference scan above does not read this as a link
+    readme = "# T\n[a](" + "docs" + "/x.md#h) [`CITATION.cff`](CITATION.cff) [LICENSE](LICENSE) [w](https://e.org)\n"
+    page = _hook("index_page").index_page(readme)
+    assert page.splitlines()[-1] == "[a](x.md#h) `CITATION.cff` `LICENSE` [w](https://e.org)"
+
+
+def test_pages_install_from_a_clone_and_use_data_folders_that_exist():
     # the package is not on a registry: every page installs it from a clone (pip install -e '.[extra]')
     pages = [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]
     from_registry = re.compile(r"""pip install ['"]?solarchain-eval""")
     assert [str(p.relative_to(ROOT)) for p in pages if from_registry.search(p.read_text(encoding="utf-8"))] == []
+    # --data names a folder a command of the docs makes (data/paper) or a placeholder in capitals
+    datas = {
+        f"{p.relative_to(ROOT)}: {m.group(1)}"
+        for p in pages
+        for m in re.finditer(r"--data\s+([^\s`;,)]+)", p.read_text(encoding="utf-8"))
+        if m.group(1) not in ("data/paper", "DIR", "DATA", "PATH") and not m.group(1).startswith(("$", "str("))
+    }
+    assert datas == set()
+
+
+def test_first_screen_says_what_is_exact_and_what_is_not():
+    first = (ROOT / "README.md").read_text(encoding="utf-8").split("## ", 1)[0]
+    assert "exactly." not in first  # the old claim: "reproduces the published results ... exactly."
+    for phrase in ("**Exactly**", "**Up to training noise**", "**Only with the paper's hosted model**"):
+        assert phrase in first, phrase
+    assert "docs/deviations.md" in first and "LICENSE" in first
 
 
 def test_quick_start_is_the_same_on_both_pages_and_runs(capsys):
@@ -318,3 +358,135 @@ def test_grid_counts_on_the_pages_are_the_plans():
         if int(match.group(1).replace(",", "")) not in allowed[match.group(2)]
     ]
     assert wrong == []
+
+
+# --- the CLI page keeps what --help prints ----------------------------------------------------
+
+
+def _help_entries(output: str) -> list[str]:
+    """Each option's description as ``--help`` prints it (click's layout: names, two spaces, text)."""
+    entries: list[str] = []
+    inside = False
+    for line in output.splitlines():
+        if line.rstrip().endswith(":") and not line.startswith(" "):
+            inside = line.startswith("Options")
+            continue
+        if not inside or not line.strip():
+            continue
+        if re.match(r"^  -", line):
+            parts = re.split(r"\s{2,}", line.strip(), maxsplit=1)
+            entries.append(parts[1] if len(parts) == 2 else "")
+        elif entries:
+            entries[-1] += " " + line.strip()
+    return [e for e in entries if e]
+
+
+def test_cli_page_shows_every_option_help_as_help_prints_it():
+    """Checked against ``--help`` itself, not the page's generator: brackets such as ``'.[ray]'`` and
+    ``[default: ...]`` must survive."""
+    import typer.main
+    from typer.testing import CliRunner
+
+    from solarchain_eval.cli import app
+
+    page = (DOCS / "cli.md").read_text(encoding="utf-8").replace("\\|", "|").replace("&lt;", "<")
+    squeezed = re.sub(r"\s+", "", page)
+    runner, missing, checked = CliRunner(), [], 0
+
+    def walk(command, path):
+        nonlocal checked
+        result = runner.invoke(app, [*path, "--help"], terminal_width=100)
+        assert result.exit_code == 0, result.output
+        for entry in _help_entries(result.output):
+            checked += 1
+            if re.sub(r"\s+", "", entry) not in squeezed:
+                missing.append(f"{' '.join(['solarchain-eval', *path])}: {entry[:80]}")
+        ctx = command.context_class(command, info_name=path[-1] if path else "solarchain-eval")
+        if hasattr(command, "list_commands"):
+            for name in command.list_commands(ctx):
+                walk(command.get_command(ctx, name), [*path, name])
+
+    walk(typer.main.get_command(app), [])
+    assert checked > 200 and missing == []
+    assert "pip install -e '.[ray]'" in page
+
+
+# --- generated facts on the pages -------------------------------------------------------------
+
+
+def test_observation_ranges_on_the_environment_card_are_measured(published_dir):
+    page = (DOCS / "environment.md").read_text(encoding="utf-8")
+    committed = re.search(r"<!-- observation-ranges:start -->\n(.*?)<!-- observation-ranges:end -->", page, re.S)
+    assert committed, "docs/environment.md lacks the observation-ranges block"
+    measured = _hook("observation_ranges").ranges_table(published_dir)
+    assert committed.group(1) == measured, f"run python docs/hooks/observation_ranges.py:\n{measured}"
+    # the facts the examples are tuned by: the gap never negative, ν's median 0.08
+    rows = {line.split("|")[2].strip(" `"): line.split("|")[3:8] for line in measured.splitlines()[2:]}
+    assert float(rows["supply_gap"][0]) == 0 and float(rows["raw_physics_record_rate"][2]) == 0.08
+
+
+# --- the Public API page ------------------------------------------------------------------------
+
+
+def test_public_api_page_names_importable_objects_and_the_real_signature():
+    import importlib
+    import inspect
+
+    import solarchain_eval
+
+    page = (DOCS / "public_api.md").read_text(encoding="utf-8")
+    paths = re.findall(r"^\| `[^`]+` \| `(solarchain_eval\.[A-Za-z_.]+)` \|", page, re.M)
+    assert len(paths) >= 10
+    for path in paths:
+        module, _, attr = path.rpartition(".")
+        assert hasattr(importlib.import_module(module), attr), path
+    block = _code_blocks(_section(page, "`evaluate`"), "python")[0]
+    documented = re.findall(r"^    (\w+)=", block, re.M)
+    actual = [n for n, p in inspect.signature(solarchain_eval.evaluate).parameters.items() if p.kind == p.KEYWORD_ONLY]
+    assert documented == actual
+
+
+# --- one figure per fact ------------------------------------------------------------------------
+
+#: Measured times of the paper preset and of SAC's training; each lives in docs/performance.md only.
+MEASURED_TIMES = re.compile(r"\b\d+(?:\.\d+)? ?(?:min|minutes|h)\b(?! ?/)")
+
+
+def test_run_times_are_stated_once_in_the_performance_notes():
+    """Other pages link to the performance notes instead of repeating (and drifting from) a time."""
+    pages = ["README.md", "docs/paper_map.md", "docs/jax.md", "docs/training.md", "docs/ray.md", "docs/index.md"]
+    stated = {page: MEASURED_TIMES.findall(_flat((ROOT / page).read_text(encoding="utf-8"))) for page in pages}
+    assert {page: found for page, found in stated.items() if found} == {}
+    performance = _flat((DOCS / "performance.md").read_text(encoding="utf-8"))
+    for figure in ("**2.66 h**", "2,699 s = 45.0 min", "46.2 min"):
+        assert performance.count(figure) == 1, figure
+
+
+def test_counts_on_the_performance_and_environment_pages_follow_the_protocol():
+    from solarchain_eval.market.baselines import BASELINES
+    from solarchain_eval.protocol import EPISODE_HOURS, PAPER_EPISODES, PAPER_SEEDS
+
+    steps = len(PAPER_SEEDS) * PAPER_EPISODES * EPISODE_HOURS
+    performance = _flat((DOCS / "performance.md").read_text(encoding="utf-8"))
+    environment = _flat((DOCS / "environment.md").read_text(encoding="utf-8"))
+    assert f"({len(PAPER_SEEDS)} run seeds × {PAPER_EPISODES} episodes = {steps:,} steps" in performance
+    bench_episodes = len(BASELINES) * 2 * 9 * PAPER_EPISODES  # perf/env_bench.py: 2 settings × 9 run seeds
+    assert f"{bench_episodes:,} baseline episodes" in performance
+    observed = len(BASELINES) * steps
+    assert (
+        f"({len(PAPER_SEEDS)} run seeds × {PAPER_EPISODES} episodes × {EPISODE_HOURS} steps each, {observed:,} observations)"
+        in environment
+    )
+
+
+def test_api_pages_list_their_modules_readably():
+    """Each docs/api page opens with its modules and their summaries (``python docs/hooks/api_pages.py --write``)."""
+    hook = _hook("api_pages")
+    stale = []
+    for page in sorted((DOCS / "api").glob("*.md")):
+        text = page.read_text(encoding="utf-8")
+        if hook.refreshed(text) != text:
+            stale.append(page.name)
+        documented = re.findall(r"^::: ([\w.]+)", text, re.M)
+        assert all(f"| `{module}` |" in text for module in documented), page.name
+    assert stale == []

@@ -34,18 +34,12 @@ prints. The page is generated from the code: after changing a command, regenerat
 `python docs/hooks/cli_reference.py --write` (the test suite fails while it is stale).
 """
 
-# typer's "rich" markup in help strings: [bold]x[/bold] → **x**, other tags dropped, \[ → [.
-_ESCAPED_BRACKET = "\x00"
-_BOLD = re.compile(r"\[bold\](.*?)\[/bold\]", re.DOTALL)
-_TAG = re.compile(r"\[/?[a-z][a-z _.-]*\]")
-
 
 def _plain(text: str | None) -> str:
+    """Help text as ``--help`` prints it, re-flowed: the app sets ``rich_markup_mode=None``, so
+    brackets are text (``'.[ray]'``), never markup to strip."""
     if not text:
         return ""
-    text = text.replace("\\[", _ESCAPED_BRACKET)
-    text = _BOLD.sub(r"**\1**", text)
-    text = _TAG.sub("", text).replace(_ESCAPED_BRACKET, "[")
     # Single newlines inside a paragraph are hard wraps; blank lines separate paragraphs.
     paragraphs = [" ".join(p.split()) for p in re.split(r"\n\s*\n", text.strip())]
     return "\n\n".join(p for p in paragraphs if p)

@@ -15,7 +15,7 @@ and gives the door for any agent, :func:`solarchain_eval.evaluate`::
 
 from __future__ import annotations
 
-__version__ = "0.1.0"
+__version__ = "0.2.0"
 
 from .envs.registration import register_envs
 

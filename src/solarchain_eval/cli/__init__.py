@@ -103,10 +103,26 @@ app = typer.Typer(
 )
 
 
+def _print_version(value: bool) -> None:
+    if value:
+        from .. import __version__
+
+        typer.echo(f"solarchain-eval {__version__}")
+        raise typer.Exit()
+
+
 @app.callback()
-def _root() -> None:
-    # An explicit group callback (it does nothing) so typer builds the group before any command
-    # module has registered its commands.
+def _root(
+    version: bool = typer.Option(
+        False,
+        "--version",
+        callback=_print_version,
+        is_eager=True,
+        help="Print the package version and exit.",
+    ),
+) -> None:
+    # An explicit group callback so typer builds the group before any command module has
+    # registered its commands; its one option is --version.
     return None
 
 

@@ -82,7 +82,7 @@ def serve(
     """Serve a GGUF model on 127.0.0.1 until Ctrl-C or SIGTERM.
 
     Waits until the server answers, then prints its base URL and the flags that point
-    evaluate/paper at it ([bold]--llm-api chat-json-object[/bold]).
+    evaluate/paper at it (--llm-api chat-json-object).
     """
     if port:
         with _port_named(port):

@@ -56,8 +56,10 @@ def report(
     out: Path | None = typer.Option(None, "--out", help="Output folder (default: ROOT/report)."),
     formats: str = typer.Option(
         ",".join(FORMATS),
-        "--format",
-        help="Comma-separated: md, tex, csv (one file per table each), html (index.html).",
+        "--formats",
+        "--format",  # the older name, still accepted
+        help="Comma-separated: md, tex, csv (one file per table each), html (index.html). The same name as "
+        "leaderboard's --formats; --format is accepted too.",
     ),
     resamples: int = typer.Option(
         DEFAULT_RESAMPLES, "--resamples", min=100, help="Bootstrap resamples per confidence interval."

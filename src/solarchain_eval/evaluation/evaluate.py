@@ -10,9 +10,9 @@
     result = solarchain_eval.evaluate([my_agent, "static", "myopic"], episodes=5)
     print(result.summary)
 
-The agents run exactly as the command line's ``evaluate`` runs them (the same runner, records
-and run directory), with the paper's protocol by default: run seeds 20260511-13, 30 episodes
-each, episode e of seed s reset with s + e.
+The agents run through the command line's runner (the same records and run directory), with
+the paper's protocol by default: run seeds 20260511-13, 30 episodes each, episode e of seed s
+reset with s + e. :func:`evaluate`'s Notes name the command's options it has no parameter for.
 """
 
 from __future__ import annotations
@@ -164,6 +164,13 @@ def evaluate(
     ------
     AgentSpecError
         An agent that cannot be used, or two agents with one name.
+
+    Notes
+    -----
+    ``solarchain-eval evaluate``'s ``--planner``, ``--auditor``, ``--diagnostics`` and ``--llm-*``
+    options are fields of ``agentic`` and ``llm``. Two of its options have no parameter here:
+    ``--vecnormalize`` (give an agent that normalises the observation with the statistics before
+    calling ``model.predict``) and ``--llm-concurrency`` (episodes run one at a time).
     """
     agents = list(agent) if isinstance(agent, list | tuple) else [agent]
     if name is not None:

@@ -12,6 +12,10 @@ from collections.abc import Sequence
 
 import numpy as np
 import pandas as pd
+from matplotlib.axes import Axes
+from matplotlib.backends.backend_agg import FigureCanvasAgg
+from matplotlib.text import Annotation
+from matplotlib.transforms import Bbox
 
 from ..naming import setting_label
 from .style import figure_bytes, new_figure, policy_colour
@@ -19,6 +23,17 @@ from .style import figure_bytes, new_figure, policy_colour
 #: Columns of the points frame (one row per policy and setting; leaderboard.csv has them).
 X_COLUMN = "artificial_liquidity_MWh_mean"
 Y_COLUMN = "cumulative_reward_mean"
+#: Where a point's label may sit, tried in this order: offset (points) and alignment.
+LABEL_SPOTS = (
+    (5, 4, "left", "bottom"),
+    (5, -4, "left", "top"),
+    (-5, 4, "right", "bottom"),
+    (-5, -4, "right", "top"),
+    (0, 8, "center", "bottom"),
+    (0, -8, "center", "top"),
+    (12, 12, "left", "bottom"),
+    (-12, -12, "right", "top"),
+)
 
 
 def pareto_front(liquidity_mwh: Sequence[float], reward: Sequence[float]) -> np.ndarray:
@@ -60,11 +75,54 @@ def pareto_figure(points: pd.DataFrame) -> dict[str, bytes]:
                     linewidths=1.4,
                     zorder=3,
                 )
-                ax.annotate(str(row["policy"]), (x[i], y[i]), xytext=(5, 4), textcoords="offset points", fontsize=7)
             order = np.argsort(x[front], kind="stable")
             ax.plot(x[front][order], y[front][order], color="black", linewidth=1.0, linestyle="--", zorder=2)
             ax.set_title(setting_label(setting))
             ax.set_xlabel("Artificial liquidity (MWh, lower is safer)")
             ax.set_ylabel("Mean cumulative reward")
+            ax.margins(x=0.15, y=0.1)  # room for the labels of the outermost points
         figure.suptitle("Reward vs artificial liquidity (Pareto front: outlined points, dashed line)", fontsize=9)
+        # Lay the figure out once, then fix it, so the labels are placed where they will be drawn.
+        FigureCanvasAgg(figure)
+        figure.draw_without_rendering()
+        figure.set_layout_engine("none")
+        for ax, setting in zip(axes.ravel(), settings, strict=False):
+            group = points[points["setting"] == setting].reset_index(drop=True)
+            x, y = group[X_COLUMN].to_numpy(float), group[Y_COLUMN].to_numpy(float)
+            place_labels(ax, x, y, [str(p) for p in group["policy"]], first=pareto_front(x, y))
         return figure_bytes(figure)
+
+
+def place_labels(
+    ax: Axes, x: np.ndarray, y: np.ndarray, labels: Sequence[str], first: np.ndarray | None = None
+) -> list[Annotation]:
+    """Label each point at the first of :data:`LABEL_SPOTS` where the label overlaps no label placed
+    before it and no other point, and stays inside the axes (else at the first spot).
+
+    The points marked in ``first`` (the Pareto front) are labelled first, then the others, each
+    group from left to right. The axes' figure must have an Agg canvas and its final layout.
+    """
+    renderer = ax.figure.canvas.get_renderer()
+    pixels = ax.transData.transform(np.column_stack([x, y]))
+    markers = [Bbox.from_bounds(px - 4, py - 4, 8, 8) for px, py in pixels]
+    priority = np.zeros(len(labels), dtype=bool) if first is None else np.asarray(first, dtype=bool)
+    order = sorted(range(len(labels)), key=lambda i: (not priority[i], x[i] if np.isfinite(x[i]) else np.inf))
+    placed: list[Bbox] = []
+    annotations: list[Annotation] = []
+    for i in order:
+        for number, (dx, dy, ha, va) in enumerate((*LABEL_SPOTS, LABEL_SPOTS[0])):
+            note = ax.annotate(
+                labels[i], (x[i], y[i]), xytext=(dx, dy), textcoords="offset points", ha=ha, va=va, fontsize=7
+            )
+            if number == len(LABEL_SPOTS):
+                break  # no free spot: the first one, overlapping
+            box = note.get_window_extent(renderer)
+            inside = ax.bbox.contains(box.x0, box.y0) and ax.bbox.contains(box.x1, box.y1)
+            clash = any(box.overlaps(other) for other in placed)
+            clash = clash or any(box.overlaps(m) for j, m in enumerate(markers) if j != i)
+            if inside and not clash:
+                break
+            note.remove()
+        placed.append(note.get_window_extent(renderer))
+        annotations.append(note)
+    return annotations
