@@ -14,6 +14,7 @@ from typer.testing import CliRunner
 from agent_server import ScriptedAgentServer
 from solarchain_eval.cli import app
 from solarchain_eval.common.redaction import REDACTED, redact_command, redact_metadata, redact_spec, redact_text
+from solarchain_eval.report.loading import load_report_data
 
 PASSWORD, TOKEN, KEY = "hunter2-PASSWORD-x", "tok-SECRET-42", "sk-KEY-0123456789"
 SECRETS = (PASSWORD, TOKEN, KEY)
@@ -75,6 +76,20 @@ def test_no_output_file_or_stream_holds_the_secret(server, tiny_dataset, tmp_pat
     for secret in SECRETS:
         assert [p for p, text in files.items() if secret in text] == []
         assert [text for text in printed if secret in text] == []
+    # A run recorded verbatim (as older versions did) is redacted wherever it is shown.
+    meta["policy_specs"][1] = spec
+    (run / "run_metadata.json").write_text(json.dumps(meta))
+    older = [
+        run_cli(monkeypatch, "verify", run, "--episodes", 1, "--seed", 0),
+        run_cli(monkeypatch, "report", run, "--no-figures", "--out", tmp_path / "report"),
+    ]
+    assert "mine: cannot rebuild (a user agent (mine=http://[redacted]@" in older[0]
+    older.append(json.dumps(load_report_data(run).metadata))  # what the report and the board read
+    shown = every_file_text(tmp_path / "report")
+    assert tmp_path / "report" / "index.html" in shown
+    for secret in SECRETS:
+        assert [text for text in older if secret in text] == []
+        assert [p for p, text in shown.items() if secret in text] == []
 
 
 def test_the_cannot_connect_error_does_not_print_the_secret(tiny_dataset, tmp_path, monkeypatch):

@@ -343,7 +343,9 @@ def test_learned_policy_is_rebuilt_from_the_models_the_keeper_passes(tiny_datase
     by_dir = invoke("verify", out, "--episodes", 2, "--models", model.parent)
     assert lines(by_dir.output)[0] == "ppo: verified (2 episodes)", by_dir.output
     recorded_only = invoke("verify", out)  # the run records the model's path; verify does not follow it
-    assert lines(recorded_only.output)[0].startswith("ppo: cannot rebuild (policy 'ppo' needs a trained model: pass --models")
+    assert lines(recorded_only.output)[0].startswith(
+        "ppo: cannot rebuild (policy 'ppo' needs a trained model: pass --models"
+    )
     model.rename(tmp_path / "elsewhere.zip")
     gone = invoke("verify", out, "--models", f"ppo={model}")
     assert lines(gone.output)[0].startswith("ppo: cannot rebuild (") and str(model) in gone.output
