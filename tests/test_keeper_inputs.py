@@ -215,3 +215,16 @@ def test_a_tarball_file_nothing_vouches_for_is_refused(run, tmp_path, no_extract
     ok = invoke("leaderboard", honest, "--out", tmp_path / "board")
     assert ok.exit_code == 0, ok.output
     assert len(no_extraction) == 1
+
+
+def test_a_tarball_with_a_link_is_refused(run, tmp_path, no_extraction):
+    tarball = tmp_path / "link.tar.gz"
+    with tarfile.open(tarball, "w:gz") as archive:
+        archive.add(run, arcname="submission")
+        link = tarfile.TarInfo("submission/notes.txt")
+        link.type, link.linkname = tarfile.SYMTYPE, "/etc/passwd"
+        archive.addfile(link)
+    result = invoke("leaderboard", tarball, "--out", tmp_path / "board")
+    assert result.exit_code == 2
+    assert "submission/notes.txt is a link or special file" in " ".join(result.output.split())
+    assert no_extraction == []

@@ -143,3 +143,16 @@ def test_verify_loads_models_only_from_what_the_keeper_passes(ppo_run, honest, t
         assert good.exit_code == 0 and "ppo: verified (2 episodes)" in good.output, good.output
     finally:
         meta_path.write_text(original)
+
+
+def test_the_sb3_door_and_vecnormalize_refuse_crafted_files(honest, tiny_dataset, tmp_path):
+    marker = tmp_path / "pwned"
+    crafted = craft(honest, tmp_path / "crafted.zip", marker, entry="policy_class")
+    stats = tmp_path / "vecnormalize.pkl"
+    stats.write_bytes(pickle.dumps(_CreatesFile(marker)))
+    for extra in ([f"mine=sb3:ppo:{crafted}"], [f"mine=sb3:ppo:{honest}", "--vecnormalize", f"mine={stats}"]):
+        out = tmp_path / "run"
+        result = invoke("evaluate", "--data", tiny_dataset, "--policies", *extra, "--out", out)
+        assert result.exit_code == 2, result.output
+        assert not marker.exists() and not out.exists()
+        assert "never needs" in result.output and "Traceback" not in result.output
