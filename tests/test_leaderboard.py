@@ -325,3 +325,10 @@ def test_a_run_of_the_paper_protocol_shows_the_reference_rows(published_dir, tmp
     assert list(frame["row_kind"]) == ["ranked", REFERENCE] and list(frame["source"]) == [str(run), REFERENCE_SOURCE]
     assert frame["cumulative_reward_mean"].iloc[1] == -1.5 and outcome.boards[0].sections[0].paper_protocol
     assert "-1.50 ± 0.25" in (tmp_path / "board" / "leaderboard.html").read_text(encoding="utf-8")
+
+
+def test_verify_rebuilds_a_grids_learned_policy_from_its_own_train_unit(runs):
+    # The keeper named the root: a unit's recorded model inside it is the grid's own (docs/security.md).
+    result = _cli("verify", runs.root, "--episodes", 1)
+    assert result.exit_code == 0, result.output
+    assert "  dqn: verified (1 episode)" in result.output.splitlines()

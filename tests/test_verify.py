@@ -331,17 +331,23 @@ def test_paper_root_verifies_each_finished_unit(tiny_dataset, tmp_path):
 
 
 @pytest.mark.slow  # trains a tiny PPO model
-def test_learned_policy_is_rebuilt_from_its_recorded_model(tiny_dataset, tmp_path):
+def test_learned_policy_is_rebuilt_from_the_models_the_keeper_passes(tiny_dataset, tmp_path):
     from solarchain_eval.training.sb3_trainer import TrainSpec, train
 
     model = train(TrainSpec(algo="ppo", seed=5, timesteps=100, data_dir=tiny_dataset), tmp_path / "ppo").model_path
     out = tmp_path / "run"
     assert invoke("evaluate", "--data", tiny_dataset, "--policies", "ppo", "--models", f"ppo={model}",
                   "--seeds", RUN_SEED, "--episodes", 2, "--out", out).exit_code == 0  # fmt: skip
-    result = invoke("verify", out, "--episodes", 2)
+    result = invoke("verify", out, "--episodes", 2, "--models", f"ppo={model}")
     assert result.exit_code == 0 and lines(result.output)[0] == "ppo: verified (2 episodes)", result.output
+    by_dir = invoke("verify", out, "--episodes", 2, "--models", model.parent)
+    assert lines(by_dir.output)[0] == "ppo: verified (2 episodes)", by_dir.output
+    recorded_only = invoke("verify", out)  # the run records the model's path; verify does not follow it
+    assert lines(recorded_only.output)[0].startswith(
+        "ppo: cannot rebuild (policy 'ppo' needs a trained model: pass --models"
+    )
     model.rename(tmp_path / "elsewhere.zip")
-    gone = invoke("verify", out)
+    gone = invoke("verify", out, "--models", f"ppo={model}")
     assert lines(gone.output)[0].startswith("ppo: cannot rebuild (") and str(model) in gone.output
 
 

@@ -6,6 +6,7 @@ from collections.abc import Callable
 from pathlib import Path
 from typing import Any
 
+from ..common.redaction import redact_spec
 from ..config import BenchmarkConfig
 from ..market.baselines import BASELINES, make_baseline
 from .adapters import AgentError, SB3ModelAgent, as_agent
@@ -96,7 +97,7 @@ def make_agent(
     except AgentSpecError:
         raise
     except (AgentError, ValueError, TypeError, OSError) as error:
-        raise AgentSpecError(f"agent {spec.label!r} ({spec.text}): {error}") from None
+        raise AgentSpecError(f"agent {spec.label!r} ({redact_spec(spec.text)}): {error}") from None
 
 
 def _own_name(agent: Any) -> str | None:

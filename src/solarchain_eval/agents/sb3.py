@@ -12,10 +12,20 @@ built from a model file found through the ``models`` mapping that ``make_policy`
 
 An explicit ``{name: PATH}`` wins over ``{"*": DIR}``. Stable-Baselines3 is imported only when a
 model is loaded.
+
+A model file is loaded without running code it names (:func:`safe_custom_objects`): every
+pickled entry of its ``data`` is rebuilt by :func:`~.safe_pickle.safe_loads` (which refuses
+any function or foreign class) or replaced by a stand-in, and every tensor file is read with
+``torch.load(weights_only=True)`` first. VecNormalize statistics (a pickle) are read the same
+way (docs/security.md#learned-models).
 """
 
 from __future__ import annotations
 
+import base64
+import io
+import json
+import zipfile
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -27,6 +37,7 @@ from ..common.errors import NamesOptions
 from ..config import BenchmarkConfig
 from ..market.observation import OBSERVATION_SHAPE
 from .checkpoints import MODEL_FILE, TRAINABLE_ACTION_MODES, algorithm_class, trained_algo
+from .safe_pickle import safe_loads
 
 #: Learned policy name -> the env action mode it acts in.
 LEARNED_POLICIES = dict(TRAINABLE_ACTION_MODES)  # ppo-lag's model is a plain PPO model
@@ -96,12 +107,69 @@ class ModelNotFoundError(NamesOptions, FileNotFoundError):
     """No trained model for a learned policy (the message lists where it looked)."""
 
 
-def load_model(name: str, path: Path) -> Any:
-    """Load ``path`` with the SB3 class of ``name`` on the CPU; errors name the file."""
+#: Entries of a model's ``data`` that acting never reads or that SB3 rebuilds from the rest; a
+#: refused pickle there is replaced (schedules by a constant one, the others by None).
+_SCHEDULES = ("learning_rate", "lr_schedule", "clip_range", "clip_range_vf", "exploration_schedule")
+#: Entries a model cannot act without: a refused pickle there refuses the model.
+_NEEDED = ("observation_space", "action_space", "policy_class", "policy_kwargs")
+
+
+class UnsafeModel(ValueError):
+    """A model file whose pickled parts name code a model never needs (refused, nothing run)."""
+
+
+def _zero_schedule(_progress_remaining: float) -> float:
+    return 0.0  # stands in for a training schedule: acting never reads it
+
+
+def safe_custom_objects(path: Path) -> dict[str, Any]:
+    """SB3's ``custom_objects`` for ``path``: every pickled entry of its ``data``, rebuilt safely or replaced.
+
+    Every ``.pth`` member is first read with ``torch.load(weights_only=True)`` (tensors and
+    plain containers only), so SB3's own read of it cannot run code either.
+
+    Raises
+    ------
+    UnsafeModel
+        A needed entry (:data:`_NEEDED`) or a tensor file names code; nothing was run.
+    """
+    import torch
+
+    with zipfile.ZipFile(path) as archive:
+        names = archive.namelist()
+        for member in (n for n in names if n.endswith(".pth")):
+            try:
+                torch.load(io.BytesIO(archive.read(member)), map_location="cpu", weights_only=True)
+            except Exception as error:  # torch raises UnpicklingError, RuntimeError, ... for a foreign pickle
+                why = str(error).strip().splitlines()[0] if str(error).strip() else type(error).__name__
+                raise UnsafeModel(f"{member} holds more than tensors, refused without running it ({why})") from None
+        data = json.loads(archive.read("data")) if "data" in names else {}
+    custom: dict[str, Any] = {}
+    for key, item in data.items() if isinstance(data, dict) else ():
+        if not (isinstance(item, dict) and ":serialized:" in item):
+            continue
+        try:
+            custom[key] = safe_loads(base64.b64decode(str(item[":serialized:"])))
+        except Exception as error:  # UnsafePickle (a refused name), or a damaged pickle
+            if key in _NEEDED:
+                raise UnsafeModel(f"its pickled entry {key!r} {error}; refused without running it") from None
+            custom[key] = _zero_schedule if key in _SCHEDULES else None
+    return custom
+
+
+def _load_safely(cls: type, path: Path, label: str) -> Any:
+    """``cls.load(path)`` on the CPU with every pickled entry replaced (:func:`safe_custom_objects`)."""
     try:
-        return algorithm_class(name).load(path, device="cpu")
+        return cls.load(path, device="cpu", custom_objects=safe_custom_objects(path))
+    except UnsafeModel as error:
+        raise ValueError(f"cannot load {path} as a {label} model: {error}") from None
     except Exception as error:  # SB3 raises many kinds for a wrong or damaged file
-        raise ValueError(f"cannot load {path} as a {name.upper()} model: {type(error).__name__}: {error}") from None
+        raise ValueError(f"cannot load {path} as a {label} model: {type(error).__name__}: {error}") from None
+
+
+def load_model(name: str, path: Path) -> Any:
+    """Load ``path`` with the SB3 class of ``name`` on the CPU, running no pickled code; errors name the file."""
+    return _load_safely(algorithm_class(name), Path(path), name.upper())
 
 
 def check_model_spaces(model: Any, action_mode: str, config: BenchmarkConfig, source: Path | str) -> None:
@@ -148,26 +216,21 @@ def load_sb3_model(algo: str, path: Path | str, config: BenchmarkConfig) -> Any:
     cls = sb3_algorithm(algo)
     if not path.is_file():
         raise ValueError(f"no model file {path}")
-    try:
-        model = cls.load(path, device="cpu")
-    except Exception as error:  # SB3 raises many kinds for a wrong or damaged file
-        raise ValueError(f"cannot load {path} as a {cls.__name__} model: {type(error).__name__}: {error}") from None
+    model = _load_safely(cls, path, cls.__name__)
     mode = "discrete" if getattr(model.action_space, "n", None) is not None else "continuous"
     check_model_spaces(model, mode, config, path)
     return model
 
 
 def load_vecnormalize(path: Path | str) -> Any:
-    """VecNormalize statistics saved by ``VecNormalize.save`` (observations normalised, not updated)."""
-    import pickle
-
+    """VecNormalize statistics saved by ``VecNormalize.save`` (observations normalised, not updated),
+    unpickled by :func:`~.safe_pickle.safe_loads` (a pickle naming anything else is refused, not run)."""
     from stable_baselines3.common.vec_env import VecNormalize
 
     path = Path(path)
     try:
-        with path.open("rb") as handle:
-            stats = pickle.load(handle)  # noqa: S301 - the user's own statistics file, as SB3 loads it
-    except Exception as error:  # a missing, truncated or foreign file
+        stats = safe_loads(path.read_bytes())
+    except Exception as error:  # a missing, truncated, foreign or unsafe file
         raise ValueError(f"cannot read VecNormalize statistics from {path}: {type(error).__name__}: {error}") from None
     if not isinstance(stats, VecNormalize):
         raise ValueError(f"{path} holds a {type(stats).__name__}, not VecNormalize statistics")

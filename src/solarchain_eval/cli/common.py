@@ -16,6 +16,7 @@ from rich.table import Table
 from rich.text import Text
 
 from ..common.errors import NamesOptions, flag_of
+from ..common.redaction import redact_text
 from ..config import ConfigError, check_seeds
 from ..data.errors import DatasetError
 from ..data.weather import WeatherError
@@ -77,6 +78,7 @@ def reports_errors(func: F) -> F:
             return func(*args, **kwargs)
         except (CliError, *USER_ERRORS) as error:
             message = error.message_for(_flag_of) if isinstance(error, NamesOptions) else str(error)
+            message = redact_text(message)  # a spec or URL the error repeats may carry credentials
             err_console.print(Text.assemble(("error:", "bold red"), f" {message}"), soft_wrap=True)
             raise typer.Exit(EXIT_USAGE) from None
         except KeyboardInterrupt:

@@ -8,6 +8,7 @@ import typer
 from rich.table import Table
 
 from ..report.options import DEFAULT_RESAMPLES, LEADERBOARD_FORMATS, LeaderboardOptions, ReportDataError, parse_formats
+from ..report.tarballs import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
 from . import app
 from .common import CliError, cli_error, console, register_user_error, reports_errors, say
 
@@ -32,6 +33,17 @@ def leaderboard(
     resamples: int = typer.Option(
         DEFAULT_RESAMPLES, "--resamples", min=100, help="Start-day bootstrap resamples per interval."
     ),
+    max_unpacked_mb: float = typer.Option(
+        DEFAULT_MAX_UNPACKED_MB,
+        "--max-unpacked-mb",
+        help="Refuse a tarball whose files unpack to more than this many MB (checked before unpacking).",
+    ),
+    max_members: int = typer.Option(
+        DEFAULT_MAX_MEMBERS,
+        "--max-members",
+        min=1,
+        help="Refuse a tarball of more members (files and folders) than this (checked before unpacking).",
+    ),
 ) -> None:
     """Rank runs and paper roots of one protocol per setting, with start-day bootstrap intervals.
 
@@ -39,12 +51,20 @@ def leaderboard(
     of improvement over the best baseline on paired episodes, the safety metrics, the access label
     (public or privileged) and the source. All inputs must share one protocol apart from the
     setting (dataset, run seeds, episodes, episode-seed rule, task configuration); otherwise the
-    command names the first differing field and two inputs, and writes nothing. See
-    docs/comparing_results.md.
+    command names the first differing field and two inputs, and writes nothing. A tarball is
+    refused before anything is unpacked when it passes --max-unpacked-mb or --max-members, holds
+    a link, or holds a file its metadata does not vouch for; --out may not lie inside an input.
+    See docs/comparing_results.md and docs/security.md.
     """
     try:
+        if not max_unpacked_mb > 0:
+            raise ValueError(f"--max-unpacked-mb must be positive, got {max_unpacked_mb:g}")
         options = LeaderboardOptions(
-            formats=parse_formats(formats, LEADERBOARD_FORMATS, "leaderboard"), split=split, n_resamples=resamples
+            formats=parse_formats(formats, LEADERBOARD_FORMATS, "leaderboard"),
+            split=split,
+            n_resamples=resamples,
+            max_unpacked_mb=max_unpacked_mb,
+            max_members=max_members,
         )
     except ValueError as error:
         raise cli_error(error) from None

@@ -7,6 +7,7 @@ from pathlib import Path
 import typer
 
 from ..agents.registry import known_policies
+from ..agents.sb3 import parse_models
 from ..agents.specs import parse_agent_args, parse_agent_spec
 from ..evaluation.verify import DEFAULT_VERIFY_EPISODES, RunVerification, VerifyError, VerifyOptions, verify_run
 from . import app
@@ -46,20 +47,30 @@ def verify(
         "--data",
         help="The run's dataset, when the recorded data_dir moved or changed; its CSVs must have the recorded sha256.",
     ),
+    models: list[str] | None = typer.Option(
+        None,
+        "--models",
+        metavar="DIR|NAME=PATH",
+        help="Trained models of the run's learned policies, as in evaluate (repeatable). Learned policies are "
+        "never loaded from the paths the run records.",
+    ),
 ) -> None:
     """Verify a run: its files against their sha256, then a sample of episodes re-run bit for bit.
 
     Checks every file of RUN against the sha256 in run_metadata.json (missing, extra and changed
     files are named) and the recorded protocol fingerprint against its id, then re-runs --episodes
     randomly chosen episodes of every policy it can rebuild -- built-ins by name, learned policies
-    from the recorded models, user agents from --agent -- with the run's dataset, configuration,
+    from --models, user agents from --agent -- with the run's dataset, configuration,
     setting and Planner/Auditor options, and compares each episode's metrics.csv row cell by cell.
-    Prints one line per policy (verified / differs / cannot rebuild) and a final line with the
-    checksum result and the protocol id. Exit status 0 when every rebuilt policy verifies and the
-    checksums match, 1 on any difference or checksum failure, 2 for unusable arguments.
+    Before re-running, metrics.csv must hold exactly the protocol's rollouts (each policy, run
+    seed and episode once) and as many rows as the metadata records. Prints one line per policy
+    (verified / differs / cannot rebuild) and a final line with the checksum result and the
+    protocol id. Exit status 0 when every rebuilt policy verifies and the checksums and rollouts
+    match, 1 on any difference or failure, 2 for unusable arguments.
 
-    A paper grid root verifies each finished eval unit and the combined files. See
-    docs/comparing_results.md#verifying-a-run.
+    A paper grid root verifies each finished eval unit (learned policies from the grid's own
+    models under the root) and the combined files. See docs/comparing_results.md#verifying-a-run
+    and docs/security.md.
     """
     try:
         specs = [parse_agent_spec(text, known_policies()) for text in agents or []]
@@ -73,6 +84,7 @@ def verify(
         llm_cache=llm_cache,
         seed=seed,
         data_dir=data_dir,
+        models=parse_models(models or []),
     )
     from ..experiments.layout import is_paper_root
 
@@ -100,7 +112,7 @@ def _verify_grid(root: Path, options: VerifyOptions) -> bool:
     units = eval_unit_dirs(root)
     if not units:
         raise CliError(f"{root}: a paper root without eval units (nothing to verify)")
-    unit_options = replace(options, grid_files=(UNIT_FILE, UNIT_LOG, DONE_MARKER))
+    unit_options = replace(options, grid_files=(UNIT_FILE, UNIT_LOG, DONE_MARKER), models_within=root)
     ok = True
     for unit in units:
         say(f"{unit.relative_to(root)}:", err=False)

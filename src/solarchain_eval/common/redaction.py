@@ -1,22 +1,31 @@
-"""Removing credentials from command lines before they are recorded or shown.
+"""Removing credentials from what is recorded or shown: command lines, agent specs, run
+metadata and error messages (the one home of redaction; see docs/security.md).
 
-A command line may carry secrets in three places: URL user info (``https://user:pw@host``),
-URL query values (``?token=…``) and the value of any option whose name mentions a key, token,
-secret, password or credential (``--api-key sk-…``, ``--hf-token=…``). :func:`redact_command`
-replaces each with ``[redacted]``, as do the values of the API-key environment variables should
-they appear verbatim. See docs/output_safety.md.
+Text may carry secrets in four places: URL user info (``https://user:pw@host``), URL query
+values (``?token=…``), the value of any option whose name mentions a key, token, secret,
+password or credential (``--api-key sk-…``, ``--hf-token=…``), and such a ``NAME=VALUE`` pair
+in free text (``--agent-arg api_key=sk-…``). :func:`redact_command`, :func:`redact_text` and
+:func:`redact_spec` replace each with ``[redacted]``, as do the values of the API-key
+environment variables should they appear verbatim. :func:`redact_metadata` applies them to the
+fields of a ``run_metadata.json`` that hold a command or an agent spec. See
+docs/output_safety.md.
 """
 
 from __future__ import annotations
 
 import os
 import re
-from collections.abc import Iterable, Sequence
+from collections.abc import Iterable, Mapping, Sequence
+from typing import Any
 
 REDACTED = "[redacted]"
 #: Words of an option name (split at - and _) that make its value a secret ("tokens" is a count).
 _SECRET_WORDS = ("key", "token", "secret", "password", "passwd", "pwd", "credential", "credentials", "auth")
 _URL = re.compile(r"[A-Za-z][A-Za-z0-9+.-]*://[^\s'\"<>]+")
+#: ``NAME=VALUE`` in free text (not inside a word): the value is a secret when the name says so.
+_PAIR = re.compile(r"(?<![A-Za-z0-9_.-])([A-Za-z][A-Za-z0-9_.-]*)=([^\s&,;'\"<>]+)")
+#: ``Authorization: Bearer …``-style credentials.
+_BEARER = re.compile(r"\b(Bearer|Basic)\s+[A-Za-z0-9._~+/=-]{8,}")
 #: Environment variables holding keys whose values never appear in a recorded command.
 SECRET_ENV_VARS = ("SOLARCHAIN_LLM_API_KEY", "OPENAI_API_KEY")
 
@@ -38,17 +47,28 @@ def redact_url(url: str) -> str:
     return f"{scheme}{netloc}{path}{question}{query}{hash_}{REDACTED if fragment else ''}"
 
 
+def redact_spec(spec: str) -> str:
+    """An agent spec (``NAME=TARGET``) safe to record: a URL target without user info or query values.
+
+    Only URLs are redacted: the spec's own ``NAME=`` is a row name, never a secret.
+    """
+    return _URL.sub(lambda m: redact_url(m.group(0)), str(spec))
+
+
 def redact_text(text: str, secrets: Iterable[str | None] = ()) -> str:
-    """``text`` with URLs redacted (:func:`redact_url`) and every given secret removed."""
-    out = _URL.sub(lambda m: redact_url(m.group(0)), text)
-    for secret in secrets:
+    """``text`` with URLs redacted (:func:`redact_url`), ``NAME=VALUE`` pairs whose name mentions
+    a key, token, secret or password redacted, bearer credentials and every given secret removed."""
+    out = redact_spec(str(text))
+    out = _PAIR.sub(lambda m: f"{m.group(1)}={REDACTED}" if _names_secret(m.group(1)) else m.group(0), out)
+    out = _BEARER.sub(lambda m: f"{m.group(1)} {REDACTED}", out)
+    for secret in [*secrets, *_env_secrets()]:
         if secret:
             out = out.replace(secret, REDACTED)
     return out
 
 
 def _names_secret(option: str) -> bool:
-    words = re.split(r"[-_]+", option.strip("-").lower())
+    words = re.split(r"[-_.]+", option.strip("-").lower())
     return any(w in _SECRET_WORDS or w.endswith(("key", "token", "secret")) for w in words)
 
 
@@ -76,4 +96,15 @@ def redact_command(argv: Sequence[str], secrets: Iterable[str | None] = ()) -> l
                     out.append(arg)
                 continue
         out.append(redact_text(arg, known))
+    return out
+
+
+def redact_metadata(metadata: Mapping[str, Any]) -> dict[str, Any]:
+    """A ``run_metadata.json`` object safe to show: its command and agent specs redacted (older
+    runs recorded them verbatim; the LLM endpoint is recorded without credentials)."""
+    out = dict(metadata)
+    if isinstance(out.get("command"), list):
+        out["command"] = redact_command(out["command"])
+    if isinstance(out.get("policy_specs"), list):
+        out["policy_specs"] = [redact_spec(str(s)) for s in out["policy_specs"]]
     return out

@@ -24,7 +24,7 @@ from ..agents.base import Policy, access_label
 from ..agents.registry import known_policies, make_agent
 from ..agents.specs import AgentSpecError, check_unique, parse_agent_spec
 from ..common.atomic_files import atomic_write_json, sha256_file
-from ..common.redaction import redact_command
+from ..common.redaction import redact_command, redact_spec
 from ..common.versions import git_commit, package_versions
 from ..config import BenchmarkConfig
 from ..data.default import resolve_data_dir
@@ -332,7 +332,7 @@ def _metadata(
         "setting": setting,
         "records_schema_version": RECORDS_SCHEMA_VERSION,
         "policies": [p.name for p in policies],
-        "policy_specs": [p if isinstance(p, str) else f"<{type(p).__name__}>" for p in spec.policies],
+        "policy_specs": [redact_spec(p) if isinstance(p, str) else f"<{type(p).__name__}>" for p in spec.policies],
         # Behind the Planner/Auditor layer every row is privileged: the layer reads hours ahead.
         "policy_access": {p.name: "privileged" if governed else access_label(p) for p in policies},
         "protocol": protocol,

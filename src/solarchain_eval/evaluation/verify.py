@@ -8,27 +8,29 @@ seeded-random episodes of every policy it can rebuild under the run's recorded p
 configuration, setting, episode-seed rule, Planner/Auditor options) and compares each re-run
 episode's ``metrics.csv`` row, cell by cell, with the recorded one as the CSV writer writes it.
 
-Policies are rebuilt from what the run records: built-ins by name, learned ones from the
-recorded models, user agents only from specs the caller gives (``agents``, matched by name;
-the run's metadata never decides what code runs). An agent that is not ``stateless`` (the
+Before any re-run, ``metrics.csv`` must hold exactly the protocol's rollouts, each once, as many
+as the metadata records (:func:`~.verify_checks.check_rollouts`, the leaderboard's rule too).
+Policies are rebuilt from what the caller gives: built-ins by name, learned ones only from the
+models the caller passes (``models``; a grid's units also from their own train units inside the
+grid root), user agents only from specs the caller gives (``agents``, matched by name). The
+run's metadata never decides what code runs or what file is loaded (docs/security.md). An agent that is not ``stateless`` (the
 Random baseline draws from one generator across a run's episodes) has the episodes before each
 chosen one replayed in order, as the run ran them (:func:`replay_plan`).
 """
 
 from __future__ import annotations
 
-import hashlib
 from collections.abc import Callable, Mapping, Sequence
 from contextlib import ExitStack
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-import numpy as np
-
 from ..agents.base import Policy
 from ..agents.registry import known_policies
 from ..agents.specs import AgentSpecError, parse_agent_spec
+from ..common.errors import NamesOptions
+from ..common.redaction import redact_text
 from ..config import BenchmarkConfig
 from ..data.table import HourlyTable, load_table
 from ..envs.env import SolarChainEnv
@@ -45,11 +47,13 @@ from .verify_checks import (
     check_checksums,
     check_protocol,
     first_difference,
+    keeper_models,
     read_metadata,
-    read_recorded_rows,
+    read_rollouts,
     resolve_dataset,
     written_row,
 )
+from .verify_plan import choose_episodes, default_seed, replay_plan
 
 #: Episodes re-run per policy by default.
 DEFAULT_VERIFY_EPISODES = 3
@@ -76,6 +80,10 @@ class VerifyOptions:
         A dataset directory to use instead of the recorded one; its CSVs must have the recorded sha256.
     grid_files : tuple of str
         Files a grid keeps in a unit beside the run's own (not vouched for, not extra).
+    models : dict
+        Trained models of the learned policies (``--models``: ``{name: PATH}`` or ``{"*": DIR}``).
+    models_within : Path, optional
+        A grid root: its units' recorded models inside it may be loaded too.
     """
 
     episodes: int = DEFAULT_VERIFY_EPISODES
@@ -85,6 +93,8 @@ class VerifyOptions:
     seed: int | None = None
     data_dir: Path | None = None
     grid_files: tuple[str, ...] = ()
+    models: dict[str, Path] = field(default_factory=dict)
+    models_within: Path | None = None
 
 
 @dataclass(frozen=True)
@@ -127,16 +137,19 @@ class RunVerification:
     protocol_problems: tuple[str, ...]
     policies: tuple[PolicyVerification, ...]
     files_checked: int = 0
+    rollout_problems: tuple[str, ...] = ()
 
     @property
     def ok(self) -> bool:
-        """Checksums and protocol agree and no rebuilt policy differs."""
-        problems = self.checksum_problems or self.protocol_problems
+        """Checksums, protocol and rollouts agree and no rebuilt policy differs."""
+        problems = self.checksum_problems or self.protocol_problems or self.rollout_problems
         return not problems and all(p.status != DIFFERS for p in self.policies)
 
     def lines(self) -> list[str]:
-        """One line per policy, one per problem, then the checksum result and protocol id."""
+        """One line per policy, one per problem, then the checksum result and protocol id (redacted:
+        a recorded spec may carry credentials)."""
         out = [p.line() for p in self.policies]
+        out += [f"rollouts: {problem}" for problem in self.rollout_problems]
         out += [f"checksum: {problem}" for problem in self.checksum_problems]
         out += [f"protocol: {problem}" for problem in self.protocol_problems]
         checksums = (
@@ -146,21 +159,7 @@ class RunVerification:
         )
         protocol = "" if not self.protocol_problems else " (inconsistent with the metadata)"
         out.append(f"{checksums}; protocol {self.protocol_id or '(none recorded)'}{protocol}")
-        return out
-
-
-def default_seed(run_id: str) -> int:
-    """The episode choice's seed of a run: the first 64 bits of the sha256 of its ``run_id``."""
-    return int(hashlib.sha256(str(run_id).encode()).hexdigest()[:16], 16)
-
-
-def choose_episodes(run_seeds: Sequence[int], episodes: int, k: int, seed: int) -> list[tuple[int, int]]:
-    """``k`` distinct (run seed, episode) pairs drawn with ``numpy.random.default_rng(seed)``, in protocol order."""
-    pairs = [(int(s), e) for s in run_seeds for e in range(episodes)]
-    if k >= len(pairs):
-        return pairs
-    chosen = np.random.default_rng(seed).choice(len(pairs), size=k, replace=False)
-    return [pairs[i] for i in sorted(int(i) for i in chosen)]
+        return [redact_text(line) for line in out]
 
 
 @dataclass
@@ -177,28 +176,6 @@ class _Rerun:
     carry_over: bool
     governance: Governance | None
     recorded: dict[tuple[str, int, int], dict[str, str]]
-
-
-def replay_plan(
-    chosen: Sequence[tuple[int, int]], run_seeds: Sequence[int], episodes: int, *, stateless: bool, carry_over: bool
-) -> list[tuple[int, list[int]]]:
-    """The episodes to run, by run seed in protocol order, so that each chosen one is run in the
-    state the agent had when it was recorded.
-
-    A stateless agent runs just the chosen episodes. Any other one runs its run seed's episodes
-    in order up to the last one chosen; with ``carry_over`` (a run evaluated in order, one agent
-    through all its run seeds) every earlier run seed's episodes first, as the runner did.
-    """
-    by_seed: dict[int, list[int]] = {}
-    for run_seed, episode in chosen:
-        by_seed.setdefault(int(run_seed), []).append(int(episode))
-    if stateless:
-        return [(s, sorted(w)) for s, w in by_seed.items()]
-    if not carry_over:
-        return [(s, list(range(max(w) + 1))) for s, w in by_seed.items()]
-    seeds = [int(s) for s in run_seeds]
-    last = max(seeds.index(s) for s in by_seed)
-    return [(s, list(range(max(by_seed[s]) + 1 if i == last else episodes))) for i, s in enumerate(seeds[: last + 1])]
 
 
 def rerun_policy(
@@ -353,11 +330,17 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
             run_dir, tuple(checksums), str(metadata.get("protocol_id") or ""), (why,), cannot, files_checked
         )
     protocol = check_protocol(metadata, config)
+    recorded, rollouts = read_rollouts(run_dir, metadata)
     data_dir, no_data = resolve_dataset(metadata, options.data_dir)
     with ExitStack() as stack:
-        models = {str(k): Path(v) for k, v in (metadata.get("models") or {}).items()}
+        models = keeper_models(metadata, options.models, options.models_within)
         given = _given_builders(metadata, config, models, options, stack)
-        results = _verify_policies(run_dir, metadata, config, data_dir, no_data, given, models, options, stack)
+        # A run whose rows are not its protocol's is not re-run: the rows would not say what was compared.
+        results = (
+            []
+            if rollouts
+            else _verify_policies(run_dir, metadata, config, data_dir, no_data, given, models, options, stack, recorded)
+        )
     return RunVerification(
         run_dir,
         tuple(checksums),
@@ -365,6 +348,7 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
         tuple(protocol),
         tuple(results),
         files_checked,
+        tuple(rollouts),
     )
 
 
@@ -378,6 +362,7 @@ def _verify_policies(
     models: dict[str, Path],
     options: VerifyOptions,
     stack: ExitStack,
+    recorded: dict[tuple[str, int, int], dict[str, str]],
 ) -> list[PolicyVerification]:
     names = [str(n) for n in metadata.get("policies") or []]
     specs = [str(s) for s in metadata.get("policy_specs") or []]
@@ -410,7 +395,7 @@ def _verify_policies(
         episodes=int(metadata.get("episodes") or 0),
         episode_seeds=rule,
         governance=governance,
-        recorded=read_recorded_rows(metrics_path),
+        recorded=recorded,
         # The runner drives one agent through every run seed, unless episodes ran in flight
         # (a private copy per run seed, :mod:`.inflight`).
         carry_over=int(metadata.get("concurrency", 1)) <= 1,
@@ -427,7 +412,8 @@ def _verify_policies(
         try:
             base = build()
         except (ValueError, OSError) as error:  # a spec or model that cannot be built now
-            results.append(PolicyVerification(name, CANNOT_REBUILD, reason=str(error)))
+            why = error.message_for() if isinstance(error, NamesOptions) else str(error)
+            results.append(PolicyVerification(name, CANNOT_REBUILD, reason=why))
             continue
         if modes.get(name, base.action_mode) != base.action_mode:
             why = f"action mode: recorded {modes[name]}, re-run {base.action_mode}"

@@ -1,5 +1,9 @@
-"""The checks :mod:`.verify` makes of a run's record: its files, its protocol, its dataset, and
-how a re-run episode's ``metrics.csv`` row compares with the recorded one.
+"""The checks :mod:`.verify` makes of a run's record: its files, its protocol, its rollouts, its
+dataset, and how a re-run episode's ``metrics.csv`` row compares with the recorded one.
+
+:func:`rollout_set_problem` is the one rule of which rollouts a run holds, shared with the
+leaderboard (:mod:`solarchain_eval.report.leaderboard_inputs`): exactly one row per (policy, run
+seed, episode) of the protocol, none missing, none repeated, none outside it.
 
 Rows are compared as text, cell by cell, as the run's CSV writer writes them (floats as their
 shortest round-trip repr, so equal text is the same float64); a cell whose text differs only
@@ -12,7 +16,7 @@ import csv
 import io
 import json
 import math
-from collections.abc import Mapping, Sequence
+from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -22,7 +26,7 @@ from ..config import BenchmarkConfig
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
 from .fingerprint import protocol_fingerprint, protocol_id
-from .records import METADATA_FILE, REPORT_DIR, metrics_frame
+from .records import METADATA_FILE, METRICS_FILE, REPORT_DIR, metrics_frame
 from .rollout import EpisodeResult
 from .rundir import verify_files
 
@@ -146,11 +150,112 @@ def resolve_dataset(metadata: Mapping[str, Any], data_dir: Path | None) -> tuple
     return recorded_dir, ""
 
 
-def read_recorded_rows(path: Path) -> dict[tuple[str, int, int], dict[str, str]]:
-    """``metrics.csv`` rows as written (cell text), by (policy, run seed, episode)."""
+#: One rollout: (policy, run seed, episode).
+RolloutKey = tuple[str, int, int]
+
+
+def rollout_set_problem(
+    keys: Iterable[RolloutKey], policies: Sequence[str], run_seeds: Sequence[int], episodes: int
+) -> str | None:
+    """Why ``keys`` (every row's rollout, in file order) is not exactly the protocol's rollouts:
+    each of ``policies`` × ``run_seeds`` × ``episodes`` once (None: it is).
+
+    The first problem is named: a repeated rollout, a policy the run does not list, a rollout
+    outside the protocol, or a policy missing rollouts (with the first one missing).
+    """
+    seeds = [int(s) for s in run_seeds]
+    promise = f"run seeds {seeds} × {int(episodes)} episodes"
+    seen: set[RolloutKey] = set()
+    for policy, seed, episode in keys:
+        key = (str(policy), int(seed), int(episode))
+        if key in seen:
+            return f"rollout (policy {key[0]!r}, run seed {key[1]}, episode {key[2]}) appears more than once"
+        seen.add(key)
+    listed = [str(p) for p in policies]
+    expected = {(p, s, e) for p in listed for s in seeds for e in range(int(episodes))}
+    for policy, seed, episode in sorted(seen - expected):
+        if policy not in listed:
+            return f"policy {policy!r} has rows but is not one of the run's policies ({', '.join(listed)})"
+        return f"policy {policy!r} holds rollout (run seed {seed}, episode {episode}) outside its protocol ({promise})"
+    for policy in listed:
+        missing = sorted(k for k in expected - seen if k[0] == policy)
+        if missing:
+            held = sum(1 for k in seen if k[0] == policy)
+            _, seed, episode = missing[0]
+            return (
+                f"policy {policy!r} holds {held} of the {len(expected) // len(listed)} rollouts its protocol promises "
+                f"({promise}); missing: run seed {seed}, episode {episode}"
+            )
+    return None
+
+
+def read_metrics_rows(path: Path) -> list[dict[str, str]]:
+    """``metrics.csv`` rows as written (cell text), in file order, with integer run seeds and episodes.
+
+    Raises
+    ------
+    ValueError
+        A row whose ``run_seed`` or ``episode`` is not an integer (the message names the row).
+    """
     with open(path, newline="", encoding="utf-8") as handle:
         rows = list(csv.DictReader(handle))
-    return {(r["policy"], int(r["run_seed"]), int(r["episode"])): r for r in rows}
+    for number, row in enumerate(rows, start=2):
+        for column in ("policy", "run_seed", "episode"):
+            value = row.get(column)
+            if value is None or (column != "policy" and not value.strip().lstrip("-").isdigit()):
+                raise ValueError(
+                    f"{path} row {number}: {column} {value!r} is not {'a name' if column == 'policy' else 'an integer'}"
+                )
+    return rows
+
+
+def check_rollouts(metadata: Mapping[str, Any], rows: Sequence[Mapping[str, str]]) -> list[str]:
+    """Whether ``metrics.csv``'s ``rows`` are exactly the run's rollouts (:func:`rollout_set_problem`)
+    and as many as ``run_metadata.json`` records (empty: they are)."""
+    problems = []
+    recorded = (metadata.get("rows") or {}).get("metrics") if isinstance(metadata.get("rows"), dict) else None
+    if recorded is not None and int(recorded) != len(rows):
+        problems.append(f"{METRICS_FILE} holds {len(rows)} rows; {METADATA_FILE} records {recorded}")
+    problem = rollout_set_problem(
+        ((r["policy"], int(r["run_seed"]), int(r["episode"])) for r in rows),
+        [str(p) for p in metadata.get("policies") or []],
+        [int(s) for s in metadata.get("run_seeds") or []],
+        int(metadata.get("episodes") or 0),
+    )
+    return problems + ([f"{METRICS_FILE}: {problem}"] if problem else [])
+
+
+def read_rollouts(run_dir: Path, metadata: Mapping[str, Any]) -> tuple[dict[RolloutKey, dict[str, str]], list[str]]:
+    """``run_dir``'s ``metrics.csv`` rows by rollout and the problems of its rollout set (:func:`check_rollouts`).
+
+    The rows are returned only when there is no problem (a repeated key would hide a row);
+    a missing file is no problem here (the checksums name it).
+    """
+    path = Path(run_dir) / METRICS_FILE
+    if not path.is_file():
+        return {}, []
+    try:
+        rows = read_metrics_rows(path)
+    except (ValueError, OSError) as error:
+        return {}, [str(error)]
+    problems = check_rollouts(metadata, rows)
+    return ({} if problems else {(r["policy"], int(r["run_seed"]), int(r["episode"])): r for r in rows}), problems
+
+
+def keeper_models(metadata: Mapping[str, Any], given: Mapping[str, Path], within: Path | None) -> dict[str, Path]:
+    """The model files verify may load: those the keeper passed (``given``, ``--models``) and, for
+    the units of a grid root the keeper named (``within``), the recorded ones that lie inside it.
+
+    A run's own record never sends verify to a path outside what the keeper named.
+    """
+    models = {str(k): Path(v) for k, v in given.items()}
+    if within is not None:
+        root = Path(within).resolve()
+        for name, path in (metadata.get("models") or {}).items():
+            resolved = Path(str(path)).resolve()
+            if str(name) not in models and resolved.is_relative_to(root):
+                models[str(name)] = resolved
+    return models
 
 
 def written_row(result: EpisodeResult) -> dict[str, str]:

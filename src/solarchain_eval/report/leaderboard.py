@@ -392,13 +392,17 @@ def make_leaderboards(
     Raises
     ------
     LeaderboardError, ReportDataError
-        Inputs that cannot be ranked together (see :func:`build_leaderboard`) or read.
+        Inputs that cannot be ranked together (see :func:`build_leaderboard`) or read, a
+        tarball past ``options``' limits, or ``out`` inside an input.
     """
     from .leaderboard_html import render_files
-    from .leaderboard_inputs import open_inputs
+    from .leaderboard_inputs import check_out_outside_inputs, open_inputs
+    from .tarballs import TarballLimits
 
     options = options or LeaderboardOptions()
-    with open_inputs(paths) as sections:
+    check_out_outside_inputs(paths, out)
+    limits = TarballLimits(options.max_unpacked_mb, options.max_members)
+    with open_inputs(paths, limits) as sections:
         boards = build_leaderboards(sections, options, references)
     rendered: dict[str, bytes] = {}
     for board in boards:

@@ -4,9 +4,12 @@ into one section per setting with the protocol its rows were evaluated under.
 A run directory is one section (its setting); a paper root is one section per setting, whose
 protocol merges its evaluation units' (each unit evaluates one run seed: the section's run seeds
 are theirs together). Every input is read and verified by
-:func:`~solarchain_eval.report.loading.load_report_data` (a file its metadata does not vouch for is
-refused), and every policy must hold exactly the rollouts its protocol promises (run seeds ×
-episodes), so that rows of different inputs pair up episode by episode.
+:func:`~solarchain_eval.report.loading.load_report_data` (every file against its recorded
+sha256); a tarball is checked before anything is written (:mod:`.tarballs`: size and member
+limits, and a file its metadata does not vouch for is refused). Every policy must hold exactly
+the rollouts its protocol promises (run seeds × episodes, each once:
+:func:`~solarchain_eval.evaluation.verify_checks.rollout_set_problem`, verify's rule), so that
+rows of different inputs pair up episode by episode.
 
 The rule of one board (docs/comparing_results.md): all sections must share the
 protocol *without its setting* (:func:`board_fingerprint`: the setting and the reward switch it
@@ -16,7 +19,6 @@ implies are left out); rows are ranked per setting.
 from __future__ import annotations
 
 import json
-import tarfile
 import tempfile
 from collections.abc import Iterator, Mapping, Sequence
 from contextlib import ExitStack, contextmanager
@@ -36,10 +38,12 @@ from ..evaluation.fingerprint import (
     protocol_id,
     task_config_sha256,
 )
+from ..evaluation.verify_checks import rollout_set_problem
 from ..experiments.layout import METADATA_FILE, UNITS_DIR, is_done
 from ..protocol import EPISODE_SEED_RULES
 from ..records_schema import RECORDS_SCHEMA_VERSION
 from .loading import load_report_data
+from .tarballs import TarballLimits, TarballRefused, unpack_tarball
 
 #: The environment every run that records no protocol ran (the only one before protocols were recorded).
 LEGACY_ENV_ID = "SolarChainEval-v0"
@@ -180,17 +184,18 @@ def _access(metadata: Mapping[str, Any]) -> dict[str, str]:
 
 
 def _check_rollouts(section: Section) -> None:
-    """Every policy holds exactly run seeds × episodes rollouts (the protocol's), else refuse."""
-    seeds = [int(s) for s in section.protocol["run_seeds"]]
-    expected = {(s, e) for s in seeds for e in range(int(section.protocol["episodes"]))}
-    for policy, rows in section.metrics.groupby("policy", sort=True):
-        held = set(zip(rows["run_seed"].astype(int), rows["episode"].astype(int), strict=True))
-        if held != expected:
-            raise LeaderboardError(
-                f"{section.where}: policy {policy!r} holds {len(held)} rollout(s) but its protocol promises "
-                f"{len(expected)} (run seeds {seeds} × {section.protocol['episodes']} episodes); an incomplete run "
-                "cannot be ranked"
-            )
+    """Every policy holds exactly its protocol's rollouts, each once (verify's rule), else refuse."""
+    metrics = section.metrics
+    problem = rollout_set_problem(
+        zip(
+            metrics["policy"].astype(str), metrics["run_seed"].astype(int), metrics["episode"].astype(int), strict=True
+        ),
+        sorted(set(metrics["policy"].astype(str))),
+        section.protocol["run_seeds"],
+        int(section.protocol["episodes"]),
+    )
+    if problem is not None:
+        raise LeaderboardError(f"{section.where}: {problem}; a board ranks only whole runs")
 
 
 def _run_sections(source: str, root: Path, metrics: pd.DataFrame, metadata: dict[str, Any]) -> list[Section]:
@@ -265,26 +270,33 @@ def _is_tarball(path: Path) -> bool:
     return path.is_file() and path.name.lower().endswith(TARBALL_SUFFIXES)
 
 
-def _unpack(tarball: Path, into: Path) -> Path:
-    """Extract ``tarball`` (safely: no links out, no absolute paths) and return the run inside it."""
+def _unpack(tarball: Path, into: Path, limits: TarballLimits | None) -> Path:
+    """Check ``tarball`` before writing anything (:mod:`.tarballs`: limits, links, files nothing
+    vouches for), extract it and return the run or paper root inside it."""
     try:
-        with tarfile.open(tarball) as archive:
-            archive.extractall(into, filter="data")
-    except (tarfile.TarError, OSError) as error:
-        raise LeaderboardError(f"{tarball}: not a readable tarball ({error})") from None
-    if (into / METADATA_FILE).is_file() or (into / "combined").is_dir() or (into / "paper_metadata.json").is_file():
-        return into
-    folders = [p for p in into.iterdir() if p.is_dir()]
-    if len(folders) == 1 and not any(p.is_file() for p in into.iterdir()):
-        return folders[0]
-    raise LeaderboardError(
-        f"{tarball}: holds {len(folders)} folders; pack one run directory or paper root (tar czf run.tar.gz RUN_DIR)"
-    )
+        return unpack_tarball(tarball, into, limits)
+    except TarballRefused as error:
+        raise LeaderboardError(str(error)) from None
+
+
+def check_out_outside_inputs(paths: Sequence[Path | str], out: Path | str) -> None:
+    """Refuse a board folder inside an input folder: its files would change the run it ranks."""
+    target = Path(out).resolve()
+    for given in paths:
+        path = Path(given)
+        if path.is_dir() and target.is_relative_to(path.resolve()):
+            raise LeaderboardError.about(
+                "{opt_out} {out} lies inside the input {given}; its files would change the run it ranks "
+                "(write the board to a folder outside every input)",
+                out=out,
+                given=given,
+            )
 
 
 @contextmanager
-def open_inputs(paths: Sequence[Path | str]) -> Iterator[list[Section]]:
-    """Every section of every input (tarballs unpacked into a temporary folder removed on exit).
+def open_inputs(paths: Sequence[Path | str], limits: TarballLimits | None = None) -> Iterator[list[Section]]:
+    """Every section of every input (tarballs, within ``limits``, unpacked into a temporary folder
+    removed on exit).
 
     Raises
     ------
@@ -299,7 +311,7 @@ def open_inputs(paths: Sequence[Path | str]) -> Iterator[list[Section]]:
             path = Path(given)
             if _is_tarball(path):
                 scratch = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="solarchain-board-")))
-                sections += read_input(_unpack(path, scratch), source=str(given))
+                sections += read_input(_unpack(path, scratch, limits), source=str(given))
             elif path.is_dir():
                 sections += read_input(path, source=str(given))
             else:

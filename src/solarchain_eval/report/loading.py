@@ -15,7 +15,7 @@ from typing import Any, Literal
 import numpy as np
 import pandas as pd
 
-from ..common.redaction import redact_command
+from ..common.redaction import redact_metadata
 from ..evaluation.records import DIAGNOSTICS_FILE, SUMMARY_FILE
 from ..evaluation.rundir import verify_files, verify_run_dir
 from ..experiments.layout import (
@@ -252,11 +252,8 @@ def _read_json(path: Path) -> dict[str, Any]:
 
 
 def _redacted(metadata: dict[str, Any]) -> dict[str, Any]:
-    """Metadata with its recorded command line redacted (older runs recorded it verbatim)."""
-    command = metadata.get("command") if isinstance(metadata, dict) else None
-    if isinstance(command, list):
-        return {**metadata, "command": redact_command(command)}
-    return metadata
+    """Metadata with its recorded command line and agent specs redacted (older runs recorded them verbatim)."""
+    return redact_metadata(metadata) if isinstance(metadata, dict) else metadata
 
 
 def _unit_metadata(root: Path) -> dict[str, dict[str, Any]]:

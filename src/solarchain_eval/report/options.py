@@ -10,6 +10,7 @@ from typing import Literal
 
 from ..common.errors import NamesOptions
 from ..protocol import PAPER_SEED
+from .tarballs import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
 
 #: Resamples per bootstrap interval (rliable's examples use 2,000).
 DEFAULT_RESAMPLES = 2000
@@ -81,6 +82,8 @@ class LeaderboardOptions:
         Write one board per protocol (``BOARD/<id>/``) instead of refusing inputs of different protocols.
     n_resamples, confidence, seed
         Start-day bootstrap resamples per interval, two-sided confidence level, resampling seed.
+    max_unpacked_mb, max_members
+        What a tarball input may unpack to, checked before anything is written (docs/security.md#tarballs).
     """
 
     formats: tuple[str, ...] = LEADERBOARD_FORMATS
@@ -88,6 +91,8 @@ class LeaderboardOptions:
     n_resamples: int = DEFAULT_RESAMPLES
     confidence: float = DEFAULT_CONFIDENCE
     seed: int = DEFAULT_SEED
+    max_unpacked_mb: float = DEFAULT_MAX_UNPACKED_MB
+    max_members: int = DEFAULT_MAX_MEMBERS
 
     def bootstrap(self) -> dict:
         """Keyword arguments of the ``bootstrap_*`` functions."""
