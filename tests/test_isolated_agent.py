@@ -43,7 +43,8 @@ CHEATER = textwrap.dedent(
 
 
     def find_envs():
-        found = [o for o in gc.get_objects() if type(o).__name__ == "SolarChainEnv"]
+        # the env, and its hourly table (720 hours ahead), wherever they are in this process's memory
+        found = [o for o in gc.get_objects() if type(o).__name__ in ("SolarChainEnv", "HourlyTable")]
         frame = sys._getframe()
         while frame is not None:  # the stack walk: the runner's frame holds the env as a local
             found += [v for v in frame.f_locals.values() if type(v).__name__ == "SolarChainEnv"]
@@ -66,7 +67,7 @@ CHEATER = textwrap.dedent(
             if self.first:  # once per episode (gc.get_objects() is slow), after the env's reset
                 self.first = False
                 envs = find_envs()
-                for env in envs:
+                for env in (o for o in envs if type(o).__name__ == "SolarChainEnv"):
                     env._unsafe = [0.0] * len(env._unsafe)
                     env._noise = [0.0] * len(env._noise)
                 if self.report:
