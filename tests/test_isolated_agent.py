@@ -106,10 +106,11 @@ class Honest:
     def act(self, observation: np.ndarray) -> np.ndarray:
         assert self.rng is not None
         jitter = self.rng.uniform(-0.05, 0.05, size=3).astype(np.float32)
-        return np.clip(self.action + jitter + np.float32(1e-3) * observation[:3], 0, 1)
+        memory = np.float32(0.01 * np.tanh(self.reward))  # what observe() saw moves the action
+        return np.clip(self.action + jitter + memory + np.float32(1e-3) * observation[:3], 0, 1)
 
     def end_episode(self) -> dict:
-        return {"steps_seen": self.steps}
+        return {"steps_seen": self.steps, "reward_seen": np.float64(self.reward)}
 
 
 def constant(observation: np.ndarray) -> list[float]:
@@ -118,8 +119,13 @@ def constant(observation: np.ndarray) -> list[float]:
 
 def _run(tmp_path: Path, name: str, policies: list, data: Path, **options) -> Path:
     out = tmp_path / name
-    solarchain_eval.evaluate(policies, data=data, seeds=[SEED, SEED + 1], episodes=2, out=out, **options)
+    _EVALUATIONS[name] = solarchain_eval.evaluate(
+        policies, data=data, seeds=[SEED, SEED + 1], episodes=2, out=out, **options
+    )
     return out
+
+
+_EVALUATIONS: dict[str, solarchain_eval.Evaluation] = {}
 
 
 def _frame(run: Path) -> pd.DataFrame:
@@ -167,6 +173,38 @@ def test_isolated_rows_equal_in_process_rows_bit_for_bit(tiny_dataset: Path, tmp
         assert (isolated / name).read_bytes() == (in_process / name).read_bytes(), name
     assert _access_of(in_process) == {"honest": "in-process", "constant": "in-process", "static": "in-process"}
     assert _access_of(isolated) == {"honest": "isolated", "constant": "isolated", "static": "in-process"}
+    # what end_episode() returned comes back with its types and bits
+    extras = [(e.extras, {k: type(v) for k, v in e.extras.items()}) for e in _EVALUATIONS["in-process"].episodes]
+    assert extras[0][0]["steps_seen"] == 24
+    assert [(e.extras, {k: type(v) for k, v in e.extras.items()}) for e in _EVALUATIONS["isolated"].episodes] == extras
+
+
+class Counter:
+    name = "counter"
+
+    def __init__(self) -> None:
+        self.count = 0
+
+    def act(self, observation):
+        self.count += 1
+        return [self.count / 100, 0.5, 0.5]
+
+
+def test_a_copy_of_an_isolated_agent_goes_on_from_its_state_in_a_process_of_its_own() -> None:
+    import copy
+
+    original = IsolatedAgent.from_object(Counter())
+    observation = np.zeros(12, np.float32)
+    try:
+        assert [original.act(observation)[0] for _ in range(3)] == [0.01, 0.02, 0.03]
+        twin = copy.deepcopy(original)
+        try:
+            assert twin.act(observation)[0] == 0.04 and twin.act(observation)[0] == 0.05
+            assert original.act(observation)[0] == 0.04  # the original's state did not move
+        finally:
+            twin.close()
+    finally:
+        original.close()
 
 
 def test_episodes_in_flight_copy_an_isolated_agent_faithfully(tiny_dataset: Path, tmp_path: Path) -> None:
