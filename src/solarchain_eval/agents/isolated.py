@@ -308,8 +308,12 @@ class IsolatedAgent:
             hint = ""
             if "exit code" in problem:
                 hint = (
-                    " (a script that evaluates with isolate=True must start it under if __name__ == '__main__':, "
+                    " (a script that evaluates with isolate=True must do so under if __name__ == '__main__':, "
                     "as multiprocessing's spawn method re-imports the script)"
+                )
+            elif "Can't get attribute" in problem:
+                hint = (
+                    " (an agent defined in a notebook or an interactive session is not importable: define it in a file)"
                 )
             return AgentSpecError(f"agent {name!r} (isolated): building it {problem}{hint}")
         if own:  # an action of the wrong shape: the message the in-process door gives

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import base64
 import json
+import math
 import re
 from typing import Any
 
@@ -32,7 +33,7 @@ def _tree(value: Any) -> Any:
     if isinstance(value, int | float) and type(value) in (int, float):
         return value
     if isinstance(value, np.ndarray | np.generic):
-        array = np.asarray(value)
+        array = value if isinstance(value, np.ndarray) else np.asarray(value)
         if array.dtype.kind not in "biuf":
             raise WireError(f"a numpy value of dtype {array.dtype}: an isolated agent {_KINDS}")
         data = base64.b64encode(np.ascontiguousarray(array).tobytes()).decode("ascii")
@@ -91,7 +92,7 @@ def _value(node: Any) -> Any:
         dtype_text, shape, data = body
         if not isinstance(shape, list) or not all(type(n) is int and n >= 0 for n in shape):
             raise WireError(f"not an array shape: {shape!r}")
-        return _buffer(_dtype(dtype_text), data, int(np.prod(shape, dtype=np.int64))).reshape(shape)
+        return _buffer(_dtype(dtype_text), data, math.prod(shape)).reshape(shape)
     raise WireError(f"unknown tag {tag!r}")
 
 
