@@ -405,3 +405,15 @@ def test_labels_old_runs_and_the_benchmarks_own_agents() -> None:
             return [0.5, 0.5, 0.5]
 
     assert access_label(Claims()) == "in-process"
+
+
+def test_bench_agent_times_the_isolated_door_beside_the_python_agent(tiny_dataset: Path) -> None:
+    from solarchain_eval.perf.agent_bench import measure_agent_overhead
+
+    result = measure_agent_overhead(tiny_dataset, seeds=1, episodes=2, repeats=2)
+    assert result.steps == 2 * 24
+    assert len(result.isolated_s) == len(result.isolated_cpu_s) == len(result.python_s) == 2
+    assert result.isolated_start_s > 0 and min(result.isolated_s) > 0
+    expected = 1000 * (np.median(result.isolated_s) - np.median(result.python_s)) / result.steps
+    assert result.isolated_overhead_ms_per_step == pytest.approx(expected)
+    assert result.isolated_over_python == pytest.approx(np.median(result.isolated_s) / np.median(result.python_s))

@@ -66,5 +66,6 @@ def bench_agent(
     )
     table.add_row("ratio isolated / Python agent (medians)", f"{result.isolated_over_python:.2f}x", "", "")
     table.add_row("isolated overhead per step (medians)", f"{result.isolated_overhead_ms_per_step:.3f}", "", "ms/step")
+    table.add_row("  of which CPU time of this process", f"{result.isolated_cpu_ms_per_step:.3f}", "", "ms/step")
     table.add_row("  start of the isolated agent's process (once)", f"{result.isolated_start_s:.3f}", "", "s")
     console.print(table)

@@ -62,9 +62,9 @@ class ConstantAgent:
 class AgentBench:
     """Seconds per evaluation of each policy (one sample per repeat) over ``steps`` env steps.
 
-    ``*_s`` are wall times; ``python_cpu_s`` and ``http_cpu_s`` the CPU time of this process
-    (the HTTP client's share of the round trip, which a busy machine inflates less than the wall
-    time: the server's own time is not in it).
+    ``*_s`` are wall times; ``python_cpu_s``, ``http_cpu_s`` and ``isolated_cpu_s`` the CPU time of
+    this process (its share of the round trip, which a busy machine inflates less than the wall
+    time: the server's or the agent process's own time is not in it).
     """
 
     steps: int
@@ -76,6 +76,7 @@ class AgentBench:
     url: str
     #: The Python agent behind the isolated door (its process already started), and that start's wall time.
     isolated_s: tuple[float, ...] = ()
+    isolated_cpu_s: tuple[float, ...] = ()
     isolated_start_s: float = 0.0
 
     @property
@@ -97,6 +98,11 @@ class AgentBench:
     def isolated_overhead_ms_per_step(self) -> float:
         """(median isolated time - median Python time) per env step, milliseconds."""
         return 1000.0 * (statistics.median(self.isolated_s) - statistics.median(self.python_s)) / self.steps
+
+    @property
+    def isolated_cpu_ms_per_step(self) -> float:
+        """(median isolated CPU time - median Python CPU time) of this process per env step, milliseconds."""
+        return 1000.0 * (statistics.median(self.isolated_cpu_s) - statistics.median(self.python_cpu_s)) / self.steps
 
     @property
     def http_client_cpu_ms_per_step(self) -> float:
@@ -211,5 +217,6 @@ def measure_agent_overhead(
         http_cpu_s=tuple(cpu["http"]),
         url=http_agent.shown_url,
         isolated_s=tuple(samples["isolated"]),
+        isolated_cpu_s=tuple(cpu["isolated"]),
         isolated_start_s=isolated_start_s,
     )
