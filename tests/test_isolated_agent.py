@@ -8,7 +8,6 @@ same code finds nothing, and its rows are an honest agent's.
 from __future__ import annotations
 
 import json
-import os
 import textwrap
 from pathlib import Path
 
@@ -18,6 +17,7 @@ import pytest
 from typer.testing import CliRunner
 
 import solarchain_eval
+from isolated_agents import Counter, FailingObserve, Honest, RaisesAtStep, ReturnsEvil, constant, static_action
 from solarchain_eval.agents.adapters import AgentError
 from solarchain_eval.agents.base import access_label
 from solarchain_eval.agents.isolated import IsolatedAgent, IsolatedAgentError
@@ -76,45 +76,6 @@ CHEATER = textwrap.dedent(
             return self.action
     """
 )
-
-
-def static_action() -> list[float]:
-    return [float(v) for v in np.asarray(make_baseline("static", BenchmarkConfig().market).act(np.zeros(1)))]
-
-
-class Honest:
-    """Static's action from a user agent, with every hook: a run seed's generator, state through episodes."""
-
-    name = "honest"
-
-    def __init__(self) -> None:
-        self.action = np.asarray(static_action(), dtype=np.float32)
-        self.rng: np.random.Generator | None = None
-        self.reward = 0.0
-        self.steps = 0
-
-    def begin_run(self, run_seed: int) -> None:
-        self.rng = np.random.default_rng(run_seed)
-
-    def begin_episode(self, *, episode: int, run_seed: int, episode_seed: int, start_hour: int) -> None:
-        self.steps = 0
-
-    def observe(self, info: dict) -> None:
-        self.reward += float(info["reward"])
-        self.steps += 1
-
-    def act(self, observation: np.ndarray) -> np.ndarray:
-        assert self.rng is not None
-        jitter = self.rng.uniform(-0.05, 0.05, size=3).astype(np.float32)
-        memory = np.float32(0.01 * np.tanh(self.reward))  # what observe() saw moves the action
-        return np.clip(self.action + jitter + memory + np.float32(1e-3) * observation[:3], 0, 1)
-
-    def end_episode(self) -> dict:
-        return {"steps_seen": self.steps, "reward_seen": np.float64(self.reward)}
-
-
-def constant(observation: np.ndarray) -> list[float]:
-    return static_action()
 
 
 def _run(tmp_path: Path, name: str, policies: list, data: Path, **options) -> Path:
@@ -179,17 +140,6 @@ def test_isolated_rows_equal_in_process_rows_bit_for_bit(tiny_dataset: Path, tmp
     assert [(e.extras, {k: type(v) for k, v in e.extras.items()}) for e in _EVALUATIONS["isolated"].episodes] == extras
 
 
-class Counter:
-    name = "counter"
-
-    def __init__(self) -> None:
-        self.count = 0
-
-    def act(self, observation):
-        self.count += 1
-        return [self.count / 100, 0.5, 0.5]
-
-
 def test_a_copy_of_an_isolated_agent_goes_on_from_its_state_in_a_process_of_its_own() -> None:
     import copy
 
@@ -209,13 +159,15 @@ def test_a_copy_of_an_isolated_agent_goes_on_from_its_state_in_a_process_of_its_
 
 def test_episodes_in_flight_copy_an_isolated_agent_faithfully(tiny_dataset: Path, tmp_path: Path) -> None:
     """A stateful agent gets a private copy per run seed (episodes in flight): a process of its own each."""
-    spec = EvaluationSpec(policies=[Honest()], run_seeds=(SEED, SEED + 1), episodes=2, data_dir=tiny_dataset)
-    sequential = run_evaluation(spec, tmp_path / "sequential")
-    spec.concurrency, spec.isolate = 2, True
-    in_flight = run_evaluation(spec, tmp_path / "in-flight")
+    spec = EvaluationSpec(
+        policies=[Honest()], run_seeds=(SEED, SEED + 1), episodes=2, data_dir=tiny_dataset, concurrency=2
+    )
+    in_process = run_evaluation(spec, tmp_path / "in-process")
+    spec.isolate = True
+    isolated = run_evaluation(spec, tmp_path / "isolated")
     for name in RECORDS:
-        assert (tmp_path / "in-flight" / name).read_bytes() == (tmp_path / "sequential" / name).read_bytes(), name
-    assert in_flight.access == {"honest": "isolated"} and sequential.access == {"honest": "in-process"}
+        assert (tmp_path / "isolated" / name).read_bytes() == (tmp_path / "in-process" / name).read_bytes(), name
+    assert isolated.access == {"honest": "isolated"} and in_process.access == {"honest": "in-process"}
 
 
 def test_the_command_line_runs_a_file_agent_isolated(tiny_dataset: Path, tmp_path: Path) -> None:
@@ -232,30 +184,6 @@ def test_an_agent_that_cannot_be_pickled_is_refused_in_one_line(tiny_dataset: Pa
     with pytest.raises(AgentSpecError, match=r"^agent '<lambda>': an isolated agent is copied .* pickled") as caught:
         solarchain_eval.evaluate(lambda obs: [0.5, 0.5, 0.5], data=tiny_dataset, seeds=[SEED], episodes=1, isolate=True)
     assert "\n" not in str(caught.value)
-
-
-class RaisesAtStep:
-    name = "raises"
-
-    def __init__(self, step: int, error: str = "value") -> None:
-        self.step, self.error, self.count = step, error, 0
-
-    def act(self, observation):
-        self.count += 1
-        if self.count == self.step:
-            if self.error == "exit":
-                os._exit(3)
-            if self.error == "shape":
-                return [0.5, 0.5]
-            if self.error == "object":
-                return [object()] * 3  # the right shape, but no data
-            raise ValueError("no market\nfor me")
-        return [0.5, 0.5, 0.5]
-
-
-class FailingObserve(RaisesAtStep):
-    def observe(self, info):
-        raise KeyError("reward")
 
 
 def _isolated(agent) -> object:
@@ -320,29 +248,6 @@ def test_a_spec_that_cannot_be_built_reads_as_in_process(tmp_path: Path) -> None
     (tmp_path / "exits.py").write_text("import sys\nsys.exit(0)\n")
     with pytest.raises(AgentSpecError, match=r"^agent .* \(isolated\): building it raised SystemExit: 0$"):
         IsolatedAgent.from_spec(parse_agent_spec(f"{tmp_path / 'exits.py'}:Agent", ()), BenchmarkConfig())
-
-
-class Evil:
-    """Unpickling this runs code: the agent's process must never get it unpickled here."""
-
-    def __init__(self, path: str) -> None:
-        self.path = path
-
-    def __reduce__(self):
-        return (Path(self.path).touch, ())
-
-
-class ReturnsEvil:
-    name = "evil"
-
-    def __init__(self, path: str) -> None:
-        self.path = path
-
-    def act(self, observation):
-        return [0.5, 0.5, 0.5]
-
-    def end_episode(self):
-        return {"payload": Evil(self.path)}
 
 
 def test_what_the_agent_returns_is_data_never_a_pickle(tmp_path: Path) -> None:
