@@ -178,6 +178,11 @@ def test_the_command_line_runs_a_file_agent_isolated(tiny_dataset: Path, tmp_pat
     result = CliRunner().invoke(app, [*command, "--policies", f"{agent_file}:mine,static", "--isolate"])
     assert result.exit_code == 0, result.output
     assert _access_of(out) == {"mine": "isolated", "static": "in-process"}
+    from solarchain_eval.report.loading import load_report_data
+    from solarchain_eval.report.provenance import run_records
+
+    # the report's run metadata shows each row's access
+    assert run_records(load_report_data(out))[0]["policy_access"] == {"mine": "isolated", "static": "in-process"}
 
 
 def test_an_agent_that_cannot_be_pickled_is_refused_in_one_line(tiny_dataset: Path) -> None:
