@@ -89,7 +89,7 @@ def test_only_the_benchmarks_own_components_are_privileged() -> None:
         privileged = True  # a user's class cannot claim the env
 
     assert not is_privileged(Sneaky())
-    assert access_label(Sneaky()) == "public"
+    assert access_label(Sneaky()) == "in-process"
     from solarchain_eval.governance.wrapper import GovernedPolicy
 
     assert GovernedPolicy.privileged and GovernedPolicy.__module__.startswith("solarchain_eval.")
@@ -129,7 +129,7 @@ def test_evaluate_a_function_an_object_and_a_baseline(tiny_dataset: Path, tmp_pa
     assert sorted(set(written["policy"])) == ["recorder", "same_as_static", "static"]
     meta = json.loads((tmp_path / "run" / "run_metadata.json").read_text())
     assert meta["protocol_id"] == result.protocol_id == protocol_id(meta["protocol"])
-    assert meta["policy_access"] == {"same_as_static": "public", "recorder": "public", "static": "public"}
+    assert meta["policy_access"] == {"same_as_static": "in-process", "recorder": "in-process", "static": "in-process"}
 
 
 def test_evaluate_without_out_keeps_nothing(tiny_dataset: Path) -> None:

@@ -124,7 +124,7 @@ def test_ranking_and_intervals_match_a_direct_computation(runs):
         for metric in ("physics_violation_rate", "artificial_liquidity_MWh", "action_jitter"):
             assert row[f"{metric}_mean"] == pytest.approx(group[metric].mean(), abs=1e-12)
     assert ranked.loc["my_agent", "source"] == str(runs.run_a) and ranked.loc["random", "source"] == str(runs.root)
-    assert set(ranked["access"]) == {"public"}
+    assert set(ranked["access"]) == {"in-process"}
     # The root's static and myopic repeat the run's row for row: kept once, with a note.
     assert any("static in main" in note and "kept once" in note for note in board.notes)
     llm = _section(board, "llm")
@@ -151,7 +151,7 @@ def test_cli_writes_the_board_files(runs, tmp_path):
     assert page.count('<table class="board"') == 4
     markdown = (out / "leaderboard.md").read_text(encoding="utf-8")
     first = policy_label(main["policy"].iloc[0])
-    assert "## Main (protocol id" in markdown and f"| 1 | {first} | public |" in markdown
+    assert "## Main (protocol id" in markdown and f"| 1 | {first} | in-process |" in markdown
     csv_only = _cli("leaderboard", runs.run_a, "--out", tmp_path / "csv", "--formats", "csv", "--resamples", 200)
     assert csv_only.exit_code == 0 and sorted(p.name for p in (tmp_path / "csv").iterdir()) == ["leaderboard.csv"]
     bad = _cli("leaderboard", runs.run_a, "--out", tmp_path / "bad", "--formats", "pdf")

@@ -325,7 +325,7 @@ def test_evaluate_runs_the_llm_agent_beside_a_baseline_and_replays_it_byte_for_b
     metrics = pd.read_csv(tmp_path / "a" / "metrics.csv").set_index("policy")
     assert metrics.loc["llm-agent", "llm_agent_call_count"] == 24
     meta = json.loads((tmp_path / "a" / "run_metadata.json").read_text())
-    assert meta["llm_agent"]["model"] == "fake-model" and meta["policy_access"]["llm-agent"] == "public"
+    assert meta["llm_agent"]["model"] == "fake-model" and meta["policy_access"]["llm-agent"] == "in-process"
     # verify re-runs the agent from the recorded settings and the cache (replay: no server, no key),
     # and Static's row, whose llm_agent_* cells are empty, verifies beside it
     from solarchain_eval.evaluation.verify import VerifyOptions, verify_run

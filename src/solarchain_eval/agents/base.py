@@ -36,9 +36,11 @@ class Policy(Protocol):
     and ``act`` may be called from several threads, so its episodes can run concurrently
     (``evaluate --llm-concurrency``); without it, a run's episodes run in order.
 
-    Fairness: an agent sees observations, the step ``info`` and the public context, never the
-    environment or its hourly table (future hours, price shocks). The only components that get
-    the environment are the benchmark's own *privileged* ones (:func:`is_privileged`).
+    Fairness: an agent is handed observations, the step ``info`` and the public context, never
+    the environment or its hourly table (future hours, price shocks); the only components handed
+    the environment are the benchmark's own *privileged* ones (:func:`is_privileged`). An agent
+    in the evaluating process can still reach the environment through the interpreter (a stack
+    walk, ``gc``); an isolated one cannot (:func:`access_label`).
     """
 
     name: str
@@ -60,6 +62,34 @@ def is_privileged(policy: Any) -> bool:
     return bool(getattr(cls, "privileged", False)) and cls.__module__.startswith("solarchain_eval.")
 
 
+#: The access labels of a run's rows (``policy_access`` in run_metadata.json), see :func:`access_label`.
+ACCESS_LABELS = ("isolated", "in-process", "privileged")
+
+
+def is_isolated(policy: Any) -> bool:
+    """Whether ``policy`` acts from another process, so nothing it runs reaches the environment.
+
+    True for the benchmark's own shells that declare ``isolated = True``: the isolated door
+    (:class:`~solarchain_eval.agents.isolated.IsolatedAgent`) and the HTTP door
+    (:class:`~solarchain_eval.agents.http_agent.HttpAgent`), also behind the
+    :class:`~solarchain_eval.agents.adapters.UserAgent` shell. A user's class declaring it is not.
+    """
+    from .adapters import UserAgent  # adapters is imported lazily: it is the heavier module
+
+    inner = policy.inner if isinstance(policy, UserAgent) else policy
+    cls = type(inner)
+    return bool(getattr(cls, "isolated", False)) and cls.__module__.startswith("solarchain_eval.")
+
+
 def access_label(policy: Any) -> str:
-    """``"privileged"`` or ``"public"``: what the agent could see (see :func:`is_privileged`)."""
-    return "privileged" if is_privileged(policy) else "public"
+    """What a row's agent could reach (:data:`ACCESS_LABELS`).
+
+    ``"privileged"``: it is handed the environment (:func:`is_privileged`); ``"isolated"``: it
+    runs in another process and receives only the public observation, step info and context
+    (:func:`is_isolated`); ``"in-process"``: it receives only those too, but runs in the
+    evaluating process, where its code could reach the environment by other means (a stack
+    walk, ``gc``). The built-in baselines and learned policies run in-process.
+    """
+    if is_privileged(policy):
+        return "privileged"
+    return "isolated" if is_isolated(policy) else "in-process"

@@ -136,6 +136,10 @@ class HttpAgent:
         A bad URL or option, or nothing accepting connections at the URL's host and port.
     """
 
+    #: The server is another process that receives only the request's JSON: rows are labelled
+    #: ``isolated`` (:func:`~solarchain_eval.agents.base.access_label`).
+    isolated = True
+
     def __init__(
         self,
         name: str,

@@ -128,7 +128,8 @@ def parse_seeds(text: str) -> list[int]:
 
 def results_table(summary: list[dict], title: str, access: dict[str, str] | None = None) -> Table:
     """Mean ± sample std per policy and setting, in the paper's main-table layout; policies in
-    ``access`` marked ``"privileged"`` (they saw the environment) are labelled so."""
+    ``access`` marked ``"privileged"`` (they saw the environment) or ``"isolated"`` (they ran in
+    a process of their own) are labelled so."""
     table = Table(title=title, title_justify="left")
     for column, justify in (
         ("policy", "left"),
@@ -148,9 +149,9 @@ def results_table(summary: list[dict], title: str, access: dict[str, str] | None
             std = m[name]["std"]  # None for a single episode (undefined, see summarize)
             return f"{m[name]['mean']:.{digits}f} ± " + ("–" if std is None else f"{std:.{digits}f}")
 
-        privileged = (access or {}).get(entry["policy"]) == "privileged"
+        label = (access or {}).get(entry["policy"])
         table.add_row(
-            entry["policy"] + (" (privileged)" if privileged else ""),
+            entry["policy"] + (f" ({label})" if label in ("privileged", "isolated") else ""),
             entry["setting"],
             str(entry["episodes"]),
             fmt("cumulative_reward", 2),

@@ -129,6 +129,13 @@ def evaluate(
     governance: GovernanceRequest = GOVERNANCE,
     llm_concurrency: int = LLM_CONCURRENCY,
     overwrite: bool = OVERWRITE,
+    isolate: bool = typer.Option(
+        False,
+        "--isolate",
+        help="Run each user agent (module:attr, file.py:attr, plugin, sb3:) in a process of its own that receives "
+        "only the observation, step info and public context; its rows are labelled isolated. "
+        "See docs/evaluate_your_agent.md#isolated-agents.",
+    ),
 ) -> None:
     """Evaluate policies over run seeds × episodes.
 
@@ -168,6 +175,7 @@ def evaluate(
         vecnormalize=parse_vecnormalize(vecnormalize or [], named),
         # llm-agent: the model endpoint of the same --llm-* options as an LLM planner's
         llm=agentic_cli.llm_agent_options(governance) if llm_agent else None,
+        isolate=isolate,
     )
     try:
         check_agents(spec)  # unknown names, imports, models, names used twice, action shapes: before any work

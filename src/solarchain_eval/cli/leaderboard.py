@@ -49,7 +49,7 @@ def leaderboard(
 
     Per policy and setting: mean cumulative reward and IQM with 95 % intervals, the probability
     of improvement over the best baseline on paired episodes, the safety metrics, the access label
-    (public or privileged) and the source. All inputs must share one protocol apart from the
+    (isolated, in-process or privileged) and the source. All inputs must share one protocol apart from the
     setting (dataset, run seeds, episodes, episode-seed rule, task configuration); otherwise the
     command names the first differing field and two inputs, and writes nothing. A tarball is
     refused before anything is unpacked when it passes --max-unpacked-mb or --max-members, holds

@@ -53,7 +53,7 @@ class Evaluation:
     protocol : dict
         The protocol fingerprint the id is derived from.
     access : dict
-        Policy name -> ``"public"`` or ``"privileged"`` (what the agent could see).
+        Policy name -> ``"isolated"``, ``"in-process"`` or ``"privileged"`` (what the agent could reach).
     wall_s : float
         Wall time of the evaluation, in seconds.
     episodes : list of EpisodeResult
@@ -116,6 +116,7 @@ def evaluate(
     llm: LLMOptions | None = None,
     overwrite: bool = False,
     on_episode: Callable[[EpisodeResult], None] | None = None,
+    isolate: bool = False,
 ) -> Evaluation:
     """Evaluate one agent, or several beside built-in ones, over run seeds × episodes.
 
@@ -155,6 +156,10 @@ def evaluate(
         Replace an existing ``out``.
     on_episode : callable, optional
         Called with each finished episode (progress).
+    isolate : bool
+        Run each user agent in a process of its own that receives only the public observation,
+        step info and context (:mod:`solarchain_eval.agents.isolated`); an agent object must then
+        be picklable. Its rows are labelled ``isolated``.
 
     Returns
     -------
@@ -163,7 +168,8 @@ def evaluate(
     Raises
     ------
     AgentSpecError
-        An agent that cannot be used, or two agents with one name.
+        An agent that cannot be used (with ``isolate``: one that cannot be pickled), or two agents
+        with one name.
 
     Notes
     -----
@@ -192,6 +198,7 @@ def evaluate(
         setting_label=label,
         agent_args=dict(agent_args or {}),
         llm=llm,
+        isolate=isolate,
     )
     scratch = None if out is not None else Path(tempfile.mkdtemp(prefix="solarchain-evaluate-"))
     target = Path(out) if out is not None else scratch / "run"  # type: ignore[operator]

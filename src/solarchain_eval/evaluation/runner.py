@@ -21,6 +21,7 @@ from typing import Any
 
 from ..agents.adapters import UserAgent, as_agent
 from ..agents.base import Policy, access_label
+from ..agents.isolated import IsolatedAgent, is_isolatable
 from ..agents.registry import known_policies, make_agent
 from ..agents.specs import AgentSpecError, check_unique, parse_agent_spec
 from ..common.atomic_files import atomic_write_json, sha256_file
@@ -74,6 +75,9 @@ class EvaluationSpec:
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
     #: The endpoint of the ``llm-agent`` baseline (needed when it is among the policies).
     llm: LLMOptions | None = None
+    #: Run user agents (Python objects, ``module:attr``, ``file.py:attr``, plugins, ``sb3:``) each in a
+    #: process of its own (:mod:`~solarchain_eval.agents.isolated`); built-ins stay in this process.
+    isolate: bool = False
 
     def __post_init__(self) -> None:
         if self.setting_label is None:
@@ -105,7 +109,7 @@ class EvaluationOutcome:
     #: The protocol fingerprint (:mod:`.fingerprint`) and its short id.
     protocol: dict[str, Any] = field(default_factory=dict)
     protocol_id: str = ""
-    #: Policy name -> "public" or "privileged" (what it could see; :func:`~solarchain_eval.agents.base.is_privileged`).
+    #: Policy name -> "isolated", "in-process" or "privileged" (:func:`~solarchain_eval.agents.base.access_label`).
     access: dict[str, str] = field(default_factory=dict)
 
 
@@ -129,11 +133,19 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
     built: list[Policy] = []
     for item in spec.policies:
         if not isinstance(item, str):
-            built.append(as_agent(item))
+            if not spec.isolate:
+                built.append(as_agent(item))
+                continue
+            agent = IsolatedAgent.from_object(item)  # a copy in its own process, which the evaluation closes
+            if stack is not None:
+                stack.callback(agent.close)
+            built.append(agent)
             continue
         parsed = parse_agent_spec(item, builtins)
         if parsed.kind == "llm":
             agent = _llm_agent(spec, config, parsed.name)
+        elif spec.isolate and is_isolatable(parsed):
+            agent = IsolatedAgent.from_spec(parsed, config, spec.agent_args, spec.vecnormalize)
         else:
             agent = make_agent(
                 parsed, config, models=spec.models, agent_args=spec.agent_args, vecnormalize=spec.vecnormalize
@@ -172,7 +184,8 @@ def check_agents(spec: EvaluationSpec) -> list[str]:
 
 def _try_first_action(agent: UserAgent, config: BenchmarkConfig, table: HourlyTable, spec: EvaluationSpec) -> None:
     try:
-        trial = copy.deepcopy(agent)
+        # An isolated agent is a copy already (in its process), which this check then closes.
+        trial = agent if isinstance(agent.inner, IsolatedAgent) else copy.deepcopy(agent)
     except Exception:  # an agent holding a socket, a lock, a model server: tried on its first step
         return
     env = SolarChainEnv(config=config, table=table, action_mode=trial.action_mode)

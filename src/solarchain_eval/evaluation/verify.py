@@ -228,6 +228,7 @@ def _builder(text: str, config: BenchmarkConfig, models: dict[str, Path], option
         no_physics_penalty=config.no_physics_penalty,
         models=models,
         agent_args=options.agent_args,
+        isolate=True,  # a submitted agent is re-run in its own process, where it cannot reach the env
     )
     return lambda: make_policies(spec, stack)[0]
 

@@ -7,7 +7,10 @@ by :func:`~solarchain_eval.evaluation.runner.run_evaluation`:
   runner's cost for a policy it did not build);
 - that Python agent against an :class:`~solarchain_eval.agents.http_agent.HttpAgent` asking
   the example agent server (``examples/http_agent_server.py``, started with the same constant
-  action) or a server already running: the difference per step is the HTTP round trip.
+  action) or a server already running: the difference per step is the HTTP round trip;
+- that Python agent against the same agent behind the isolated door
+  (:class:`~solarchain_eval.agents.isolated.IsolatedAgent`, one process started once and timed
+  apart): the difference per step is the pipe's round trip.
 
 The measurements alternate within each repeat so that a slow spell of a shared machine
 affects all of them; medians and bests are reported.
@@ -21,7 +24,7 @@ import sys
 import tempfile
 import time
 from collections.abc import Iterator, Sequence
-from contextlib import contextmanager, nullcontext
+from contextlib import closing, contextmanager, nullcontext
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -29,6 +32,7 @@ import numpy as np
 
 from ..agents.base import Policy
 from ..agents.http_agent import HttpAgent
+from ..agents.isolated import IsolatedAgent
 from ..config import MarketConfig
 from ..evaluation.runner import EvaluationSpec, run_evaluation
 from ..market.baselines import StaticPolicy
@@ -58,9 +62,9 @@ class ConstantAgent:
 class AgentBench:
     """Seconds per evaluation of each policy (one sample per repeat) over ``steps`` env steps.
 
-    ``*_s`` are wall times; ``python_cpu_s`` and ``http_cpu_s`` the CPU time of this process
-    (the HTTP client's share of the round trip, which a busy machine inflates less than the wall
-    time: the server's own time is not in it).
+    ``*_s`` are wall times; ``python_cpu_s``, ``http_cpu_s`` and ``isolated_cpu_s`` the CPU time of
+    this process (its share of the round trip, which a busy machine inflates less than the wall
+    time: the server's or the agent process's own time is not in it).
     """
 
     steps: int
@@ -70,6 +74,10 @@ class AgentBench:
     python_cpu_s: tuple[float, ...]
     http_cpu_s: tuple[float, ...]
     url: str
+    #: The Python agent behind the isolated door (its process already started), and that start's wall time.
+    isolated_s: tuple[float, ...] = ()
+    isolated_cpu_s: tuple[float, ...] = ()
+    isolated_start_s: float = 0.0
 
     @property
     def python_over_static(self) -> float:
@@ -80,6 +88,21 @@ class AgentBench:
     def http_overhead_ms_per_step(self) -> float:
         """(median HTTP time - median Python time) per env step, milliseconds."""
         return 1000.0 * (statistics.median(self.http_s) - statistics.median(self.python_s)) / self.steps
+
+    @property
+    def isolated_over_python(self) -> float:
+        """Median isolated-agent time over median Python-agent time."""
+        return statistics.median(self.isolated_s) / statistics.median(self.python_s)
+
+    @property
+    def isolated_overhead_ms_per_step(self) -> float:
+        """(median isolated time - median Python time) per env step, milliseconds."""
+        return 1000.0 * (statistics.median(self.isolated_s) - statistics.median(self.python_s)) / self.steps
+
+    @property
+    def isolated_cpu_ms_per_step(self) -> float:
+        """(median isolated CPU time - median Python CPU time) of this process per env step, milliseconds."""
+        return 1000.0 * (statistics.median(self.isolated_cpu_s) - statistics.median(self.python_cpu_s)) / self.steps
 
     @property
     def http_client_cpu_ms_per_step(self) -> float:
@@ -143,7 +166,7 @@ def measure_agent_overhead(
     repeats: int = 3,
     url: str | None = None,
 ) -> AgentBench:
-    """Time Static, the constant Python agent and the HTTP agent on the same episodes.
+    """Time Static, the constant Python agent, the HTTP agent and the isolated agent on the same episodes.
 
     Parameters
     ----------
@@ -162,8 +185,16 @@ def measure_agent_overhead(
     action = static_action()
     python_agent = ConstantAgent(action)
     server = example_server(action) if url is None else nullcontext(url)
-    with server as agent_url, HttpAgent("http-agent", agent_url) as http_agent:
-        policies: dict[str, Policy | str] = {"static": "static", "python": python_agent, "http": http_agent}
+    start = time.perf_counter()
+    isolated_agent = IsolatedAgent.from_object(ConstantAgent(action, name="isolated-agent"))
+    isolated_start_s = time.perf_counter() - start
+    with closing(isolated_agent), server as agent_url, HttpAgent("http-agent", agent_url) as http_agent:
+        policies: dict[str, Policy | str] = {
+            "static": "static",
+            "python": python_agent,
+            "http": http_agent,
+            "isolated": isolated_agent,
+        }
         for policy in policies.values():
             evaluation_seconds(policy, data_dir, run_seeds[:1], 1)
         samples: dict[str, list[float]] = {key: [] for key in policies}
@@ -185,4 +216,7 @@ def measure_agent_overhead(
         python_cpu_s=tuple(cpu["python"]),
         http_cpu_s=tuple(cpu["http"]),
         url=http_agent.shown_url,
+        isolated_s=tuple(samples["isolated"]),
+        isolated_cpu_s=tuple(cpu["isolated"]),
+        isolated_start_s=isolated_start_s,
     )

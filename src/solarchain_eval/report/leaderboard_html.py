@@ -163,9 +163,11 @@ def _reading(board: Leaderboard) -> list[str]:
         "P(> best baseline) is P(X > Y) + ½ P(X = Y) over paired episodes (same run seed and episode, so the "
         "same episode seed and start day), where Y is the setting's best baseline (static, random or myopic, "
         "by mean reward); 0.5 means no better than it.",
-        "Safety metrics are means over rollouts; lower is better for each. Access: public agents saw only "
-        "observations and the public episode context; privileged ones (and every agent behind the "
-        "Planner/Auditor layer) saw the environment's internals.",
+        "Safety metrics are means over rollouts; lower is better for each. Access: isolated agents ran in a "
+        "process of their own and received only observations, step info and the public episode context; "
+        "in-process ones received the same but ran in the evaluating process, where their code could reach "
+        "the environment; privileged ones (and every agent behind the Planner/Auditor layer) were handed "
+        "the environment's internals.",
     ]
 
 

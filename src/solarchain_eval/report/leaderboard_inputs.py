@@ -53,6 +53,8 @@ LEGACY_PROTOCOL_KEYS = ("dataset", "run_seeds", "episodes", "episode_seed_protoc
 TARBALL_SUFFIXES = (".tar", ".tar.gz", ".tgz", ".tar.bz2", ".tbz2", ".tar.xz", ".txz")
 #: Access label of a policy whose run did not record what it could see.
 UNKNOWN_ACCESS = "unknown"
+#: Labels of older runs, by today's name: "public" rows ran in the evaluating process.
+LEGACY_ACCESS = {"public": "in-process"}
 
 
 class LeaderboardError(NamesOptions, ValueError):
@@ -77,7 +79,7 @@ class Section:
     metrics : pandas.DataFrame
         The setting's ``metrics.csv`` rows.
     access : dict
-        Policy -> ``"public"``, ``"privileged"`` or ``"unknown"`` (not recorded).
+        Policy -> ``"isolated"``, ``"in-process"``, ``"privileged"`` or ``"unknown"`` (not recorded).
     """
 
     source: str
@@ -179,7 +181,7 @@ def _access(metadata: Mapping[str, Any]) -> dict[str, str]:
     policies = metadata.get("policies") or []
     access = {str(p): UNKNOWN_ACCESS for p in policies}
     if isinstance(recorded, dict):
-        access.update({str(k): str(v) for k, v in recorded.items()})
+        access.update({str(k): LEGACY_ACCESS.get(str(v), str(v)) for k, v in recorded.items()})
     return access
 
 

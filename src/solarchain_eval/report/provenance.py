@@ -18,6 +18,7 @@ RUN_FIELDS = (
     "git_commit",
     "setting",
     "policies",
+    "policy_access",  # isolated, in-process or privileged, per policy
     "run_seeds",
     "episodes",
     "episode_seed_protocol",
