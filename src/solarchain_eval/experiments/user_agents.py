@@ -25,8 +25,8 @@ from typing import Any
 
 from ..agents.checkpoints import TRAINABLE_ALGOS
 from ..agents.registry import known_policies
+from ..agents.registry import reserved_names as registry_reserved_names
 from ..agents.specs import (
-    LLM_AGENT,
     AgentSpec,
     AgentSpecError,
     check_name,
@@ -53,8 +53,8 @@ class PolicyChoice:
 
 
 def reserved_names() -> tuple[str, ...]:
-    """Names a user agent may not take: the built-in policies' and the LLM agent's."""
-    return (*known_policies(), *TRAINABLE_ALGOS, LLM_AGENT)
+    """Names a user agent may not take (:func:`~solarchain_eval.agents.registry.reserved_names`)."""
+    return registry_reserved_names()
 
 
 def split_policies(items: Sequence[str]) -> PolicyChoice:
