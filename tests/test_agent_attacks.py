@@ -331,7 +331,11 @@ def _one_line_exit_2(result, tmp_path: Path) -> str:
         ("Quits", [], "agent 'Quits': act() raised SystemExit(0): the agent called sys.exit"),
         ("Listy", [], "agent 'Listy': end_episode() returned list [1, 2]; return None or a dict"),
         ("Nan", [], "agent 'Nan': act() returned action[1]=nan, which is not finite"),
-        ("Index", [], "agent 'Index': act() returned the index 125, outside 0..124 (run seed {seed}, episode 0, step 0)"),
+        (
+            "Index",
+            [],
+            "agent 'Index': act() returned the index 125, outside 0..124 (run seed {seed}, episode 0, step 0)",
+        ),
     ],
 )
 def test_user_code_failures_are_one_line_exit_2_and_nothing_published(

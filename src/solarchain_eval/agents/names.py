@@ -29,5 +29,7 @@ def name_problem(name: object) -> str | None:
     """Why ``name`` cannot name an agent (one line), or None when it can."""
     if is_valid_name(name):
         return None
-    shown = repr(name) if not isinstance(name, str) or len(name) <= MAX_NAME_CHARS else repr(name[:MAX_NAME_CHARS]) + "..."
+    shown = (
+        repr(name) if not isinstance(name, str) or len(name) <= MAX_NAME_CHARS else repr(name[:MAX_NAME_CHARS]) + "..."
+    )
     return f"agent name {shown}: {NAME_RULE}"

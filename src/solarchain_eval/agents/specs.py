@@ -261,7 +261,9 @@ def _load_file(location: str, spec: AgentSpec) -> Any:
     except SyntaxError as error:
         raise _user_code_failed(f"{path}:{error.lineno}: syntax error: {error.msg}", error) from None
     except (Exception, SystemExit) as error:  # whatever the file raises while it runs, sys.exit included
-        raise _user_code_failed(f"agent spec {spec.text!r}: running {path} raised {describe_exception(error)}", error) from None
+        raise _user_code_failed(
+            f"agent spec {spec.text!r}: running {path} raised {describe_exception(error)}", error
+        ) from None
     finally:
         sys.path.remove(str(resolved.parent))
     sys.modules[module_name] = module
@@ -283,7 +285,9 @@ def instantiate(target: Any, attr: str, spec: AgentSpec, kwargs: dict[str, Any])
         try:
             return target(**kwargs)
         except (Exception, SystemExit) as error:  # the user's constructor can fail in any way
-            raise _user_code_failed(f"agent spec {spec.text!r}: {attr}() raised {describe_exception(error)}", error) from None
+            raise _user_code_failed(
+                f"agent spec {spec.text!r}: {attr}() raised {describe_exception(error)}", error
+            ) from None
     if kwargs:
         raise AgentSpecError(
             f"agent spec {spec.text!r}: {attr} is not a class or factory, so --agent-arg {', '.join(sorted(kwargs))} "
