@@ -20,6 +20,9 @@ from solarchain_eval.agents.names import NAME_RULE
 from solarchain_eval.agents.registry import EXTRA_POLICIES, reserved_names
 from solarchain_eval.agents.specs import LLM_AGENT, AgentSpecError
 from solarchain_eval.cli import app
+from solarchain_eval.config import BenchmarkConfig
+from solarchain_eval.data.table import load_table
+from solarchain_eval.envs.env import SolarChainEnv
 from solarchain_eval.governance.auditor import AUDITOR_KINDS
 from solarchain_eval.governance.planner import PLANNER_KINDS
 from solarchain_eval.market.baselines import BASELINES
@@ -233,11 +236,23 @@ def test_a_governed_user_agent_is_held_to_the_same_rule(tiny_dataset: Path) -> N
         _evaluate(BadFrom([float("nan"), 0.5, 0.5]), tiny_dataset, setting="llm")
 
 
-def test_the_benchmarks_own_policies_renamed_keep_the_environments_decoding(tiny_dataset: Path) -> None:
-    # A renamed built-in is not a user's action: the env decodes it as it always did.
-    metrics = _evaluate(["mine=random", "random"], tiny_dataset).metrics.set_index(["policy", "episode"])
-    mine = metrics.loc["mine"].drop(columns=["setting"])
-    pd.testing.assert_frame_equal(mine, metrics.loc["random"].drop(columns=["setting"]), check_exact=True)
+def test_the_benchmarks_own_policies_renamed_keep_the_environments_decoding(tiny_dataset: Path, monkeypatch) -> None:
+    # A built-in's action (a learned policy's raw output, say) is not a user's: the env clips it as
+    # it always did, also when the built-in is renamed (mine=static).
+    class Overshoots:
+        name, action_mode = "static", "continuous"
+
+        def act(self, observation):
+            return np.array([1.5, -0.25, 0.5], dtype=np.float32)
+
+    monkeypatch.setattr("solarchain_eval.agents.registry.make_baseline", lambda name, market: Overshoots())
+    result = _evaluate(["mine=static"], tiny_dataset)
+    steps = result.episodes[0].steps
+    executed = [steps[c][0] for c in ("reward_ratio", "liquidity_ratio", "burn_rate")]
+    env = SolarChainEnv(config=BenchmarkConfig(), table=load_table(tiny_dataset))
+    np.testing.assert_array_equal(executed, env.codec.decode(np.array([1.0, 0.0, 0.5], dtype=np.float32)))
+    with pytest.raises(AgentFailure, match="action\\[0\\]=1.5, outside"):
+        _evaluate(Overshoots(), tiny_dataset, name="mine")  # the same object from a user is refused
 
 
 # --- 8. Every user-code failure is one line ---------------------------------------------------------
@@ -363,6 +378,18 @@ def test_specs_and_out_paths_that_are_not_what_they_claim(tiny_dataset: Path, tm
     assert result.exit_code == 2 and "Traceback" not in result.output, result.output
     assert len(result.stderr.strip().splitlines()) == 1
     assert (tmp_path / "run").read_text() == "mine"
+
+
+@pytest.mark.parametrize("command", [["report", "{run}"], ["leaderboard", "{run}"], ["paper", "--preset", "smoke"]])
+def test_every_out_naming_an_existing_file_is_one_line(tiny_dataset: Path, tmp_path: Path, command) -> None:
+    run = tmp_path / "published"
+    _evaluate("static", tiny_dataset, out=run)
+    (tmp_path / "file").write_text("mine")
+    args = [part.format(run=run) for part in command]
+    result = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "file")])
+    assert result.exit_code == 2, result.output
+    assert result.stderr.strip() == f"error: --out {tmp_path / 'file'} is an existing file, not a folder"
+    assert (tmp_path / "file").read_text() == "mine"
 
 
 def test_solarchain_debug_shows_the_users_traceback(tiny_dataset: Path, tmp_path: Path, agent_file: Path) -> None:

@@ -125,6 +125,12 @@ def progress_bar(description: str, total: int, *, enabled: bool = True) -> Itera
         yield lambda n=1: progress.advance(task, n)
 
 
+def refuse_file_out(out: Path | None, flag: str = "--out") -> None:
+    """An output folder that is an existing file is the user's mistake: one line, before any work."""
+    if out is not None and out.exists() and not out.is_dir():
+        raise CliError(f"{flag} {out} is an existing file, not a folder")
+
+
 def parse_int_list(text: str, what: str) -> list[int]:
     try:
         values = [int(part) for part in text.split(",") if part.strip()]

@@ -9,7 +9,7 @@ from rich.table import Table
 
 from ..report.options import DEFAULT_RESAMPLES, LEADERBOARD_FORMATS, LeaderboardOptions, ReportDataError, parse_formats
 from . import app
-from .common import CliError, cli_error, console, register_user_error, reports_errors, say
+from .common import CliError, cli_error, console, refuse_file_out, register_user_error, reports_errors, say
 
 register_user_error(ReportDataError)
 
@@ -42,6 +42,7 @@ def leaderboard(
     command names the first differing field and two inputs, and writes nothing. See
     docs/comparing_results.md.
     """
+    refuse_file_out(out)
     try:
         options = LeaderboardOptions(
             formats=parse_formats(formats, LEADERBOARD_FORMATS, "leaderboard"), split=split, n_resamples=resamples
