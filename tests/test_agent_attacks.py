@@ -145,6 +145,20 @@ def test_a_user_agent_cannot_take_a_built_in_name(tiny_dataset: Path, tmp_path: 
     assert not (tmp_path / "run").exists()
 
 
+def test_the_benchmarks_own_policy_objects_keep_their_names(tiny_dataset: Path) -> None:
+    import importlib
+
+    from solarchain_eval.agents.adapters import BUILTIN_POLICY_CLASSES, is_builtin_policy
+    from solarchain_eval.market.baselines import make_baseline
+
+    for qualified in BUILTIN_POLICY_CLASSES:  # the list names real classes
+        module, _, name = qualified.rpartition(".")
+        assert isinstance(getattr(importlib.import_module(module), name), type), qualified
+    static = make_baseline("static")
+    assert is_builtin_policy(static) and not is_builtin_policy(_named(Honest(), "static"))
+    assert list(_evaluate([static, Honest()], tiny_dataset).summary["policy"]) == ["static", "honest"]
+
+
 def test_on_the_command_line_neither(tiny_dataset: Path, tmp_path: Path, agent_file: Path) -> None:
     for policies in (f"static={agent_file}:Constant", "random=static", "Static=myopic", f"{agent_file}:Rule"):
         result = _cli(tiny_dataset, tmp_path, policies)

@@ -34,6 +34,27 @@ ACTION_MODES = ("continuous", "discrete")
 DEFAULT_DISCRETE_ACTIONS = n_discrete_actions(BenchmarkConfig().discrete_levels)
 
 
+#: The benchmark's own policy classes (module.qualname). An object of one of these, passed to an
+#: evaluation as an object, is driven as the registry builds it (no shell, its own ``end_episode``
+#: extras, the env's decoding of its actions); every other object is a user's agent.
+BUILTIN_POLICY_CLASSES = frozenset(
+    {
+        "solarchain_eval.market.baselines.StaticPolicy",
+        "solarchain_eval.market.baselines.RandomPolicy",
+        "solarchain_eval.market.baselines.MyopicPolicy",
+        "solarchain_eval.agents.sb3.SB3Policy",
+        "solarchain_eval.agents.jax_checkpoint.JaxPolicy",
+        "solarchain_eval.governance.llm_agent.LLMAgent",
+    }
+)
+
+
+def is_builtin_policy(agent: Any) -> bool:
+    """Whether ``agent`` is one of the benchmark's own policies (:data:`BUILTIN_POLICY_CLASSES`)."""
+    cls = type(agent)
+    return f"{cls.__module__}.{cls.__qualname__}" in BUILTIN_POLICY_CLASSES
+
+
 class AgentError(ValueError):
     """An agent that cannot take part as given: bad name, action mode, action or hook."""
 

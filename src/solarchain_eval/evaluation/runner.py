@@ -19,7 +19,7 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..agents.adapters import AgentFailure, UserAgent, as_agent
+from ..agents.adapters import AgentFailure, UserAgent, as_agent, is_builtin_policy
 from ..agents.base import Policy, access_label
 from ..agents.registry import check_reserved, known_policies, make_agent
 from ..agents.specs import AgentSpecError, check_unique, parse_agent_spec
@@ -129,6 +129,9 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
     builtins = known_policies()
     built: list[Policy] = []
     for item in spec.policies:
+        if is_builtin_policy(item):  # the benchmark's own policy object, as make_agent returns it
+            built.append(item)
+            continue
         if not isinstance(item, str):
             agent = as_agent(item, discrete_actions=n_discrete_actions(config.discrete_levels))
             check_reserved(agent.name)
