@@ -110,7 +110,7 @@ def test_episode_context_statistics_come_from_the_episode_hours(published_dir):
 
 
 def test_an_agentic_run_writes_a_complete_run_dir(tiny_dataset, tmp_path):
-    policy = FixedIndexPolicy(62, name="ppo")
+    policy = FixedIndexPolicy(62, name="fixed")
     spec = EvaluationSpec(
         policies=[policy],
         run_seeds=[11],
@@ -123,12 +123,14 @@ def test_an_agentic_run_writes_a_complete_run_dir(tiny_dataset, tmp_path):
     outcome = run_evaluation(spec, tmp_path / "unit")
     unit = tmp_path / "unit"
     metrics = pd.read_csv(unit / "metrics.csv")
-    assert list(metrics["policy"]) == ["ppo", "ppo"] and set(metrics["setting"]) == {"llm_no_physics"}
+    assert list(metrics["policy"]) == ["fixed", "fixed"] and set(metrics["setting"]) == {"llm_no_physics"}
     assert list(metrics["episode_seed"]) == [11, 12]
     lines = (unit / "agentic_logs.jsonl").read_text().splitlines()
     assert len(lines) == 48 and json.loads(lines[0])["setting"] == "llm_no_physics"
     meta = json.loads((unit / "run_metadata.json").read_text())
-    assert meta["policies"] == ["ppo"] and meta["agentic"]["auditor"] == "rule" and meta["config"]["no_physics_penalty"]
+    assert (
+        meta["policies"] == ["fixed"] and meta["agentic"]["auditor"] == "rule" and meta["config"]["no_physics_penalty"]
+    )
     assert len(outcome.results) == 2
 
 

@@ -124,7 +124,7 @@ def test_the_plan_gives_user_agents_eval_units_in_every_setting_and_no_train_uni
     ]
     # user agents alone are a grid too; a built-in's name is refused, in any case
     GridSpec(timesteps=10, episodes=1, seeds=(1,), settings=("main",), policies=(), agents=agents).validate()
-    with pytest.raises(ValueError, match="the name of a built-in policy"):
+    with pytest.raises(ValueError, match="'PPO' is reserved for the benchmark's own 'ppo'"):
         GridSpec(timesteps=10, episodes=1, seeds=(1,), agents=(("PPO", "steady.py:Steady"),)).validate()
 
 
@@ -260,8 +260,8 @@ def test_sweep_runs_user_agents_in_the_settings_that_list_them(tiny_dataset, age
 @pytest.mark.parametrize(
     ("policies", "message"),
     [
-        ("myopic,static=steady.py:Steady", "'static', the name of a built-in policy"),
-        (f"{MODULE}:Myopic", "'Myopic', the name of a built-in policy"),
+        ("myopic,static=steady.py:Steady", "'static' is reserved for the benchmark's own 'static'"),
+        (f"{MODULE}:Myopic", "'Myopic' is reserved for the benchmark's own 'myopic'"),
         ("a=steady.py:Steady,A=steady.py:Steady", "differ only in case"),
         (f"{MODULE}:wrong", "action"),
         ("steady.py:Nope", "has no attribute 'Nope'"),

@@ -181,11 +181,12 @@ def test_another_dataset_is_refused_naming_the_field_or_split(runs, other_datase
 
 def test_one_name_with_different_results_is_refused(runs, tmp_path):
     other = tmp_path / "run_dup"
-    solarchain_eval.evaluate(bold_agent, name="static", seeds=[SEED], episodes=EPISODES, out=other)
+    # (a built-in's name is the benchmark's own: tests/test_agent_attacks.py)
+    solarchain_eval.evaluate(bold_agent, name="my_agent", seeds=[SEED], episodes=EPISODES, out=other)
     refused = _cli("leaderboard", runs.run_a, other, "--out", tmp_path / "board")
     assert refused.exit_code == 2
     message = " ".join(refused.output.split())
-    assert "policy 'static' of setting 'main'" in message and str(runs.run_a) in message and str(other) in message
+    assert "policy 'my_agent' of setting 'main'" in message and str(runs.run_a) in message and str(other) in message
     assert not (tmp_path / "board").exists()
     twice = _board(runs.run_a, runs.run_a)  # the same run twice: identical rows, ranked once
     assert list(_section(twice, "main").ranked["policy"]) == list(_section(_board(runs.run_a), "main").ranked["policy"])

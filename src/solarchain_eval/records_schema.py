@@ -120,6 +120,10 @@ AGENTIC_METRIC_NAMES = names(AGENTIC_COLUMNS)
 LLM_AGENT_METRIC_NAMES = names(LLM_AGENT_COLUMNS)
 #: The numeric agentic columns (those a report averages).
 AGENTIC_NUMERIC_NAMES = tuple(c.name for c in AGENTIC_COLUMNS if c.numeric)
+#: The prefix of a user agent's own columns: what its ``end_episode`` returned, key ``k`` as
+#: ``agent_k`` (checked: finite numbers and short text; see agents/validation.py). No other column
+#: starts with it, so an agent can never write a metric, its name or an episode key.
+AGENT_COLUMN_PREFIX = "agent_"
 #: Every column ``metrics.csv`` may hold, by name.
 ALL_COLUMNS = {c.name: c for c in (*EPISODE_KEY_COLUMNS, *EPISODE_METRIC_COLUMNS, *AGENTIC_COLUMNS, *LLM_AGENT_COLUMNS)}
 

@@ -3,26 +3,120 @@
 :func:`as_agent` accepts an object with ``act(observation)`` (the :class:`~.base.Policy`
 protocol), a plain function ``observation -> action``, or a Stable-Baselines3 model (anything
 with ``predict(observation, deterministic=True)`` and an ``action_space``, sb3-contrib's
-included). It returns a :class:`UserAgent`: the user's agent behind a thin shell that names it,
-exposes exactly the hooks the agent has, and checks the shape of every action it returns, so a
-wrong action is a one-line error naming the agent and the step instead of a numpy traceback.
+included). It returns a :class:`UserAgent`: the user's agent behind a thin shell that names it
+(:mod:`.names`), exposes exactly the hooks the agent has, and guards every call into the user's
+code: an exception (``SystemExit`` included), an action that is not valid as returned, or an
+``end_episode`` value that is not a dict of numbers and short text (:mod:`.validation`) is an
+:class:`AgentFailure`, one line naming the agent, to which the rollout adds the run seed,
+episode and step.
 """
 
 from __future__ import annotations
 
+import copy
 import inspect
 from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
+from ..config import BenchmarkConfig
+from ..market.spaces import n_discrete_actions
+from .names import name_problem
+from .validation import AGENT_EXTRAS_KEY, agent_columns, continuous_problem, discrete_problem
+
 #: The hooks the runner calls when an agent has them (see :class:`~.base.Policy`).
 HOOKS = ("begin_run", "begin_episode", "observe", "end_episode", "close")
 ACTION_MODES = ("continuous", "discrete")
 
 
+#: The discrete grid's size under the default configuration (5 levels per component: 125).
+DEFAULT_DISCRETE_ACTIONS = n_discrete_actions(BenchmarkConfig().discrete_levels)
+
+
+#: The benchmark's own policy classes (module.qualname). An object of one of these, passed to an
+#: evaluation as an object, is driven as the registry builds it (no shell, its own ``end_episode``
+#: extras, the env's decoding of its actions); every other object is a user's agent.
+BUILTIN_POLICY_CLASSES = frozenset(
+    {
+        "solarchain_eval.market.baselines.StaticPolicy",
+        "solarchain_eval.market.baselines.RandomPolicy",
+        "solarchain_eval.market.baselines.MyopicPolicy",
+        "solarchain_eval.agents.sb3.SB3Policy",
+        "solarchain_eval.agents.jax_checkpoint.JaxPolicy",
+        "solarchain_eval.governance.llm_agent.LLMAgent",
+    }
+)
+
+
+def is_builtin_policy(agent: Any) -> bool:
+    """Whether ``agent`` is one of the benchmark's own policies (:data:`BUILTIN_POLICY_CLASSES`)."""
+    cls = type(agent)
+    return f"{cls.__module__}.{cls.__qualname__}" in BUILTIN_POLICY_CLASSES
+
+
 class AgentError(ValueError):
     """An agent that cannot take part as given: bad name, action mode, action or hook."""
+
+
+class AgentFailure(AgentError):
+    """A user's agent failed while it was driven: its code raised, or it returned something unusable.
+
+    The message is one line: ``agent 'NAME': PROBLEM (run seed R, episode E, step S)``; the rollout
+    fills the position (:meth:`at`) as the failure passes through it, and leaves out what it does
+    not know (a failure while the agent is built has no position). ``user_error`` keeps the
+    exception the user's code raised, for ``SOLARCHAIN_DEBUG=1`` to show its traceback.
+    """
+
+    def __init__(
+        self,
+        agent: str,
+        problem: str,
+        *,
+        where: str = "",
+        run_seed: int | None = None,
+        episode: int | None = None,
+        step: int | None = None,
+        user_error: BaseException | None = None,
+    ) -> None:
+        super().__init__(problem)
+        self.agent, self.problem, self.where = agent, problem, where
+        self.run_seed, self.episode, self.step = run_seed, episode, step
+        self.user_error = user_error
+
+    def at(self, *, run_seed: int | None = None, episode: int | None = None, step: int | None = None) -> AgentFailure:
+        """Fill in the parts of the position not known yet; returns ``self``."""
+        self.run_seed = self.run_seed if self.run_seed is not None else run_seed
+        self.episode = self.episode if self.episode is not None else episode
+        self.step = self.step if self.step is not None else step
+        return self
+
+    def __str__(self) -> str:
+        parts = [f"{label} {value}" for label, value in self._position() if value is not None]
+        return f"agent '{self.agent}'{self.where}: {self.problem}" + (f" ({', '.join(parts)})" if parts else "")
+
+    def _position(self) -> tuple[tuple[str, int | None], ...]:
+        return (("run seed", self.run_seed), ("episode", self.episode), ("step", self.step))
+
+    def __reduce__(self) -> tuple:
+        # Failures cross process boundaries (grid workers); the user's exception may not pickle.
+        state = {k: v for k, v in self.__dict__.items() if k != "user_error"}
+        return (_rebuild_failure, (type(self), state))
+
+
+def _rebuild_failure(cls: type[AgentFailure], state: dict[str, Any]) -> AgentFailure:
+    failure = cls.__new__(cls)
+    failure.__dict__.update(state, user_error=None)
+    failure.args = (state.get("problem", ""),)
+    return failure
+
+
+def describe_exception(error: BaseException) -> str:
+    """The exception's own last line (``Type: message``) with any line breaks folded: one line."""
+    text = " ".join(str(error).split())
+    if isinstance(error, SystemExit):
+        return f"SystemExit({error.code!r}): the agent called sys.exit"
+    return f"{type(error).__name__}: {text}" if text else type(error).__name__
 
 
 def _name_of(agent: Any) -> str | None:
@@ -105,17 +199,27 @@ def is_observation_function(agent: Any) -> bool:
 
 
 class UserAgent:
-    """A user's agent as the runner drives it: named, with the agent's own hooks, actions checked.
+    """A user's agent as the runner drives it: named, with the agent's own hooks, every call guarded.
 
     Parameters
     ----------
     inner : object
         The agent (``act`` required; hooks optional).
     name : str
-        The ``policy`` column of its records.
+        The ``policy`` column of its records (:mod:`.names`).
+    builtin : bool
+        The benchmark's own policy under another name (``mine=static``): its actions' shape is
+        checked, their values go to the environment as they are.
+    discrete_actions : int
+        Size of the discrete grid (a discrete agent's index must be below it).
     """
 
-    def __init__(self, inner: Any, name: str) -> None:
+    def __init__(
+        self, inner: Any, name: str, *, builtin: bool = False, discrete_actions: int = DEFAULT_DISCRETE_ACTIONS
+    ) -> None:
+        problem = name_problem(name)
+        if problem is not None:
+            raise AgentError(f"{problem}; name the agent with NAME=spec, or name= in Python")
         if not callable(getattr(inner, "act", None)):
             raise AgentError(f"agent '{name}': {type(inner).__name__} has no act(observation) method")
         mode = getattr(inner, "action_mode", "continuous")
@@ -124,43 +228,69 @@ class UserAgent:
         self.inner = inner
         self.name = name
         self.action_mode = mode
+        self.builtin = builtin
+        self.discrete_actions = int(discrete_actions)
         self.stateless = bool(getattr(inner, "stateless", False))
         self._act = inner.act
         for hook in HOOKS:  # only the hooks the agent has, so the runner's getattr sees the same
             method = getattr(inner, hook, None)
             if callable(method):
-                setattr(self, hook, method)
-        self._check = _check_continuous if mode == "continuous" else _check_discrete
+                setattr(self, hook, self._guarded(hook, method))
+        # SB3 models sample actions the environment clips (as in training): their range is not checked.
+        self._check_range = not isinstance(inner, SB3ModelAgent)
 
     def act(self, observation: np.ndarray) -> Any:
-        action = self._act(observation)
-        problem = self._check(action)
+        action = self._call("act", self._act, observation)
+        if self.action_mode == "continuous":
+            problem = continuous_problem(action, check_values=not self.builtin, check_range=self._check_range)
+        else:
+            problem = discrete_problem(action, self.discrete_actions)
         if problem is not None:
-            raise AgentError(f"agent '{self.name}': {problem}")
+            raise AgentFailure(self.name, problem)
         return action
+
+    def _guarded(self, hook: str, method: Callable[..., Any]) -> Callable[..., Any]:
+        if hook == "end_episode":
+
+            def end_episode() -> dict[str, Any]:
+                returned = self._call(hook, method)
+                try:
+                    columns = agent_columns(returned)
+                except ValueError as error:
+                    raise AgentFailure(self.name, str(error)) from None
+                return {AGENT_EXTRAS_KEY: columns} if columns else {}
+
+            return end_episode
+        return lambda *args, **kwargs: self._call(hook, method, *args, **kwargs)
+
+    def _call(self, hook: str, method: Callable[..., Any], *args: Any, **kwargs: Any) -> Any:
+        """``method(*args, **kwargs)``; whatever it raises (``SystemExit`` included) as an :class:`AgentFailure`."""
+        try:
+            return method(*args, **kwargs)
+        except AgentFailure:
+            raise  # already one line naming the agent (an HTTP agent's own errors)
+        except (Exception, SystemExit) as error:
+            raise AgentFailure(self.name, f"{hook}() raised {describe_exception(error)}", user_error=error) from error
+
+    def __deepcopy__(self, memo: dict) -> UserAgent:
+        # The guarded hooks are closures over this shell: a copy gets its own, bound to its own inner copy.
+        twin = UserAgent(
+            copy.deepcopy(self.inner, memo), self.name, builtin=self.builtin, discrete_actions=self.discrete_actions
+        )
+        memo[id(self)] = twin
+        return twin
 
     def __repr__(self) -> str:
         return f"UserAgent({self.name!r}, {type(self.inner).__name__}, {self.action_mode})"
 
 
-def _check_continuous(action: Any) -> str | None:
-    try:
-        shape = np.shape(action)
-    except (TypeError, ValueError):
-        return f"act() returned {type(action).__name__}; a continuous action is three numbers in [0, 1]"
-    if shape not in ((3,), (1, 3)):
-        return f"act() returned an action of shape {shape}; a continuous action has shape (3,)"
-    return None
-
-
-def _check_discrete(action: Any) -> str | None:
-    value = np.asarray(action)
-    if value.size != 1 or not np.issubdtype(value.dtype, np.integer):
-        return f"act() returned {action!r}; a discrete action is one integer index"
-    return None
-
-
-def as_agent(agent: Any, *, name: str | None = None) -> UserAgent:
+def as_agent(
+    agent: Any,
+    *,
+    name: str | None = None,
+    builtin: bool = False,
+    discrete_actions: int = DEFAULT_DISCRETE_ACTIONS,
+) -> UserAgent:
     """The runner's view of a user's agent (see the module docstring).
 
     Parameters
@@ -168,14 +298,21 @@ def as_agent(agent: Any, *, name: str | None = None) -> UserAgent:
     agent : object, function or SB3 model
     name : str, optional
         Overrides the agent's own ``name`` (default: its ``name``, else its class or function name).
+    builtin : bool
+        ``agent`` is one of the benchmark's own policies (see :class:`UserAgent`).
+    discrete_actions : int
+        Size of the discrete grid of the evaluation's configuration.
 
     Raises
     ------
     AgentError
-        The object is none of the accepted kinds, or declares an unknown action mode.
+        The object is none of the accepted kinds, its name breaks the naming rule
+        (:mod:`.names`), or it declares an unknown action mode.
     """
+    options = {"builtin": builtin, "discrete_actions": discrete_actions}
     if isinstance(agent, UserAgent):
-        return agent if name in (None, agent.name) else UserAgent(agent.inner, name)
+        same = name in (None, agent.name) and (agent.builtin, agent.discrete_actions) == (builtin, discrete_actions)
+        return agent if same else UserAgent(agent.inner, name or agent.name, **options)
     if is_sb3_model(agent):
         inner: Any = SB3ModelAgent(agent, name=name)
     elif is_observation_function(agent):
@@ -189,4 +326,4 @@ def as_agent(agent: Any, *, name: str | None = None) -> UserAgent:
             "a function observation -> action, or a Stable-Baselines3 model"
         )
     label = name or _name_of(inner) or type(inner).__name__
-    return UserAgent(inner, label)
+    return UserAgent(inner, label, **options)

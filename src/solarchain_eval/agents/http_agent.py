@@ -24,6 +24,7 @@ import numpy as np
 
 from ..common.redaction import redact_url
 from ..market.observation import OBSERVATION_NAMES
+from .adapters import AgentFailure
 
 ACTION_MODES = ("continuous", "discrete")
 DEFAULT_TIMEOUT_S = 5.0
@@ -46,7 +47,7 @@ _HEADERS = {"Content-Type": "application/json", "Accept": "application/json"}
 _SNIPPET_CHARS = 120
 
 
-class HttpAgentError(ValueError):
+class HttpAgentError(AgentFailure):
     """An agent server that cannot be reached or gave a reply the benchmark cannot use.
 
     The message is one line: ``agent 'NAME' (URL): PROBLEM (run seed R, episode E, step S)``;
@@ -69,18 +70,8 @@ class HttpAgentError(ValueError):
         episode: int | None = None,
         step: int | None = None,
     ) -> None:
-        where = "" if step is None else f" (run seed {run_seed}, episode {episode}, step {step})"
-        super().__init__(f"agent '{agent}' ({url}): {problem}{where}")
-        self.agent, self.url, self.problem = agent, url, problem
-        self.run_seed, self.episode, self.step = run_seed, episode, step
-
-    def __reduce__(self) -> tuple:
-        position = {"run_seed": self.run_seed, "episode": self.episode, "step": self.step}
-        return (_rebuild_error, (self.agent, self.url, self.problem, position))
-
-
-def _rebuild_error(agent: str, url: str, problem: str, position: dict[str, int | None]) -> HttpAgentError:
-    return HttpAgentError(agent, url, problem, **position)
+        super().__init__(agent, problem, where=f" ({url})", run_seed=run_seed, episode=episode, step=step)
+        self.url = url
 
 
 @dataclass

@@ -9,11 +9,12 @@ from typing import Any
 from ..common.redaction import redact_spec
 from ..config import BenchmarkConfig
 from ..market.baselines import BASELINES, make_baseline
+from ..market.spaces import n_discrete_actions
 from .adapters import AgentError, SB3ModelAgent, as_agent
 from .base import Policy
 from .jax_checkpoint import register_jax_policies
 from .sb3 import load_sb3_model, load_vecnormalize, register_learned_policies
-from .specs import AgentSpec, AgentSpecError, instantiate, load_target, parse_agent_list
+from .specs import LLM_AGENT, AgentSpec, AgentSpecError, instantiate, load_target, parse_agent_list
 
 #: Factories for policies that need more than the config (e.g. trained models), by name.
 #: Each takes (config, models) and returns a Policy; extra modules register themselves here.
@@ -24,6 +25,31 @@ register_jax_policies(EXTRA_POLICIES)  # the same names also load JAX checkpoint
 
 def known_policies() -> tuple[str, ...]:
     return (*BASELINES, *EXTRA_POLICIES)
+
+
+def reserved_names() -> tuple[str, ...]:
+    """Names no user agent may take (in any case): the baselines, the learned algorithms, the LLM
+    agent and the Planner/Auditor kinds, so that a row with one of these names is the benchmark's own."""
+    from ..governance.auditor import AUDITOR_KINDS
+    from ..governance.planner import PLANNER_KINDS
+
+    return tuple(dict.fromkeys((*known_policies(), LLM_AGENT, *PLANNER_KINDS, *AUDITOR_KINDS)))
+
+
+def check_reserved(name: str, builtin: str | None = None) -> None:
+    """Refuse ``name`` for an agent that is not the built-in policy ``builtin`` when the name is
+    reserved (:func:`reserved_names`, compared case-insensitively).
+
+    Raises
+    ------
+    AgentSpecError
+    """
+    reserved = {r.lower(): r for r in reserved_names()}
+    if name.lower() in reserved and name != builtin:
+        raise AgentSpecError(
+            f"agent name {name!r} is reserved for the benchmark's own {reserved[name.lower()]!r}: "
+            "give your agent another name (NAME=spec, or name= in Python)"
+        )
 
 
 def make_policy(name: str, config: BenchmarkConfig, models: dict[str, Path] | None = None) -> Policy:
@@ -72,10 +98,11 @@ def make_agent(
     AgentSpecError
         An import, attribute, constructor, model or action-mode problem, in one line.
     """
+    discrete_actions = n_discrete_actions(config.discrete_levels)
     if spec.kind == "builtin":
         policy = make_policy(spec.target, config, models)
         if spec.name is not None and spec.name != policy.name:
-            return as_agent(policy, name=spec.name)
+            return as_agent(policy, name=spec.name, builtin=True, discrete_actions=discrete_actions)
         return policy
     if spec.kind == "llm":
         raise AgentSpecError(f"{spec.text!r}: the LLM agent is built by the evaluation, which owns its endpoint")
@@ -86,14 +113,15 @@ def make_agent(
             algo, _, path = spec.target.partition(":")
             stats = (vecnormalize or {}).get(name) or (vecnormalize or {}).get(None)
             model = load_sb3_model(algo, path, config)
-            return as_agent(SB3ModelAgent(model, name=name, obs_normalizer=load_vecnormalize(stats) if stats else None))
+            agent = SB3ModelAgent(model, name=name, obs_normalizer=load_vecnormalize(stats) if stats else None)
+            return as_agent(agent, discrete_actions=discrete_actions)
         if spec.kind == "http":
             from .http_agent import HttpAgent  # httpx is imported only for HTTP agents
 
-            return as_agent(HttpAgent(name, spec.target, **kwargs), name=name)
+            return as_agent(HttpAgent(name, spec.target, **kwargs), name=name, discrete_actions=discrete_actions)
         target, attr = load_target(spec)
         agent = instantiate(target, attr, spec, kwargs)
-        return as_agent(agent, name=name or _own_name(agent) or attr)
+        return as_agent(agent, name=name or _own_name(agent) or attr, discrete_actions=discrete_actions)
     except AgentSpecError:
         raise
     except (AgentError, ValueError, TypeError, OSError) as error:

@@ -33,18 +33,32 @@ from pathlib import Path
 from typing import Any
 
 from ..common.errors import NamesOptions
-from .adapters import AgentError, is_observation_function
+from .adapters import AgentError, describe_exception, is_observation_function
+from .names import NAME_RULE, is_valid_name
 
 #: The entry-point group installed packages register agents in (``NAME = "pkg.module:attr"``).
 ENTRY_POINT_GROUP = "solarchain_eval.agents"
 #: The built-in LLM agent (built by the evaluation runner, which owns the model endpoint).
 LLM_AGENT = "llm-agent"
 AGENT_KINDS = ("builtin", "llm", "python", "file", "plugin", "sb3", "http")
-_NAME = re.compile(r"^[A-Za-z0-9][A-Za-z0-9_.+-]*$")
+#: What may stand before ``=`` in ``NAME=spec`` (the naming rule of :mod:`.names` is checked after).
+_NAME_PREFIX = re.compile(r"^[^=:/\\]+$")
 
 
 class AgentSpecError(NamesOptions, AgentError):
-    """A spec that cannot be read, imported or built (one line, before any work)."""
+    """A spec that cannot be read, imported or built (one line, before any work).
+
+    ``user_error`` keeps the exception the user's code raised (an import, a constructor), for
+    ``SOLARCHAIN_DEBUG=1`` to show its traceback.
+    """
+
+    user_error: BaseException | None = None
+
+
+def _user_code_failed(message: str, error: BaseException) -> AgentSpecError:
+    failure = AgentSpecError(message)
+    failure.user_error = error
+    return failure
 
 
 @dataclass(frozen=True)
@@ -76,10 +90,9 @@ class AgentSpec:
 
 
 def check_name(name: str, spec: str) -> str:
-    if not _NAME.match(name):
-        raise AgentSpecError(
-            f"agent name {name!r} in {spec!r}: use letters, digits and _ . + - (starting with a letter or digit)"
-        )
+    """``name`` if it follows the naming rule (:mod:`.names`), else an :class:`AgentSpecError` naming ``spec``."""
+    if not is_valid_name(name):
+        raise AgentSpecError(f"agent name {name!r} in {spec!r}: {NAME_RULE}")
     return name
 
 
@@ -90,7 +103,7 @@ def parse_agent_spec(text: str, builtins: tuple[str, ...]) -> AgentSpec:
         raise AgentSpecError("empty agent spec")
     name: str | None = None
     head, sep, rest = raw.partition("=")
-    if sep and _NAME.match(head.strip()) and ":" not in head:
+    if sep and _NAME_PREFIX.match(head.strip()):
         name, raw = check_name(head.strip(), text), rest.strip()
         if not raw:
             raise AgentSpecError(f"agent spec {text!r} names an agent but gives nothing after '='")
@@ -203,9 +216,9 @@ def load_target(spec: AgentSpec) -> tuple[Any, str]:
         entry = plugin_entry_point(spec.target)
         try:
             return entry.load(), spec.target
-        except Exception as error:  # a plugin's import can fail in any way
-            raise AgentSpecError(
-                f"cannot load plugin agent {spec.target!r} ({entry.value}): {type(error).__name__}: {error}"
+        except (Exception, SystemExit) as error:  # a plugin's import can fail in any way, sys.exit included
+            raise _user_code_failed(
+                f"cannot load plugin agent {spec.target!r} ({entry.value}): {describe_exception(error)}", error
             ) from None
     location, _, attr = spec.target.rpartition(":")
     module = _load_file(location, spec) if spec.kind == "file" else _import_module(location, spec)
@@ -221,9 +234,9 @@ def load_target(spec: AgentSpec) -> tuple[Any, str]:
 def _import_module(module: str, spec: AgentSpec) -> Any:
     try:
         return importlib.import_module(module)
-    except Exception as error:  # ImportError, or whatever the module raises while importing
-        raise AgentSpecError(
-            f"agent spec {spec.text!r}: cannot import {module!r}: {type(error).__name__}: {error}"
+    except (Exception, SystemExit) as error:  # ImportError, or whatever the module raises (sys.exit too)
+        raise _user_code_failed(
+            f"agent spec {spec.text!r}: cannot import {module!r}: {describe_exception(error)}", error
         ) from None
 
 
@@ -231,22 +244,25 @@ def _load_file(location: str, spec: AgentSpec) -> Any:
     path = Path(location).expanduser()
     if not path.is_file():
         raise AgentSpecError(f"agent spec {spec.text!r}: no such file {path}")
+    if path.suffix != ".py":
+        raise AgentSpecError(f"agent spec {spec.text!r}: {path} is not a Python file (write path/to/file.py:attr)")
     resolved = path.resolve()
     # A private module name per file, so two files named agent.py do not replace each other.
     module_name = f"solarchain_user_agent_{hashlib.sha256(str(resolved).encode()).hexdigest()[:12]}"
     if module_name in sys.modules:
         return sys.modules[module_name]
     loader_spec = importlib.util.spec_from_file_location(module_name, resolved)
-    assert loader_spec is not None and loader_spec.loader is not None
+    if loader_spec is None or loader_spec.loader is None:
+        raise AgentSpecError(f"agent spec {spec.text!r}: cannot load {path} as a Python module")
     module = importlib.util.module_from_spec(loader_spec)
     sys.path.insert(0, str(resolved.parent))  # the file may import modules beside it
     try:
         loader_spec.loader.exec_module(module)
     except SyntaxError as error:
-        raise AgentSpecError(f"{path}:{error.lineno}: syntax error: {error.msg}") from None
-    except Exception as error:  # whatever the file raises while it runs
-        raise AgentSpecError(
-            f"agent spec {spec.text!r}: running {path} raised {type(error).__name__}: {error}"
+        raise _user_code_failed(f"{path}:{error.lineno}: syntax error: {error.msg}", error) from None
+    except (Exception, SystemExit) as error:  # whatever the file raises while it runs, sys.exit included
+        raise _user_code_failed(
+            f"agent spec {spec.text!r}: running {path} raised {describe_exception(error)}", error
         ) from None
     finally:
         sys.path.remove(str(resolved.parent))
@@ -268,8 +284,10 @@ def instantiate(target: Any, attr: str, spec: AgentSpec, kwargs: dict[str, Any])
             pass  # no signature (a builtin): let the call decide
         try:
             return target(**kwargs)
-        except Exception as error:  # the user's constructor can fail in any way
-            raise AgentSpecError(f"agent spec {spec.text!r}: {attr}() raised {type(error).__name__}: {error}") from None
+        except (Exception, SystemExit) as error:  # the user's constructor can fail in any way
+            raise _user_code_failed(
+                f"agent spec {spec.text!r}: {attr}() raised {describe_exception(error)}", error
+            ) from None
     if kwargs:
         raise AgentSpecError(
             f"agent spec {spec.text!r}: {attr} is not a class or factory, so --agent-arg {', '.join(sorted(kwargs))} "

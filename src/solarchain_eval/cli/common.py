@@ -3,7 +3,9 @@
 from __future__ import annotations
 
 import functools
+import os
 import sys
+import traceback
 from collections.abc import Callable, Iterator
 from contextlib import contextmanager
 from pathlib import Path
@@ -53,8 +55,23 @@ FIELD_FLAGS = {"run_dir": "--out", "root": "--out", "tensorboard_dir": "--tensor
 
 
 def cli_error(error: Exception) -> CliError:
-    """A :class:`CliError` with ``error``'s message, its options named by flag."""
-    return CliError(error.message_for(_flag_of) if isinstance(error, NamesOptions) else str(error))
+    """A :class:`CliError` with ``error``'s message, its options named by flag (and the user's
+    exception behind it, for :data:`DEBUG_VARIABLE`)."""
+    failure = CliError(error.message_for(_flag_of) if isinstance(error, NamesOptions) else str(error))
+    failure.user_error = getattr(error, "user_error", None)  # type: ignore[attr-defined]
+    return failure
+
+
+#: Set to 1 to see, above the one-line error, the traceback of the user's code that caused it
+#: (an agent's import, constructor or hook), else of the error itself.
+DEBUG_VARIABLE = "SOLARCHAIN_DEBUG"
+
+
+def _show_traceback(error: BaseException) -> None:
+    if os.environ.get(DEBUG_VARIABLE, "") in ("", "0"):
+        return
+    shown = getattr(error, "user_error", None) or error
+    sys.stderr.write("".join(traceback.format_exception(shown)))
 
 
 def _flag_of(field: str) -> str:
@@ -77,6 +94,7 @@ def reports_errors(func: F) -> F:
         try:
             return func(*args, **kwargs)
         except (CliError, *USER_ERRORS) as error:
+            _show_traceback(error)
             message = error.message_for(_flag_of) if isinstance(error, NamesOptions) else str(error)
             message = redact_text(message)  # a spec or URL the error repeats may carry credentials
             err_console.print(Text.assemble(("error:", "bold red"), f" {message}"), soft_wrap=True)
@@ -107,6 +125,12 @@ def progress_bar(description: str, total: int, *, enabled: bool = True) -> Itera
     with progress:
         task = progress.add_task(description, total=total)
         yield lambda n=1: progress.advance(task, n)
+
+
+def refuse_file_out(out: Path | None, flag: str = "--out") -> None:
+    """An output folder that is an existing file is the user's mistake: one line, before any work."""
+    if out is not None and out.exists() and not out.is_dir():
+        raise CliError(f"{flag} {out} is an existing file, not a folder")
 
 
 def parse_int_list(text: str, what: str) -> list[int]:

@@ -10,7 +10,7 @@ from rich.table import Table
 from ..report.options import DEFAULT_RESAMPLES, LEADERBOARD_FORMATS, LeaderboardOptions, ReportDataError, parse_formats
 from ..report.tarballs import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
 from . import app
-from .common import CliError, cli_error, console, register_user_error, reports_errors, say
+from .common import CliError, cli_error, console, refuse_file_out, register_user_error, reports_errors, say
 
 register_user_error(ReportDataError)
 
@@ -56,6 +56,7 @@ def leaderboard(
     a link, or holds a file its metadata does not vouch for; --out may not lie inside an input.
     See docs/comparing_results.md and docs/security.md.
     """
+    refuse_file_out(out)
     try:
         if not max_unpacked_mb > 0:
             raise ValueError(f"--max-unpacked-mb must be positive, got {max_unpacked_mb:g}")

@@ -36,6 +36,7 @@ from .common import (
     err_console,
     invoked_command,
     parse_seeds,
+    refuse_file_out,
     register_user_error,
     reports_errors,
     results_table,
@@ -278,6 +279,7 @@ def paper(
     and redoes the ones that were in flight (training resumes from its last checkpoint; with
     --backend jax, from its last chunk).
     """
+    refuse_file_out(out)
     cfg = load_config(config) if config else BenchmarkConfig()
     options = agentic_cli.resolve(governance)
     chosen_settings = _settings(settings)

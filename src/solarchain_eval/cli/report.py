@@ -19,7 +19,16 @@ from ..report.options import (
     parse_formats,
 )
 from . import app
-from .common import CliError, cli_error, console, err_console, register_user_error, reports_errors, say
+from .common import (
+    CliError,
+    cli_error,
+    console,
+    err_console,
+    refuse_file_out,
+    register_user_error,
+    reports_errors,
+    say,
+)
 
 register_user_error(ReportDataError)
 
@@ -98,6 +107,7 @@ def report(
 
     Tables and figures the run cannot support (e.g. no learned policies, no agentic setting)
     are listed with the reason. Same inputs and options give byte-identical files."""
+    refuse_file_out(out)
     try:
         chosen = parse_formats(formats)
     except ValueError as error:

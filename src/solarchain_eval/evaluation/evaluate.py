@@ -26,6 +26,7 @@ from typing import Any
 
 import pandas as pd
 
+from ..agents.names import name_problem
 from ..agents.specs import AgentSpecError
 from ..config import BenchmarkConfig
 from ..governance.factory import AgenticOptions, LLMOptions
@@ -144,7 +145,10 @@ def evaluate(
         Publish the run directory there (``metrics.csv``, ``actions.csv``, ..., ``run_metadata.json``
         with checksums); by default the run is written to a temporary directory and removed.
     name : str, optional
-        The row name of a single agent (default: its ``name``, class or function name).
+        The row name of a single agent (default: its ``name``, class or function name). Every
+        agent's name follows the command line's rule (letters, digits and ``_ . + -``, at most 64
+        characters), differs from the others' in more than case, and is none of the built-in
+        names (``static``, ``ppo``, ``llm-agent``, the Planner/Auditor kinds, ...).
     config : BenchmarkConfig, optional
     models : dict, optional
         Trained models for the built-in learned policies (``{"ppo": path}`` or ``{"*": dir}``).
@@ -168,8 +172,11 @@ def evaluate(
     Raises
     ------
     AgentSpecError
-        An agent that cannot be used (with ``isolate``: one that cannot be pickled), or two agents
-        with one name.
+        An agent that cannot be used (with ``isolate``: one that cannot be pickled), a name against
+        the rule, or two agents with one name.
+    AgentFailure
+        A user agent's code raised, or it returned an invalid action or ``end_episode`` value
+        (one line naming the agent, run seed, episode and step); nothing is published.
 
     Notes
     -----
@@ -180,6 +187,9 @@ def evaluate(
     """
     agents = list(agent) if isinstance(agent, list | tuple) else [agent]
     if name is not None:
+        problem = name_problem(name)  # the command line's rule (``NAME=spec``), checked before anything else
+        if problem is not None:
+            raise AgentSpecError(f"name=: {problem}")
         if len(agents) != 1:
             raise AgentSpecError("name= names a single agent; give each of several agents its own name attribute")
         from ..agents.adapters import as_agent

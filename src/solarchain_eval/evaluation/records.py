@@ -12,6 +12,7 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..agents.validation import AGENT_EXTRAS_KEY
 from ..common.atomic_files import atomic_write_csv, atomic_write_json, atomic_write_text
 from ..governance.counterfactual import DIAGNOSTIC_COLUMNS
 from ..governance.wrapper import EXTRA_DIAGNOSTICS_KEY, EXTRA_LOG_KEY, EXTRA_METRICS_KEY
@@ -31,12 +32,15 @@ REPORT_DIR = "report"
 
 
 def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
-    """One row per episode: identifiers, the episode metrics of docs/metrics.md, then any extra per-episode metrics."""
+    """One row per episode: identifiers, the episode metrics of docs/metrics.md, then any extra
+    per-episode metrics (the Planner/Auditor layer's, the LLM agent's) and a user agent's own
+    ``agent_*`` columns. The identifiers and metrics are the runner's: written last, so no extra
+    column can replace them."""
     rows = []
     for r in results:
-        row = {k: getattr(r, k) for k in EPISODE_KEYS}
+        row = {**r.extras.get(EXTRA_METRICS_KEY, {}), **r.extras.get(AGENT_EXTRAS_KEY, {})}
+        row.update({k: getattr(r, k) for k in EPISODE_KEYS})
         row.update(r.metrics)
-        row.update(r.extras.get(EXTRA_METRICS_KEY, {}))
         rows.append(row)
     frame = pd.DataFrame(rows)
     if frame.empty:

@@ -8,6 +8,7 @@ from typing import Any
 
 import numpy as np
 
+from ..agents.adapters import AgentFailure
 from ..agents.base import Policy, is_privileged
 from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
 from ..protocol import paper_episode_seeds
@@ -46,7 +47,21 @@ def run_episode(
     run_seed: int,
     episode: int,
 ) -> EpisodeResult:
-    """Run one full episode with ``policy`` acting deterministically."""
+    """Run one full episode with ``policy`` acting deterministically.
+
+    A user agent's failure (:class:`~solarchain_eval.agents.adapters.AgentFailure`) leaves with the
+    run seed, episode and step it happened at (``begin_episode``: step 0; ``end_episode``: the last).
+    """
+    step = [0]
+    try:
+        return _run_episode(env, policy, episode_seed, setting, run_seed, episode, step)
+    except AgentFailure as failure:
+        raise failure.at(run_seed=run_seed, episode=episode, step=step[0]) from failure.__cause__
+
+
+def _run_episode(
+    env: SolarChainEnv, policy: Policy, episode_seed: int, setting: str, run_seed: int, episode: int, step: list[int]
+) -> EpisodeResult:
     obs, reset_info = env.reset(seed=episode_seed)
     begin = getattr(policy, "begin_episode", None)
     if begin is not None:
@@ -74,6 +89,7 @@ def run_episode(
         city_rewards.append(tuple(info["city_rewards"].values()))
         if observe is not None:
             observe(info)
+        step[0] += 1
     actions = np.column_stack(
         [np.asarray(columns[c], dtype=np.float32) for c in ("reward_ratio", "liquidity_ratio", "burn_rate")]
     )
@@ -101,6 +117,7 @@ def run_episode(
     )
     finish = getattr(policy, "end_episode", None)
     if finish is not None:
+        step[0] -= 1  # after the last step
         result.extras.update(finish() or {})
     return result
 
@@ -109,7 +126,10 @@ def begin_run(policy: Policy, run_seed: int) -> None:
     """Call the agent's optional ``begin_run`` hook."""
     hook = getattr(policy, "begin_run", None)
     if hook is not None:
-        hook(run_seed)
+        try:
+            hook(run_seed)
+        except AgentFailure as failure:
+            raise failure.at(run_seed=run_seed) from failure.__cause__
 
 
 def run_policy(

@@ -19,10 +19,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..agents.adapters import UserAgent, as_agent
+from ..agents.adapters import AgentFailure, UserAgent, as_agent, is_builtin_policy
 from ..agents.base import Policy, access_label
 from ..agents.isolated import IsolatedAgent, is_isolatable
-from ..agents.registry import known_policies, make_agent
+from ..agents.registry import check_reserved, known_policies, make_agent
 from ..agents.specs import AgentSpecError, check_unique, parse_agent_spec
 from ..common.atomic_files import atomic_write_json, sha256_file
 from ..common.redaction import redact_command, redact_spec
@@ -33,6 +33,7 @@ from ..data.provenance import dataset_provenance as dataset_provenance  # re-exp
 from ..data.table import HourlyTable, load_table
 from ..envs.env import SolarChainEnv
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
+from ..market.spaces import n_discrete_actions
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS, episode_seed_rule_name, paper_episode_seeds
 from ..records_schema import RECORDS_SCHEMA_VERSION
 from .fingerprint import protocol_fingerprint, protocol_id
@@ -132,13 +133,17 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
     builtins = known_policies()
     built: list[Policy] = []
     for item in spec.policies:
+        if is_builtin_policy(item):  # the benchmark's own policy object, as make_agent returns it
+            built.append(item)
+            continue
         if not isinstance(item, str):
-            if not spec.isolate:
-                built.append(as_agent(item))
-                continue
-            agent = IsolatedAgent.from_object(item)  # a copy in its own process, which the evaluation closes
-            if stack is not None:
-                stack.callback(agent.close)
+            if spec.isolate:
+                agent = IsolatedAgent.from_object(item)  # a copy in its own process, which the evaluation closes
+                if stack is not None:
+                    stack.callback(agent.close)
+            else:
+                agent = as_agent(item, discrete_actions=n_discrete_actions(config.discrete_levels))
+            check_reserved(agent.name)
             built.append(agent)
             continue
         parsed = parse_agent_spec(item, builtins)
@@ -153,6 +158,8 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
         close = getattr(agent, "close", None)
         if stack is not None and close is not None:
             stack.callback(close)
+        # a reserved name only for the built-in it names (``static``, not ``static=file.py:A``)
+        check_reserved(agent.name, parsed.target if parsed.kind in ("builtin", "llm") else None)
         built.append(agent)
     check_unique([p.name for p in built])
     return built
@@ -192,11 +199,14 @@ def _try_first_action(agent: UserAgent, config: BenchmarkConfig, table: HourlyTa
     run_seed = int(spec.run_seeds[0])
     (episode_seed,) = spec.episode_seeds(run_seed, 1)
     obs, info = env.reset(seed=episode_seed)
-    begin_run(trial, run_seed)
-    begin = getattr(trial, "begin_episode", None)
-    if begin is not None:
-        begin(episode=0, run_seed=run_seed, episode_seed=episode_seed, start_hour=int(info["episode_start_hour"]))
-    env.step(trial.act(obs))  # the shell checks the action's shape; the env its value
+    try:
+        begin_run(trial, run_seed)
+        begin = getattr(trial, "begin_episode", None)
+        if begin is not None:
+            begin(episode=0, run_seed=run_seed, episode_seed=episode_seed, start_hour=int(info["episode_start_hour"]))
+        env.step(trial.act(obs))  # the shell checks the action as returned
+    except AgentFailure as failure:
+        raise failure.at(run_seed=run_seed, episode=0, step=0) from failure.user_error
 
 
 def _llm_agent(spec: EvaluationSpec, config: BenchmarkConfig, name: str | None) -> Policy:

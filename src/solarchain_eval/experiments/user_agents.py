@@ -24,9 +24,8 @@ from pathlib import Path
 from typing import Any
 
 from ..agents.checkpoints import TRAINABLE_ALGOS
-from ..agents.registry import known_policies
+from ..agents.registry import check_reserved, known_policies, reserved_names
 from ..agents.specs import (
-    LLM_AGENT,
     AgentSpec,
     AgentSpecError,
     check_name,
@@ -50,11 +49,6 @@ class PolicyChoice:
 
     builtins: tuple[str, ...]
     agents: tuple[AgentSpec, ...]
-
-
-def reserved_names() -> tuple[str, ...]:
-    """Names a user agent may not take: the built-in policies' and the LLM agent's."""
-    return (*known_policies(), *TRAINABLE_ALGOS, LLM_AGENT)
 
 
 def split_policies(items: Sequence[str]) -> PolicyChoice:
@@ -104,7 +98,6 @@ def check_agent_names(agents: GridAgents, builtins: Sequence[str] = ()) -> None:
     ------
     AgentSpecError
     """
-    reserved = {name.lower() for name in reserved_names()}
     for name, text in agents:
         try:
             check_name(name, text)
@@ -113,10 +106,7 @@ def check_agent_names(agents: GridAgents, builtins: Sequence[str] = ()) -> None:
                 f"agent {text!r} is named {name!r}, which cannot name its unit directories: "
                 "give it a name of letters, digits and _ . + - (NAME=spec)"
             ) from None
-        if name.lower() in reserved:
-            raise AgentSpecError(
-                f"agent {text!r} is named {name!r}, the name of a built-in policy: give it another name (NAME=spec)"
-            )
+        check_reserved(name)  # the rule of every evaluation (agents/registry.py)
     check_unique([*builtins, *(name for name, _ in agents)])
 
 

@@ -399,11 +399,18 @@ def merge_by_setting(sections: Sequence[Section]) -> tuple[dict[str, list[Sectio
     for section in sections:
         keep = []
         for policy, rows in section.metrics.groupby("policy", sort=False):
-            first = owner.get((section.setting, str(policy)))
+            # names are one name whatever their case, as within a run (agents/specs.check_unique)
+            first = owner.get((section.setting, str(policy).lower()))
             if first is None:
-                owner[(section.setting, str(policy))] = section
+                owner[(section.setting, str(policy).lower())] = section
                 keep.append(policy)
                 continue
+            other = next(p for p in first.metrics["policy"].unique() if str(p).lower() == str(policy).lower())
+            if other != policy:
+                raise LeaderboardError(
+                    f"policy {policy!r} of {section.source} and {other!r} of {first.source} (setting "
+                    f"{section.setting!r}) differ only in case; a board ranks each name once (rename one)"
+                )
             earlier = first.metrics[first.metrics["policy"] == policy]
             if _rows_text(earlier) != _rows_text(rows):
                 raise LeaderboardError(
