@@ -134,10 +134,16 @@ def test_isolated_rows_equal_in_process_rows_bit_for_bit(tiny_dataset: Path, tmp
         assert (isolated / name).read_bytes() == (in_process / name).read_bytes(), name
     assert _access_of(in_process) == {"honest": "in-process", "constant": "in-process", "static": "in-process"}
     assert _access_of(isolated) == {"honest": "isolated", "constant": "isolated", "static": "in-process"}
+
     # what end_episode() returned comes back with its types and bits
-    extras = [(e.extras, {k: type(v) for k, v in e.extras.items()}) for e in _EVALUATIONS["in-process"].episodes]
-    assert extras[0][0]["steps_seen"] == 24
-    assert [(e.extras, {k: type(v) for k, v in e.extras.items()}) for e in _EVALUATIONS["isolated"].episodes] == extras
+    # (the door namespaces it: {"agent_columns": {"agent_<key>": value}})
+    def typed(evaluation: str) -> list:
+        columns = [e.extras["agent_columns"] for e in _EVALUATIONS[evaluation].episodes if "agent_columns" in e.extras]
+        return [(c, {k: type(v) for k, v in c.items()}) for c in columns]
+
+    extras = typed("in-process")
+    assert extras[0][0]["agent_steps_seen"] == 24
+    assert typed("isolated") == extras
 
 
 def test_a_copy_of_an_isolated_agent_goes_on_from_its_state_in_a_process_of_its_own() -> None:
@@ -186,8 +192,10 @@ def test_the_command_line_runs_a_file_agent_isolated(tiny_dataset: Path, tmp_pat
 
 
 def test_an_agent_that_cannot_be_pickled_is_refused_in_one_line(tiny_dataset: Path) -> None:
-    with pytest.raises(AgentSpecError, match=r"^agent '<lambda>': an isolated agent is copied .* pickled") as caught:
-        solarchain_eval.evaluate(lambda obs: [0.5, 0.5, 0.5], data=tiny_dataset, seeds=[SEED], episodes=1, isolate=True)
+    with pytest.raises(AgentSpecError, match=r"^agent 'anon': an isolated agent is copied .* pickled") as caught:
+        solarchain_eval.evaluate(
+            lambda obs: [0.5, 0.5, 0.5], name="anon", data=tiny_dataset, seeds=[SEED], episodes=1, isolate=True
+        )
     assert "\n" not in str(caught.value)
 
 
@@ -228,8 +236,9 @@ def test_a_wrong_action_reads_as_in_process_and_a_dead_process_is_named() -> Non
         == "agent 'raises': act() returned an action of shape (2,); a continuous action has shape (3,)"
     )
     shell = _isolated(RaisesAtStep(1, "object"))
+    # the door in the agent's process refuses it as the in-process door does, before the wire sees it
     with pytest.raises(
-        IsolatedAgentError, match=r"act\(\) returned a value of type object: an isolated agent returns None, numbers"
+        AgentError, match=r"act\(\) returned .*; a continuous action is three numbers in \[0, 1\], not object"
     ):
         shell.act(np.zeros(12, np.float32))
     shell.close()
@@ -251,14 +260,19 @@ def test_a_spec_that_cannot_be_built_reads_as_in_process(tmp_path: Path) -> None
         IsolatedAgent.from_spec(spec, BenchmarkConfig())
     assert str(isolated.value) == str(in_process.value)
     (tmp_path / "exits.py").write_text("import sys\nsys.exit(0)\n")
-    with pytest.raises(AgentSpecError, match=r"^agent .* \(isolated\): building it raised SystemExit: 0$"):
-        IsolatedAgent.from_spec(parse_agent_spec(f"{tmp_path / 'exits.py'}:Agent", ()), BenchmarkConfig())
+    exits = parse_agent_spec(f"{tmp_path / 'exits.py'}:Agent", ())
+    with pytest.raises(AgentSpecError) as in_process:  # sys.exit at import is the door's one line, not an exit
+        make_agent(exits, BenchmarkConfig())
+    with pytest.raises(AgentSpecError, match=r"raised SystemExit\(0\): the agent called sys.exit$") as isolated:
+        IsolatedAgent.from_spec(exits, BenchmarkConfig())
+    assert str(isolated.value) == str(in_process.value)
 
 
 def test_what_the_agent_returns_is_data_never_a_pickle(tmp_path: Path) -> None:
     marker = tmp_path / "ran-in-the-evaluator"
     shell = _isolated(ReturnsEvil(str(marker)))
-    with pytest.raises(IsolatedAgentError, match=r"end_episode\(\) returned a value of type Evil"):
+    # refused by the door in the agent's own process, as in-process; nothing crosses as a pickle
+    with pytest.raises(AgentError, match=r"end_episode\(\) 'payload' is Evil .*; values are finite numbers"):
         shell.end_episode()
     shell.close()
     assert not marker.exists()

@@ -269,6 +269,10 @@ class UserAgent:
             return method(*args, **kwargs)
         except AgentFailure:
             raise  # already one line naming the agent (an HTTP agent's own errors)
+        except AgentError as error:
+            if getattr(error, "names_its_agent", False):
+                raise  # an isolated agent's line, which names the agent and its position itself
+            raise AgentFailure(self.name, f"{hook}() raised {describe_exception(error)}", user_error=error) from error
         except (Exception, SystemExit) as error:
             raise AgentFailure(self.name, f"{hook}() raised {describe_exception(error)}", user_error=error) from error
 

@@ -31,8 +31,10 @@ import weakref
 from dataclasses import dataclass
 from typing import Any
 
-from .adapters import AgentError, UserAgent, as_agent
+from ..records_schema import AGENT_COLUMN_PREFIX
+from .adapters import AgentError, AgentFailure, UserAgent, as_agent
 from .specs import AgentSpec, AgentSpecError
+from .validation import AGENT_EXTRAS_KEY
 from .wire import WireError, decode, encode
 
 #: Spec kinds the isolated door builds in the agent's process (HTTP agents are in another process already).
@@ -46,6 +48,9 @@ _JOIN_S = 10.0
 
 class IsolatedAgentError(AgentError):
     """An isolated agent that failed: a hook raised, its process ended, or an answer was not data."""
+
+    #: The message is one line naming the agent and its position already: the door passes it on as it is.
+    names_its_agent = True
 
 
 @dataclass
@@ -119,6 +124,9 @@ def _build(payload: tuple) -> UserAgent:
 
 def _line(error: BaseException) -> tuple[str, bool]:
     """The error in one line, and whether it is the benchmark's own message (which names the agent)."""
+    user_error = getattr(error, "user_error", None)
+    if isinstance(error, AgentFailure) and user_error is not None:
+        return _line(user_error)  # the agent's own exception, which this process's door caught
     if isinstance(error, AgentError):
         return str(error), True  # a wrong action's shape, a spec that cannot be built: as in-process
     text = " ".join(str(error).split())
@@ -238,7 +246,13 @@ class IsolatedAgent:
         self._send("observe", info)
 
     def _end_episode(self) -> Any:
-        return self._request("end_episode")
+        # The child's door already checked and namespaced the agent's dict ({"agent_columns":
+        # {"agent_k": v}}); hand this process's door the agent's own keys, which it checks again.
+        returned = self._request("end_episode")
+        columns = returned.get(AGENT_EXTRAS_KEY, {}) if isinstance(returned, dict) else returned
+        if not isinstance(columns, dict):
+            return columns  # refused here with the door's own line
+        return {key.removeprefix(AGENT_COLUMN_PREFIX): value for key, value in columns.items()} or None
 
     def close(self) -> None:
         """Call the agent's ``close`` (when it has one) and end its process."""
