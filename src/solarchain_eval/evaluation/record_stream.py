@@ -21,7 +21,6 @@ from typing import Any
 import pandas as pd
 
 from ..common.atomic_files import AtomicFile, atomic_write_csv, atomic_write_json
-from ..records_schema import EPISODE_KEYS, METRIC_NAMES
 from .records import (
     ACTIONS_FILE,
     ACTIONS_PARQUET,
@@ -171,13 +170,12 @@ class RecordStream:
 
 
 def _concat_metrics(frames: list[pd.DataFrame]) -> pd.DataFrame:
-    """The chunks' metrics rows as :func:`~.records.metrics_frame` orders all of them at once:
-    the fixed columns, then the others in the order they first appear."""
+    """The chunks' metrics rows as :func:`~.records.metrics_frame` gives all of them at once: each
+    chunk starts with the fixed columns, and a column first seen in a later chunk comes after
+    those already there (pandas fills the rows without it with NaN, as the whole frame does)."""
     if not frames:
         return metrics_frame([])
-    frame = frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True, sort=False)
-    ordered = [*EPISODE_KEYS, *METRIC_NAMES]
-    return frame[ordered + [c for c in frame.columns if c not in ordered]]
+    return frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True, sort=False)
 
 
 def estimate_bytes(episodes: int, steps_per_episode: int, cities: int, step_format: str = "csv") -> int:
