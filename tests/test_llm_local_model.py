@@ -93,13 +93,15 @@ def server():
     spec = local_server.ServerSpec(
         model_path=path, model_name=local_server.default_model_name(), requantize=local_server.DEFAULT_FILE_TYPE
     )
-    before = set(Path(tempfile.gettempdir()).glob("solarchain-model-*"))
+    # Only this server's own folder is checked: another `llm serve` on the machine makes its own
+    # solarchain-model-* folders in the same temporary directory.
     with local_server.LocalServer(spec) as running:
-        pid = running.process.pid
-        assert set(Path(tempfile.gettempdir()).glob("solarchain-model-*")) - before  # the Q4_0 copy
+        pid, folder = running.process.pid, running.model_dir
+        assert folder is not None and folder.parent == Path(tempfile.gettempdir())
+        assert [p.name for p in folder.iterdir()] == [f"{local_server.default_model_name()}.gguf"]  # the Q4_0 copy
         yield running
     assert not local_server.pid_alive(pid)
-    assert set(Path(tempfile.gettempdir()).glob("solarchain-model-*")) == before  # deleted on SIGTERM
+    assert not folder.exists()  # deleted on SIGTERM
 
 
 def test_planner_and_auditor_answers_of_the_real_model_validate(server):

@@ -100,6 +100,17 @@ MALFORMED = {
         "response_format",
         "Missing 'a'",
     ),
+    # the server would answer these with 200 and something else than asked: one choice, or a
+    # reply that runs until the context is full
+    "n of 3": ({"messages": MESSAGES, "n": 3}, "n", "n must be 1, got 3"),
+    "n of 0": ({"messages": MESSAGES, "n": 0}, "n", "n must be 1, got 0"),
+    "max_tokens of -1": ({"messages": MESSAGES, "max_tokens": -1}, "max_tokens", "Expected a value >= 1, but got -1"),
+    "max_tokens of 0": ({"messages": MESSAGES, "max_tokens": 0}, "max_tokens", "Expected a value >= 1, but got 0"),
+    "max_completion_tokens of -1": (
+        {"messages": MESSAGES, "max_completion_tokens": -1},
+        "max_tokens",
+        "Expected a value >= 1, but got -1",
+    ),
 }
 #: Malformed only to the real server: its grammar builder and its request model judge them.
 SERVER_MALFORMED = {
@@ -119,6 +130,11 @@ SERVER_MALFORMED = {
         "Invalid value for 'messages.0'",
     ),
     "max_tokens not an integer": ({"messages": MESSAGES, "max_tokens": "many"}, "max_tokens", "max_tokens"),
+    "max_tokens beyond the context": (
+        {"messages": MESSAGES, "max_tokens": 10**9},
+        "max_tokens",
+        f"context window holds {local_server.LOCAL_CONTEXT_TOKENS} tokens",
+    ),
 }
 
 
@@ -177,6 +193,24 @@ def test_other_formats_and_paths_pass_unchanged(fmt):
 def test_malformed_requests_get_400_with_openais_error_body(case):
     body, param, words = MALFORMED[case]
     _assert_openai_error(_post(CHAT, body), param, words)
+
+
+def test_max_tokens_the_context_window_cannot_hold_is_refused():
+    app = OpenAICompat(_echo, context_tokens=4096)
+    for budget in (10**9, 4096):
+        for key in ("max_tokens", "max_completion_tokens"):
+            response = _post(CHAT, {"messages": MESSAGES, key: budget}, app)
+            _assert_openai_error(response, "max_tokens", f"max_tokens is too large: {budget}")
+    assert (
+        json.loads(_post(CHAT, {"messages": MESSAGES, "max_tokens": 4095}, app).json()["received"])["max_tokens"]
+        == 4095
+    )
+    # the text completions endpoint generates too
+    _assert_openai_error(
+        _post("/v1/completions", {"prompt": "hi", "max_tokens": 10**9}, app), "max_tokens", "too large"
+    )
+    _assert_openai_error(_post("/v1/completions", {"prompt": "hi", "n": 2}, app), "n", "n must be 1")
+    assert _post("/v1/completions", {"prompt": "hi", "n": 1, "max_tokens": 8}, app).status_code == 200
 
 
 def test_the_servers_request_model_judges_field_types():
@@ -247,7 +281,14 @@ def test_the_server_answers_malformed_requests_with_400_and_openais_error_body(s
 
 @pytest.mark.llm_model
 def test_other_endpoints_answer_bad_bodies_with_400_too(server):
-    for path, body, param in (("/completions", {"prompt": 5}, "prompt"), ("/embeddings", b"{", None)):
+    cases = (
+        ("/completions", {"prompt": 5}, "prompt"),
+        ("/embeddings", b"{", None),
+        ("/completions", {"prompt": "hi", "n": 3}, "n"),
+        ("/completions", {"prompt": "hi", "max_tokens": -1}, "max_tokens"),
+        ("/completions", {"prompt": "hi", "max_tokens": 10**9}, "max_tokens"),
+    )
+    for path, body, param in cases:
         response = httpx.post(
             f"{server.base_url}{path}", content=_raw(body), headers={"content-type": "application/json"}
         )

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from datetime import datetime
+from enum import StrEnum
 from pathlib import Path
 
 import typer
@@ -13,7 +14,6 @@ from ..agents.sb3 import parse_models
 from ..agents.specs import LLM_AGENT, parse_agent_args, parse_vecnormalize
 from ..config import BenchmarkConfig, load_config
 from ..data.default import default_dataset_dir
-from ..evaluation.records import metrics_frame, summarize
 from ..evaluation.rundir import RunDirError, check_target
 from ..evaluation.runner import EvaluationSpec, check_agents, run_evaluation
 from ..governance.request import GovernanceRequest
@@ -27,13 +27,13 @@ from .common import (
     console,
     invoked_command,
     parse_seeds,
-    progress_bar,
     register_user_error,
     reports_errors,
     results_table,
     say,
     show_files,
 )
+from .progress import count_progress
 
 register_user_error(RunDirError, AgentError)
 OVERWRITE = typer.Option(
@@ -78,21 +78,42 @@ LLM_CONCURRENCY = typer.Option(
 _SEEDS = ",".join(str(s) for s in PAPER_SEEDS)
 
 
+class StepFormat(StrEnum):
+    csv = "csv"
+    parquet = "parquet"
+
+
+STEP_FORMAT = typer.Option(
+    StepFormat.csv,
+    "--step-format",
+    help="The per-step tables as CSV (actions.csv, city_hour_policy.csv) or Parquet (actions.parquet, "
+    "city_hour_policy.parquet: about a tenth of the size, for large evaluations). report, verify and leaderboard "
+    "read both.",
+)
+
+
 def _default_run_dir(config: BenchmarkConfig, label: str) -> Path:
     return Path(config.output_dir) / f"{datetime.now().strftime('%Y%m%d-%H%M%S')}_{label}"
 
 
-def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool) -> None:
+def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool, step_format: str = "csv") -> None:
     total = len(spec.policies) * len(spec.run_seeds) * spec.episodes
-    with progress_bar("evaluating", total) as advance:
+    with count_progress("evaluating", total) as advance:
+        # Episodes are not kept once written: memory stays flat however many there are.
         outcome = run_evaluation(
-            spec, out, on_episode=lambda _r: advance(1), command=invoked_command(), overwrite=overwrite
+            spec,
+            out,
+            on_episode=lambda _r: advance(1),
+            command=invoked_command(),
+            overwrite=overwrite,
+            keep_results=False,
+            step_format=step_format,
         )
-    summary = summarize(metrics_frame(outcome.results))
+    summary = outcome.summary
     console.print(results_table(summary, title, access=outcome.access))
     if spec.agentic is not None:
         console.print(agentic_cli.agentic_table(summary, f"Planner/Auditor ({spec.agentic.label()})"))
-    show_files(outcome.files, f"wrote {len(outcome.results)} episodes in {outcome.wall_s:.1f} s to {out}")
+    show_files(outcome.files, f"wrote {outcome.episodes} episodes in {outcome.wall_s:.1f} s to {out}")
     say(f"protocol {outcome.protocol_id} (equal ids: comparable results; see run_metadata.json 'protocol')", err=False)
 
 
@@ -136,6 +157,7 @@ def evaluate(
         "only the observation, step info and public context; its rows are labelled isolated. "
         "See docs/evaluate_your_agent.md#isolated-agents.",
     ),
+    step_format: StepFormat = STEP_FORMAT,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
 
@@ -184,7 +206,7 @@ def evaluate(
     label = "evaluate" if options is None else f"evaluate-{spec.setting}"
     # --llm-backend local: started here, always stopped; one server slot per episode in flight
     with agentic_cli.serving(governance, options, parallel=llm_concurrency, needs_llm=llm_agent):
-        _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite)
+        _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite, step_format.value)
 
 
 @app.command("run")

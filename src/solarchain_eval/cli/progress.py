@@ -1,12 +1,18 @@
-"""Progress of JAX trainings on the command line (``train`` and ``paper`` with ``--backend jax``).
+"""Progress on the command line: JAX trainings (``train`` and ``paper`` with ``--backend jax``)
+and counted work such as ``evaluate``'s episodes.
 
 On a terminal (stderr) a live display keeps one row per running training: steps, recent
 episode return, steps/s and ETA, updated after every chunk. Elsewhere (a file, a pipe,
 ``nohup``) each chunk prints one plain line instead, so a log shows how a long training goes.
+:func:`count_progress` does the same for a count: a live bar with its ETA on a terminal, else a
+plain line with the rate and ETA every :data:`PLAIN_EVERY_S` seconds.
 """
 
 from __future__ import annotations
 
+import time
+from collections.abc import Callable, Iterator
+from contextlib import contextmanager
 from types import TracebackType
 
 from rich.console import Console
@@ -14,7 +20,10 @@ from rich.progress import BarColumn, Progress, TaskID, TextColumn, TimeElapsedCo
 from rich.text import Text
 
 from ..training.jax_progress import ChunkProgress, format_duration
-from .common import err_console
+from .common import err_console, progress_bar
+
+#: Seconds between two plain progress lines (a run shorter than this prints none).
+PLAIN_EVERY_S = 10.0
 
 
 def _summary(progress: ChunkProgress) -> str:
@@ -92,3 +101,47 @@ class TrainingProgress:
             self._progress.update(
                 self._units, completed=self._units_done, info=f"{self._units_done}/{self._units_total}"
             )
+
+
+def count_line(description: str, done: int, total: int, elapsed_s: float, unit: str) -> str:
+    """``evaluating: 1,200/90,000 episodes (1.3%), 600 episodes/s, ETA 2:28``."""
+    rate = done / elapsed_s if elapsed_s > 0 else 0.0
+    eta = (total - done) / rate if rate > 0 else None
+    share = done / total if total else 1.0
+    return f"{description}: {done:,}/{total:,} {unit} ({share:.1%}), {rate:,.1f} {unit}/s, ETA {format_duration(eta)}"
+
+
+@contextmanager
+def count_progress(
+    description: str,
+    total: int,
+    *,
+    unit: str = "episodes",
+    console: Console | None = None,
+    every_s: float | None = None,
+    clock: Callable[[], float] = time.monotonic,
+) -> Iterator[Callable[[int], None]]:
+    """Progress of ``total`` items; yields ``advance(n)``.
+
+    On a terminal, a live bar with its ETA; elsewhere a :func:`count_line` at most every
+    ``every_s`` seconds (default :data:`PLAIN_EVERY_S`), so a log of a long run shows how far it
+    is and how long it will take.
+    """
+    console = console or err_console
+    every_s = PLAIN_EVERY_S if every_s is None else every_s
+    if console.is_terminal:
+        with progress_bar(description, total) as advance:
+            yield advance
+        return
+    started = last = clock()
+    done = 0
+
+    def advance(count: int = 1) -> None:
+        nonlocal done, last
+        done += count
+        now = clock()
+        if now - last >= every_s:
+            last = now
+            console.print(count_line(description, done, total, now - started, unit), soft_wrap=True, highlight=False)
+
+    yield advance

@@ -38,6 +38,41 @@ def _atomic_write(path: Path, write: Callable[[Path], None]) -> Path:
     return path
 
 
+class AtomicFile:
+    """A file written piece by piece that appears at ``path`` complete or not at all.
+
+    The pieces go to a hidden ``.NAME.*.partial`` beside ``path``; :meth:`commit` syncs it and
+    renames it into place, :meth:`discard` (or an exception in a ``with`` block) removes it.
+    :attr:`handle` is a text handle (UTF-8, newlines as written) or, with ``binary``, a byte handle.
+    """
+
+    def __init__(self, path: Path | str, *, binary: bool = False) -> None:
+        self.path = Path(path)
+        self.path.parent.mkdir(parents=True, exist_ok=True)
+        fd, tmp_name = tempfile.mkstemp(prefix=f".{self.path.name}.", suffix=".partial", dir=self.path.parent)
+        self.tmp = Path(tmp_name)
+        self.handle: Any = os.fdopen(fd, "wb") if binary else os.fdopen(fd, "w", encoding="utf-8", newline="")
+
+    def commit(self) -> Path:
+        self.handle.flush()
+        os.fsync(self.handle.fileno())
+        self.handle.close()
+        os.chmod(self.tmp, _FILE_MODE)  # mkstemp creates files readable by the owner only
+        os.replace(self.tmp, self.path)
+        return self.path
+
+    def discard(self) -> None:
+        self.handle.close()
+        self.tmp.unlink(missing_ok=True)
+
+    def __enter__(self) -> AtomicFile:
+        return self
+
+    def __exit__(self, kind: object, error: object, trace: object) -> None:
+        if not self.handle.closed:
+            self.discard()
+
+
 def atomic_write_with(path: Path | str, write: Callable[[Path], None]) -> Path:
     """Atomically create ``path`` from ``write(tmp_path)`` (for writers that want a path,
     e.g. a library's ``save``): the file appears complete or not at all."""

@@ -22,6 +22,11 @@ from .rollout import STEP_FIELDS, EpisodeResult
 METRICS_FILE = "metrics.csv"
 ACTIONS_FILE = "actions.csv"
 CITY_HOUR_FILE = "city_hour_policy.csv"
+#: The per-step tables in Parquet (``evaluate --step-format parquet``), in place of the two CSVs.
+ACTIONS_PARQUET = "actions.parquet"
+CITY_HOUR_PARQUET = "city_hour_policy.parquet"
+#: Each per-step CSV's Parquet twin (readers take whichever a run has).
+PARQUET_TWINS = {ACTIONS_FILE: ACTIONS_PARQUET, CITY_HOUR_FILE: CITY_HOUR_PARQUET}
 SUMMARY_FILE = "summary.json"
 METADATA_FILE = "run_metadata.json"
 AGENTIC_LOG_FILE = "agentic_logs.jsonl"

@@ -32,8 +32,10 @@ from ..common.atomic_files import sha256_file
 from ..common.errors import NamesOptions
 from .records import (
     ACTIONS_FILE,
+    ACTIONS_PARQUET,
     AGENTIC_LOG_FILE,
     CITY_HOUR_FILE,
+    CITY_HOUR_PARQUET,
     DIAGNOSTICS_FILE,
     METADATA_FILE,
     METRICS_FILE,
@@ -41,7 +43,16 @@ from .records import (
 )
 
 #: The files a run directory's metadata vouches for, when present.
-RUN_FILES = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, DIAGNOSTICS_FILE, SUMMARY_FILE)
+RUN_FILES = (
+    METRICS_FILE,
+    ACTIONS_FILE,
+    CITY_HOUR_FILE,
+    ACTIONS_PARQUET,
+    CITY_HOUR_PARQUET,
+    AGENTIC_LOG_FILE,
+    DIAGNOSTICS_FILE,
+    SUMMARY_FILE,
+)
 #: Environment variable naming a point where the writer kills itself with SIGKILL (kill tests).
 KILL_AT_ENV = "SOLARCHAIN_TEST_KILL_AT"
 KILL_POINTS = ("staged", "metadata", "old-moved", "published")
@@ -76,7 +87,7 @@ def _describe(run_dir: Path, keep: Sequence[str]) -> str | None:
             complete = False
         if complete:
             return "a finished run"
-    if any(n.endswith((".csv", ".json", ".jsonl", ".partial")) for n in names):
+    if any(n.endswith((".csv", ".json", ".jsonl", ".parquet", ".partial")) for n in names):
         return f"a partial run ({', '.join(names[:3])}{', …' if len(names) > 3 else ''})"
     return f"unrelated files ({', '.join(names[:3])}{', …' if len(names) > 3 else ''})"
 

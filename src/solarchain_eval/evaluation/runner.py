@@ -38,7 +38,8 @@ from ..protocol import PAPER_EPISODES, PAPER_SEEDS, episode_seed_rule_name, pape
 from ..records_schema import RECORDS_SCHEMA_VERSION
 from .fingerprint import protocol_fingerprint, protocol_id
 from .inflight import run_in_flight
-from .records import METADATA_FILE, write_records
+from .record_stream import RecordStream, check_disk_space
+from .records import METADATA_FILE
 from .rollout import EpisodeResult, begin_run, run_policy
 from .rundir import RunDirWriter, kill_point
 from .settings import KNOWN_SETTINGS, setting_name
@@ -112,6 +113,9 @@ class EvaluationOutcome:
     protocol_id: str = ""
     #: Policy name -> "isolated", "in-process" or "privileged" (:func:`~solarchain_eval.agents.base.access_label`).
     access: dict[str, str] = field(default_factory=dict)
+    #: What ``summary.json`` holds, and the number of episodes run (also when ``results`` was not kept).
+    summary: list[dict[str, Any]] = field(default_factory=list)
+    episodes: int = 0
 
 
 def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[Policy]:
@@ -227,6 +231,8 @@ def run_evaluation(
     command: Sequence[str] | None = None,
     overwrite: bool = False,
     keep: Sequence[str] = (),
+    keep_results: bool = True,
+    step_format: str = "csv",
 ) -> EvaluationOutcome:
     """Evaluate ``spec`` and publish the run directory ``run_dir`` as a whole.
 
@@ -244,6 +250,17 @@ def run_evaluation(
         Replace an existing run directory (its old files are removed, never mixed in).
     keep : sequence of str
         File names in ``run_dir`` owned by the caller (a grid unit's ``unit.json``), carried over.
+    keep_results : bool
+        Return every episode's steps in ``results``; without it each episode is dropped once its
+        records are written, so memory stays flat in the number of episodes (``evaluate``).
+    step_format : str
+        ``"csv"`` (``actions.csv``, ``city_hour_policy.csv``) or ``"parquet"`` (``actions.parquet``,
+        ``city_hour_policy.parquet``).
+
+    Raises
+    ------
+    RunDirError
+        Also when the records would not fit on the disk (the estimate is in the message).
     """
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
@@ -251,13 +268,24 @@ def run_evaluation(
     data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
     table = load_table(data_dir)  # validates before anything is written
     setting = spec.setting
+    episodes = len(spec.policies) * len(spec.run_seeds) * spec.episodes
+    check_disk_space(run_dir, episodes, config.episode_steps, len(table.cities), step_format)
 
     with ExitStack() as stack:
         policies = make_policies(spec, stack)
         writer = stack.enter_context(RunDirWriter(run_dir, overwrite=overwrite, keep=keep))
         governance = stack.enter_context(Governance(spec.agentic, config.market)) if spec.agentic is not None else None
+        assert writer.staging is not None
+        stream = stack.enter_context(RecordStream(writer.staging, table.cities, step_format))
+        results: list[EpisodeResult] = []
+
+        def record(result: EpisodeResult) -> None:
+            stream.add(result)
+            if keep_results:
+                results.append(result)
+
         if spec.concurrency > 1:
-            results = run_in_flight(
+            finished = run_in_flight(
                 policies,
                 lambda mode: SolarChainEnv(config=config, table=table, action_mode=mode),
                 setting=setting,
@@ -268,14 +296,16 @@ def run_evaluation(
                 wrap=governance.wrap if governance is not None else None,
                 on_episode=on_episode,
             )
+            for result in finished:  # in protocol order; few episodes (they wait on a model)
+                record(result)
         else:
             wrapped = [governance.wrap(p) for p in policies] if governance is not None else policies
-            results = _run_sequentially(wrapped, spec, config, table, setting, on_episode)
-        assert writer.staging is not None
-        files = write_records(writer.staging, results, table.cities)
+            _run_sequentially(wrapped, spec, config, table, setting, on_episode, record)
+        files = stream.finish()
         kill_point("staged")
         wall_s = time.perf_counter() - started
-        metadata = _metadata(spec, config, table, policies, results, files, command, started_at, wall_s, setting)
+        rows = {"metrics": stream.episodes, "actions": stream.steps}
+        metadata = _metadata(spec, config, table, policies, rows, files, command, started_at, wall_s, setting)
         atomic_write_json(writer.staging / METADATA_FILE, metadata)
         writer.publish()
     files = {name: Path(run_dir) / name for name in [*files, METADATA_FILE]}
@@ -287,6 +317,8 @@ def run_evaluation(
         protocol=metadata["protocol"],
         protocol_id=metadata["protocol_id"],
         access=metadata["policy_access"],
+        summary=stream.summary,
+        episodes=stream.episodes,
     )
 
 
@@ -297,26 +329,25 @@ def _run_sequentially(
     table: HourlyTable,
     setting: str,
     on_episode: Callable[[EpisodeResult], None] | None,
-) -> list[EpisodeResult]:
-    """Every policy's runs and episodes in protocol order, one env per action mode."""
+    record: Callable[[EpisodeResult], None],
+) -> None:
+    """Every policy's runs and episodes in protocol order, one env per action mode, each
+    episode handed to ``record`` as it finishes."""
     envs: dict[str, SolarChainEnv] = {}
-    results: list[EpisodeResult] = []
     for policy in policies:
         env = envs.get(policy.action_mode)
         if env is None:
             env = envs[policy.action_mode] = SolarChainEnv(config=config, table=table, action_mode=policy.action_mode)
-        results.extend(
-            run_policy(
-                env,
-                policy,
-                setting=setting,
-                run_seeds=spec.run_seeds,
-                episodes=spec.episodes,
-                episode_seeds=spec.episode_seeds,
-                on_episode=on_episode,
-            )
-        )
-    return results
+        for result in run_policy(
+            env,
+            policy,
+            setting=setting,
+            run_seeds=spec.run_seeds,
+            episodes=spec.episodes,
+            episode_seeds=spec.episode_seeds,
+            on_episode=on_episode,
+        ):
+            record(result)
 
 
 def _metadata(
@@ -324,7 +355,7 @@ def _metadata(
     config: BenchmarkConfig,
     table: HourlyTable,
     policies: Sequence[Policy],
-    results: list[EpisodeResult],
+    rows: dict[str, int],
     files: dict[str, Path],
     command: Sequence[str] | None,
     started_at: str,
@@ -367,7 +398,7 @@ def _metadata(
         "run_seeds": [int(s) for s in spec.run_seeds],
         "episodes": int(spec.episodes),
         "episode_seed_protocol": getattr(spec.episode_seeds, "__name__", "custom"),
-        "rows": {"metrics": len(results), "actions": sum(r.n_steps for r in results)},
+        "rows": rows,
         "dataset": dataset,
         "models": {k: str(v) for k, v in spec.models.items()},
         "config": config.model_dump(),

@@ -16,7 +16,7 @@ import numpy as np
 import pandas as pd
 
 from ..common.redaction import redact_metadata
-from ..evaluation.records import DIAGNOSTICS_FILE, SUMMARY_FILE
+from ..evaluation.records import DIAGNOSTICS_FILE, PARQUET_TWINS, SUMMARY_FILE
 from ..evaluation.rundir import verify_files, verify_run_dir
 from ..experiments.layout import (
     ACTIONS_FILE,
@@ -126,10 +126,14 @@ class ReportData:
 
 
 def _read_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
-    try:
-        frame = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
-        raise ReportDataError(f"{path}: not a readable CSV ({error})") from None
+    """A CSV table, or its Parquet twin (``evaluate --step-format parquet``) by its suffix."""
+    if path.suffix == ".parquet":
+        frame = _read_parquet(path)
+    else:
+        try:
+            frame = pd.read_csv(path)
+        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
+            raise ReportDataError(f"{path}: not a readable CSV ({error})") from None
     # Files written before a column was renamed or removed (records_schema's version history).
     upgrade = upgrade_columns(list(frame.columns))
     if upgrade:
@@ -139,6 +143,15 @@ def _read_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
     if missing:
         raise ReportDataError(f"{path}: missing column(s) {', '.join(missing)}")
     return frame
+
+
+def _read_parquet(path: Path) -> pd.DataFrame:
+    import pyarrow as pa
+
+    try:
+        return pd.read_parquet(path)
+    except (pa.ArrowException, OSError, ValueError) as error:
+        raise ReportDataError(f"{path}: not a readable Parquet file ({error})") from None
 
 
 def _check_numeric(frame: pd.DataFrame, columns: tuple[str, ...], path: Path) -> None:
@@ -168,6 +181,8 @@ def _read_table(
     root: Path, name: str, required: tuple[str, ...], kind: str, numeric: tuple[str, ...] = ()
 ) -> tuple[pd.DataFrame, list[Path]]:
     paths = run_table_paths(root, name)
+    if name in PARQUET_TWINS:
+        paths += run_table_paths(root, PARQUET_TWINS[name])
     frames = []
     for path in paths:
         frame = _read_csv(path, required)

@@ -92,9 +92,11 @@ def serve(args: list[str]) -> None:
     add_args_from_model(parser, Settings)
     options = parser.parse_args(args)
     server_settings = parse_model_from_args(ServerSettings, options)
-    app = create_app(server_settings=server_settings, model_settings=[parse_model_from_args(ModelSettings, options)])
+    model_settings = parse_model_from_args(ModelSettings, options)
+    app = create_app(server_settings=server_settings, model_settings=[model_settings])
     uvicorn.run(
-        OpenAICompat(app, **llama_cpp_checks()),
+        # n_ctx 0 takes the model's own window, unknown here: max_tokens is then not checked against it.
+        OpenAICompat(app, **llama_cpp_checks(), context_tokens=model_settings.n_ctx or None),
         host=server_settings.host,
         port=server_settings.port,
         ssl_keyfile=server_settings.ssl_keyfile,

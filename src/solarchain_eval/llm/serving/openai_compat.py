@@ -13,6 +13,9 @@ API for these requests:
   (:mod:`.jump_forward`) when the schema is a fixed template, llama.cpp's JSON-schema grammar
   otherwise. A schema the grammar builder cannot compile is refused before any decoding.
 - ``max_completion_tokens`` (what the SDK sends for a token budget) becomes ``max_tokens``.
+- ``n`` other than 1 is refused (the server returns one choice whatever ``n`` asks), and so is a
+  ``max_tokens`` below 1 (llama.cpp reads it as "until the context is full") or one the context
+  window cannot hold (``max_tokens`` at least the window, which also holds the prompt).
 - A malformed request is answered with HTTP 400 and OpenAI's error body
   ``{"error": {"message", "type": "invalid_request_error", "param", "code": null}}``, never 500.
 
@@ -33,6 +36,8 @@ from pydantic import BaseModel, ValidationError
 CHAT_PATH = "/v1/chat/completions"
 #: The JSON endpoints whose bodies are checked: the chat endpoint, and those with a request model.
 CHECKED_PATHS = (CHAT_PATH, "/v1/completions", "/v1/embeddings")
+#: The endpoints that generate text (``n`` and ``max_tokens`` are checked).
+GENERATING_PATHS = (CHAT_PATH, "/v1/completions")
 RESPONSE_FORMAT_TYPES = ("text", "json_object", "json_schema")
 #: OpenAI's rule for a response format's name.
 SCHEMA_NAME = re.compile(r"[a-zA-Z0-9_-]{1,64}\Z")
@@ -100,6 +105,38 @@ def chat_request(body: dict[str, Any], check_schema: Callable[[dict[str, Any]], 
     if out.get("response_format") is not None:
         out["response_format"] = response_format(out["response_format"], check_schema)
     return out
+
+
+def check_choices_and_budget(body: dict[str, Any], context_tokens: int | None = None) -> None:
+    """Refuse what the server would answer with 200 and a reply other than the one asked for:
+    ``n`` other than 1 (it returns one choice), ``max_tokens`` below 1 (llama.cpp decodes until
+    the context is full) or at least ``context_tokens`` (the window holds the prompt too).
+
+    Values of other types are left to the server's request model, which names their type.
+    """
+    n = body.get("n")
+    if _is_number(n) and n != 1:
+        raise InvalidRequest(
+            f"Invalid value for 'n': this server returns one choice per request, so n must be 1, got {n}.", "n"
+        )
+    budget = body.get("max_tokens")
+    if not _is_number(budget):
+        return
+    if budget < 1:
+        raise InvalidRequest(
+            f"Invalid 'max_tokens': integer below minimum value. Expected a value >= 1, but got {budget} instead.",
+            "max_tokens",
+        )
+    if context_tokens is not None and context_tokens > 0 and budget >= context_tokens:
+        raise InvalidRequest(
+            f"max_tokens is too large: {budget}. This model's context window holds {context_tokens} tokens, "
+            f"prompt and completion together, whereas you provided {budget}.",
+            "max_tokens",
+        )
+
+
+def _is_number(value: Any) -> bool:
+    return isinstance(value, int | float) and not isinstance(value, bool)
 
 
 def response_format(value: Any, check_schema: Callable[[dict[str, Any]], None] | None = None) -> dict[str, Any]:
@@ -234,6 +271,8 @@ class OpenAICompat:
         The server's request model of each endpoint: a body it refuses is answered with 400.
     check_schema : callable, optional
         Raises when the server cannot decode under a ``json_schema`` format's schema.
+    context_tokens : int, optional
+        The model's context window: a ``max_tokens`` this large is refused (None: not checked).
     """
 
     def __init__(
@@ -242,16 +281,20 @@ class OpenAICompat:
         *,
         request_models: Mapping[str, type[BaseModel]] | None = None,
         check_schema: Callable[[dict[str, Any]], None] | None = None,
+        context_tokens: int | None = None,
     ) -> None:
         self.app = app
         self.request_models = dict(request_models or {})
         self.check_schema = check_schema
+        self.context_tokens = context_tokens
 
     def check(self, path: str, raw: bytes) -> dict[str, Any]:
         """The body the server gets for ``raw`` sent to ``path``; raises :class:`InvalidRequest`."""
         body = parse_body(raw)
         if path == CHAT_PATH:
             body = chat_request(body, self.check_schema)
+        if path in GENERATING_PATHS:
+            check_choices_and_budget(body, self.context_tokens)
         model = self.request_models.get(path)
         if model is not None:
             try:
