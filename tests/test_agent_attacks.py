@@ -17,12 +17,13 @@ from typer.testing import CliRunner
 import solarchain_eval
 from solarchain_eval.agents.adapters import AgentError, AgentFailure
 from solarchain_eval.agents.names import NAME_RULE
-from solarchain_eval.agents.registry import EXTRA_POLICIES, reserved_names
+from solarchain_eval.agents.registry import EXTRA_POLICIES
 from solarchain_eval.agents.specs import LLM_AGENT, AgentSpecError
 from solarchain_eval.cli import app
 from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.data.table import load_table
 from solarchain_eval.envs.env import SolarChainEnv
+from solarchain_eval.evaluation.reserved import reserved_names
 from solarchain_eval.governance.auditor import AUDITOR_KINDS
 from solarchain_eval.governance.planner import PLANNER_KINDS
 from solarchain_eval.market.baselines import BASELINES

@@ -14,7 +14,7 @@ from .adapters import AgentError, SB3ModelAgent, as_agent
 from .base import Policy
 from .jax_checkpoint import register_jax_policies
 from .sb3 import load_sb3_model, load_vecnormalize, register_learned_policies
-from .specs import LLM_AGENT, AgentSpec, AgentSpecError, instantiate, load_target, parse_agent_list
+from .specs import AgentSpec, AgentSpecError, instantiate, load_target, parse_agent_list
 
 #: Factories for policies that need more than the config (e.g. trained models), by name.
 #: Each takes (config, models) and returns a Policy; extra modules register themselves here.
@@ -27,29 +27,9 @@ def known_policies() -> tuple[str, ...]:
     return (*BASELINES, *EXTRA_POLICIES)
 
 
-def reserved_names() -> tuple[str, ...]:
-    """Names no user agent may take (in any case): the baselines, the learned algorithms, the LLM
-    agent and the Planner/Auditor kinds, so that a row with one of these names is the benchmark's own."""
-    from ..governance.auditor import AUDITOR_KINDS
-    from ..governance.planner import PLANNER_KINDS
-
-    return tuple(dict.fromkeys((*known_policies(), LLM_AGENT, *PLANNER_KINDS, *AUDITOR_KINDS)))
-
-
-def check_reserved(name: str, builtin: str | None = None) -> None:
-    """Refuse ``name`` for an agent that is not the built-in policy ``builtin`` when the name is
-    reserved (:func:`reserved_names`, compared case-insensitively).
-
-    Raises
-    ------
-    AgentSpecError
-    """
-    reserved = {r.lower(): r for r in reserved_names()}
-    if name.lower() in reserved and name != builtin:
-        raise AgentSpecError(
-            f"agent name {name!r} is reserved for the benchmark's own {reserved[name.lower()]!r}: "
-            "give your agent another name (NAME=spec, or name= in Python)"
-        )
+def user_agent(agent: Any, config: BenchmarkConfig) -> Any:
+    """The runner's view of a user's agent object, its discrete indices checked against ``config``'s grid."""
+    return as_agent(agent, discrete_actions=n_discrete_actions(config.discrete_levels))
 
 
 def make_policy(name: str, config: BenchmarkConfig, models: dict[str, Path] | None = None) -> Policy:

@@ -52,8 +52,8 @@ COMMANDS = {
     "bench-scale": ("bench_scale", "Scale benchmark: build, load and step synthetic datasets of growing size."),
     "bench-agent": (
         "bench_agent",
-        "Time evaluating the Static baseline, a Python agent object with the same action and that agent "
-        "behind HTTP, on the paper's protocol (3 seeds x 30 episodes).",
+        "Time evaluating the Static baseline, a Python agent object with the same action, that agent "
+        "behind HTTP and that agent isolated (--isolate), on the paper's protocol (3 seeds x 30 episodes).",
     ),
     "bench-llm": ("llm", "Median and p90 latency per planner and auditor call, tokens/s and schema validity."),
     "data": ("data", "Build and validate datasets."),

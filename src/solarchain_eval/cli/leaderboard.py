@@ -7,8 +7,15 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
-from ..report.options import DEFAULT_RESAMPLES, LEADERBOARD_FORMATS, LeaderboardOptions, ReportDataError, parse_formats
-from ..report.tarballs import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
+from ..report.options import (
+    DEFAULT_MAX_MEMBERS,
+    DEFAULT_MAX_UNPACKED_MB,
+    DEFAULT_RESAMPLES,
+    LEADERBOARD_FORMATS,
+    LeaderboardOptions,
+    ReportDataError,
+    parse_formats,
+)
 from . import app
 from .common import CliError, cli_error, console, refuse_file_out, register_user_error, reports_errors, say
 

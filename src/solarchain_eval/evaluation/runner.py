@@ -19,10 +19,10 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..agents.adapters import AgentFailure, UserAgent, as_agent, is_builtin_policy
+from ..agents.adapters import AgentFailure, UserAgent, is_builtin_policy
 from ..agents.base import Policy, access_label
 from ..agents.isolated import IsolatedAgent, is_isolatable
-from ..agents.registry import check_reserved, known_policies, make_agent
+from ..agents.registry import known_policies, make_agent, user_agent
 from ..agents.specs import AgentSpecError, check_unique, parse_agent_spec
 from ..common.atomic_files import atomic_write_json, sha256_file
 from ..common.redaction import redact_command, redact_spec
@@ -33,13 +33,13 @@ from ..data.provenance import dataset_provenance as dataset_provenance  # re-exp
 from ..data.table import HourlyTable, load_table
 from ..envs.env import SolarChainEnv
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
-from ..market.spaces import n_discrete_actions
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS, episode_seed_rule_name, paper_episode_seeds
 from ..records_schema import RECORDS_SCHEMA_VERSION
 from .fingerprint import protocol_fingerprint, protocol_id
 from .inflight import run_in_flight
 from .record_stream import RecordStream, check_disk_space
 from .records import METADATA_FILE
+from .reserved import check_reserved
 from .rollout import EpisodeResult, begin_run, run_policy
 from .rundir import RunDirWriter, kill_point
 from .settings import KNOWN_SETTINGS, setting_name
@@ -146,7 +146,7 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
                 if stack is not None:
                     stack.callback(agent.close)
             else:
-                agent = as_agent(item, discrete_actions=n_discrete_actions(config.discrete_levels))
+                agent = user_agent(item, config)
             check_reserved(agent.name)
             built.append(agent)
             continue

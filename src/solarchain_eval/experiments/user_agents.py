@@ -24,7 +24,7 @@ from pathlib import Path
 from typing import Any
 
 from ..agents.checkpoints import TRAINABLE_ALGOS
-from ..agents.registry import check_reserved, known_policies, reserved_names
+from ..agents.registry import known_policies
 from ..agents.specs import (
     AgentSpec,
     AgentSpecError,
@@ -36,6 +36,7 @@ from ..agents.specs import (
 )
 from ..common.atomic_files import sha256_file
 from ..config import BenchmarkConfig
+from ..evaluation.reserved import check_reserved, reserved_names
 from ..evaluation.runner import EvaluationSpec, check_agents, make_policies
 from ..protocol import PAPER_SEED
 
@@ -106,7 +107,7 @@ def check_agent_names(agents: GridAgents, builtins: Sequence[str] = ()) -> None:
                 f"agent {text!r} is named {name!r}, which cannot name its unit directories: "
                 "give it a name of letters, digits and _ . + - (NAME=spec)"
             ) from None
-        check_reserved(name)  # the rule of every evaluation (agents/registry.py)
+        check_reserved(name)  # the rule of every evaluation (evaluation/reserved.py)
     check_unique([*builtins, *(name for name, _ in agents)])
 
 

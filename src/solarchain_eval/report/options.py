@@ -10,7 +10,6 @@ from typing import Literal
 
 from ..common.errors import NamesOptions
 from ..protocol import PAPER_SEED
-from .tarballs import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
 
 #: Resamples per bootstrap interval (rliable's examples use 2,000).
 DEFAULT_RESAMPLES = 2000
@@ -37,6 +36,12 @@ def parse_formats(text: str, choices: tuple[str, ...] = FORMATS, what: str = "re
     if unknown or not formats:
         raise ValueError(f"unknown {what} format(s) {', '.join(unknown) or '(none)'}; choose from {', '.join(choices)}")
     return formats
+
+
+#: Default limit on the bytes a tarball's files unpack to (raise it with ``--max-unpacked-mb``).
+DEFAULT_MAX_UNPACKED_MB = 4096
+#: Default limit on a tarball's members, files and folders (raise it with ``--max-members``).
+DEFAULT_MAX_MEMBERS = 100_000
 
 
 @dataclass(frozen=True)

@@ -22,11 +22,8 @@ from pathlib import Path, PurePosixPath
 from typing import Any
 
 from ..experiments.layout import COMBINED_DIR, DONE_MARKER, METADATA_FILE, PAPER_METADATA_FILE, UNITS_DIR
+from .options import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
 
-#: Default limit on the bytes a tarball's files unpack to (raise it with ``--max-unpacked-mb``).
-DEFAULT_MAX_UNPACKED_MB = 4096
-#: Default limit on a tarball's members, files and folders (raise it with ``--max-members``).
-DEFAULT_MAX_MEMBERS = 100_000
 #: A metadata file larger than this is not read (no real run's comes near it).
 METADATA_MAX_BYTES = 64 * 2**20
 #: Files a paper grid keeps in an evaluation unit beside the run's own (``experiments.units``).
