@@ -87,6 +87,8 @@ def test_notebook_code_cells_run(published_dir, monkeypatch):
     monkeypatch.chdir(EXAMPLES)  # the notebook runs from examples/ (it imports my_agent beside it)
     monkeypatch.syspath_prepend(str(EXAMPLES))
     monkeypatch.setenv("MPLBACKEND", "Agg")
+    # an earlier test may have imported another my_agent (a plugin test's own file): import this one
+    monkeypatch.delitem(sys.modules, "my_agent", raising=False)
     namespace: dict = {"__name__": "notebook"}
     try:
         for number, cell in enumerate(cells):
