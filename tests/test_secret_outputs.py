@@ -97,6 +97,9 @@ def test_the_cannot_connect_error_does_not_print_the_secret(tiny_dataset, tmp_pa
     printed = run_cli(monkeypatch, "evaluate", "--data", tiny_dataset, "--policies", spec, "--out", tmp_path / "run")
     assert printed.splitlines()[0] == "2"
     assert "cannot connect to 127.0.0.1:9" in printed
+    # one line, the URL shown once and redacted, the text after it intact
+    assert f"agent 'mine' (http://{REDACTED}@127.0.0.1:9/act?token={REDACTED}): cannot connect" in printed
+    assert printed.count("agent 'mine'") == 1
     assert not any(secret in printed for secret in SECRETS)
     assert not (tmp_path / "run").exists()
 

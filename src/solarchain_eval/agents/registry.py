@@ -10,7 +10,7 @@ from ..common.redaction import redact_spec
 from ..config import BenchmarkConfig
 from ..market.baselines import BASELINES, make_baseline
 from ..market.spaces import n_discrete_actions
-from .adapters import AgentError, SB3ModelAgent, as_agent
+from .adapters import AgentError, AgentFailure, SB3ModelAgent, as_agent
 from .base import Policy
 from .jax_checkpoint import register_jax_policies
 from .sb3 import load_sb3_model, load_vecnormalize, register_learned_policies
@@ -104,6 +104,8 @@ def make_agent(
         return as_agent(agent, name=name or _own_name(agent) or attr, discrete_actions=discrete_actions)
     except AgentSpecError:
         raise
+    except AgentFailure as error:  # already one line naming the agent (an HTTP agent's own errors)
+        raise AgentSpecError(str(error)) from None
     except (AgentError, ValueError, TypeError, OSError) as error:
         raise AgentSpecError(f"agent {spec.label!r} ({redact_spec(spec.text)}): {error}") from None
 

@@ -42,9 +42,16 @@ def redact_url(url: str) -> str:
     path, question, query = rest.partition("?")
     if query:
         query = "&".join(
-            f"{k}={REDACTED}" if eq else REDACTED for k, eq, _ in (part.partition("=") for part in query.split("&"))
+            f"{k}={_redacted(v)}" if eq else _redacted(k)
+            for k, eq, v in (part.partition("=") for part in query.split("&"))
         )
-    return f"{scheme}{netloc}{path}{question}{query}{hash_}{REDACTED if fragment else ''}"
+    return f"{scheme}{netloc}{path}{question}{query}{hash_}{_redacted(fragment) if fragment else ''}"
+
+
+def _redacted(value: str) -> str:
+    # A value redacted before keeps what follows it: in a message the URL's match runs on into the
+    # text after it ("…?token=[redacted]): cannot connect"), which must survive a second pass.
+    return value if value.startswith(REDACTED) else REDACTED
 
 
 def redact_spec(spec: str) -> str:
@@ -59,7 +66,7 @@ def redact_text(text: str, secrets: Iterable[str | None] = ()) -> str:
     """``text`` with URLs redacted (:func:`redact_url`), ``NAME=VALUE`` pairs whose name mentions
     a key, token, secret or password redacted, bearer credentials and every given secret removed."""
     out = redact_spec(str(text))
-    out = _PAIR.sub(lambda m: f"{m.group(1)}={REDACTED}" if _names_secret(m.group(1)) else m.group(0), out)
+    out = _PAIR.sub(lambda m: f"{m.group(1)}={_redacted(m.group(2))}" if _names_secret(m.group(1)) else m.group(0), out)
     out = _BEARER.sub(lambda m: f"{m.group(1)} {REDACTED}", out)
     for secret in [*secrets, *_env_secrets()]:
         if secret:
