@@ -119,6 +119,9 @@ def _build(payload: tuple) -> UserAgent:
         _, spec, config, agent_args, vecnormalize = payload
         return as_agent(make_agent(spec, config, agent_args=agent_args, vecnormalize=vecnormalize))
     _, data, name = payload
+    # Runs only in the agent's own process, on bytes the evaluator pickled from an object its
+    # caller passed in Python (or this agent's own snapshot): never on a file a run names, and the
+    # evaluating process itself never unpickles what an agent sends (docs/security.md).
     return as_agent(pickle.loads(data), name=name)
 
 
