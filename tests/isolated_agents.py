@@ -107,3 +107,28 @@ class ReturnsEvil:
 
     def end_episode(self):
         return {"payload": Evil(self.path)}
+
+
+class Echo:
+    """Answers the first three observation values as its action, in the observation's own dtype."""
+
+    name = "echo"
+
+    def act(self, observation):
+        return observation[:3].copy()
+
+
+class BadAt:
+    """Acts well until episode 1, step 3, then returns ``bad``."""
+
+    name = "bad"
+
+    def __init__(self, bad) -> None:
+        self.bad, self.episode, self.step = bad, 0, 0
+
+    def begin_episode(self, *, episode, **_context) -> None:
+        self.episode, self.step = episode, 0
+
+    def act(self, observation):
+        self.step += 1
+        return self.bad if (self.episode, self.step) == (1, 3) else np.float32([0.3, 0.7, 0.05])

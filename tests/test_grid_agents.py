@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 from pathlib import Path
 
 import pandas as pd
@@ -255,6 +256,12 @@ def test_sweep_runs_user_agents_in_the_settings_that_list_them(tiny_dataset, age
     assert unit["agent"]["args"] == {"level": 0.2}
     again = invoke(["sweep", str(path), "--out", str(root)])
     assert again.exit_code == 0 and "8 units, 8 already done (skipped)" in again.output
+    # grid.isolate: the same root resumes (its identity is unchanged) and redoes the user agents' units
+    path.write_text(SWEEP.format(module=MODULE, data=tiny_dataset).replace("grid:\n", "grid:\n  isolate: true\n"))
+    isolated = invoke(["sweep", str(path), "--out", str(root)])
+    assert isolated.exit_code == 0 and "8 units, 2 already done (skipped)" in isolated.output, isolated.output
+    unit_dir = root / "points" / "lambda_p-2.0" / "units" / "eval" / "hold-no_physics-7"
+    assert json.loads((unit_dir / "run_metadata.json").read_text())["policy_access"] == {"hold": "isolated"}
 
 
 @pytest.mark.parametrize(
@@ -302,3 +309,61 @@ def test_governance_and_sweep_refuse_a_bad_agent_before_any_work(tiny_dataset, a
     result = invoke(["sweep", str(path), "--out", str(root)])
     assert result.exit_code == 2 and "on the dataset" in result.output and "wrong" in result.output
     assert not (root / "points").exists()
+
+
+def test_paper_isolate_runs_user_agents_in_their_own_process_from_the_workers(
+    paper_root, tiny_dataset, agents_dir, tmp_path
+):
+    # --workers 2: the units run in the pool's worker processes, which start the agents' processes
+    root = tmp_path / "isolated"
+    args = _paper(root, tiny_dataset, agents_dir, "--agent-arg", "mine.level=0.2", "--no-report")
+    args[args.index("main,llm")] = "main"
+    result = invoke([*args, "--isolate", "--workers", "2"])
+    assert result.exit_code == 0, result.output
+    for name in ("mine", "hold", "static"):
+        unit = root / "units" / "eval" / f"{name}-main-{SEED}"
+        access = json.loads((unit / "run_metadata.json").read_text())["policy_access"]
+        assert access == {name: "in-process" if name == "static" else "isolated"}  # built-ins stay in-process
+        if name != "mine":  # an honest agent's rows are the in-process grid's, bit for bit (mine's args changed there)
+            pd.testing.assert_frame_equal(
+                pd.read_csv(unit / "actions.csv"),
+                pd.read_csv(paper_root / "units" / "eval" / unit.name / "actions.csv"),
+            )
+    assert json.loads((root / "units" / "eval" / f"mine-main-{SEED}" / "unit.json").read_text())["isolate"] is True
+    # the same grid without --isolate redoes the user agents' units (their door changed), not Static's
+    again = invoke([*args, "--workers", "2"])
+    assert again.exit_code == 0, again.output
+    assert "1 of 3 units already done: skipped" in again.output
+    access = json.loads((root / "units" / "eval" / f"mine-main-{SEED}" / "run_metadata.json").read_text())
+    assert access["policy_access"] == {"mine": "in-process"}
+
+
+PID_AGENT = """
+import os
+
+
+class Where:
+    def __init__(self, report):
+        self.report = report
+
+    def act(self, observation):
+        with open(self.report, "a") as out:
+            out.write(f"{os.getpid()}\\n")
+        return [0.5, 0.0, 0.5]
+"""
+
+
+def test_governance_isolate_runs_the_user_agent_in_a_process_of_its_own(tiny_dataset, tmp_path):
+    (tmp_path / "where.py").write_text(PID_AGENT, encoding="utf-8")
+    report, out = tmp_path / "pids.txt", tmp_path / "board"
+    result = invoke(
+        ["governance", "--data", str(tiny_dataset), "--seeds", "5", "--episodes", "1", "--out", str(out)]
+        + ["--policies", f"static,where={tmp_path / 'where.py'}:Where", "--agent-arg", f"where.report={report}"]
+        + ["--isolate", "--resamples", "100", "--auditors", "rule"]
+    )
+    assert result.exit_code == 0, result.output
+    pids = set(report.read_text().split())
+    assert pids and str(os.getpid()) not in pids  # built in its own process (a check run and the run: 2)
+    # governed rows are privileged whatever the door: the Planner/Auditor layer is handed the env
+    meta = json.loads((out / "runs" / "llm" / "rule--rule" / "run_metadata.json").read_text())
+    assert meta["policy_access"] == {"static": "privileged", "where": "privileged"}

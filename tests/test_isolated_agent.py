@@ -17,12 +17,22 @@ import pytest
 from typer.testing import CliRunner
 
 import solarchain_eval
-from isolated_agents import Counter, FailingObserve, Honest, RaisesAtStep, ReturnsEvil, constant, static_action
+from isolated_agents import (
+    BadAt,
+    Counter,
+    Echo,
+    FailingObserve,
+    Honest,
+    RaisesAtStep,
+    ReturnsEvil,
+    constant,
+    static_action,
+)
 from solarchain_eval.agents.adapters import AgentError
 from solarchain_eval.agents.base import access_label
 from solarchain_eval.agents.isolated import IsolatedAgent, IsolatedAgentError
 from solarchain_eval.agents.specs import AgentSpecError
-from solarchain_eval.agents.wire import WireError, decode, encode
+from solarchain_eval.agents.wire import WireError, decode, encode, frameable, pack_array, unpack_array
 from solarchain_eval.cli import app
 from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
@@ -248,6 +258,31 @@ def test_a_wrong_action_reads_as_in_process_and_a_dead_process_is_named() -> Non
     shell.close()
 
 
+@pytest.mark.parametrize(
+    "bad",
+    [
+        np.float32([np.nan, 0.5, 0.5]),
+        np.float64([0.5, 1.5, 0.5]),
+        np.float32([0.5, 0.5]),
+        np.int64([0, 1, 2]),
+        np.zeros((3, 1), np.float32),
+        ["0.5", "0.5", "0.5"],
+    ],
+)
+def test_an_invalid_action_reads_the_same_through_both_doors(tiny_dataset: Path, bad) -> None:
+    # a numeric array crosses as a frame and the evaluating process's door checks it; the rest is
+    # checked in the agent's process: either way the line is the in-process door's, word for word
+    messages = []
+    for isolate in (False, True):
+        with pytest.raises(AgentError) as caught:
+            solarchain_eval.evaluate(BadAt(bad), data=tiny_dataset, seeds=[SEED], episodes=2, isolate=isolate)
+        messages.append(str(caught.value))
+    assert messages[0] == messages[1], messages
+    assert messages[0].startswith("agent 'bad': act() returned") and messages[0].endswith(
+        "episode 1, step 2)"
+    )  # steps count from 0
+
+
 def test_a_spec_that_cannot_be_built_reads_as_in_process(tmp_path: Path) -> None:
     from solarchain_eval.agents.registry import make_agent
     from solarchain_eval.agents.specs import parse_agent_spec
@@ -313,6 +348,56 @@ def test_the_wire_keeps_types_and_bits(value) -> None:
 def test_the_wire_refuses_anything_but_data(answer: bytes) -> None:
     with pytest.raises(WireError):
         decode(answer)
+
+
+@pytest.mark.parametrize(
+    "array",
+    [
+        np.float32([0.1, np.nan, -np.inf]),
+        np.arange(6, dtype=">i2").reshape(2, 3),
+        np.array(3.5),
+        np.zeros((0, 4), dtype=np.uint8),
+        np.array([True, False]),
+        np.arange(12, dtype=np.float64).reshape(3, 4).T,  # not contiguous: the values travel, in C order
+    ],
+)
+def test_an_array_frame_keeps_dtype_shape_and_bits(array: np.ndarray) -> None:
+    assert frameable(array)
+    label, back = unpack_array(pack_array("act", array))
+    assert label == "act" and back.dtype == array.dtype and back.shape == array.shape
+    assert back.tobytes() == np.ascontiguousarray(array).tobytes() and back.flags.writeable
+
+
+@pytest.mark.parametrize(
+    "frame",
+    [
+        b"\x00act\x00|O8\x001\x00" + bytes(8),  # an object array would hold references
+        b"\x00act\x00<U1\x001\x00" + bytes(4),  # strings are not a numeric dtype
+        b"\x00act\x00<f4\x003\x00" + bytes(8),  # fewer bytes than the shape says
+        b"\x00act\x00<f4\x00-3\x00",  # not a shape
+        b"\x00act\x00<f4\x0099999999999999\x00",  # a shape too large to be real
+        b"\x00act\x00<f4",  # a header cut short
+        b"\x00\xff\x00<f4\x001\x00" + bytes(4),  # a label that is not ASCII
+    ],
+)
+def test_an_array_frame_refuses_anything_but_a_numeric_array(frame: bytes) -> None:
+    with pytest.raises(WireError):
+        unpack_array(frame)
+    with pytest.raises(WireError):  # nor is a frame read where JSON is expected
+        decode(frame)
+    assert not frameable(np.array(["x"])) and not frameable(np.array([object()])) and not frameable([1.0])
+
+
+def test_observations_and_actions_cross_as_frames_with_their_exact_bits() -> None:
+    shell = _isolated(Echo())
+    shell.begin_run(SEED)
+    shell.begin_episode(episode=0, run_seed=SEED, episode_seed=1, start_hour=0)
+    for dtype in (np.float32, np.float64, ">f8"):
+        observation = np.array([0.1, 1 / 3, 0.7, 5.0], dtype=dtype)
+        action = shell.act(observation)
+        assert type(action) is np.ndarray and action.dtype == observation.dtype
+        assert action.tobytes() == observation[:3].tobytes()
+    shell.close()
 
 
 def test_labels_old_runs_and_the_benchmarks_own_agents() -> None:

@@ -240,14 +240,22 @@ class UserAgent:
         self._check_range = not isinstance(inner, SB3ModelAgent)
 
     def act(self, observation: np.ndarray) -> Any:
-        action = self._call("act", self._act, observation)
-        if self.action_mode == "continuous":
-            problem = continuous_problem(action, check_values=not self.builtin, check_range=self._check_range)
-        else:
-            problem = discrete_problem(action, self.discrete_actions)
+        action = self.act_unchecked(observation)
+        problem = self.action_problem(action)
         if problem is not None:
             raise AgentFailure(self.name, problem)
         return action
+
+    def act_unchecked(self, observation: np.ndarray) -> Any:
+        """The agent's action, its errors guarded, before :meth:`action_problem` (the isolated door's
+        agent process leaves a numeric array's check to the evaluating process, which makes it anyway)."""
+        return self._call("act", self._act, observation)
+
+    def action_problem(self, action: Any) -> str | None:
+        """What is wrong with ``action`` for this agent (None: nothing)."""
+        if self.action_mode == "continuous":
+            return continuous_problem(action, check_values=not self.builtin, check_range=self._check_range)
+        return discrete_problem(action, self.discrete_actions)
 
     def _guarded(self, hook: str, method: Callable[..., Any]) -> Callable[..., Any]:
         if hook == "end_episode":

@@ -11,6 +11,9 @@ process's memory is inherited) and talks to it over a pipe:
 - the agent's process answers with data only (:mod:`.wire`: JSON of numbers, strings, lists,
   dicts and numeric numpy arrays, never a pickle), so nothing it returns can run code here.
 
+Each step's observation and action, numeric arrays, travel as raw array frames rather than a
+pickle and JSON: the round trip is then the pipe's own cost plus the agent's time.
+
 Hooks whose result the runner ignores (``begin_run``, ``begin_episode``, ``observe``) are sent
 without waiting for an answer; an error they raise is reported with the next call that waits
 (``act``, ``end_episode``, ``close``). The agent's actions reach the environment with their exact
@@ -35,7 +38,7 @@ from ..records_schema import AGENT_COLUMN_PREFIX
 from .adapters import AgentError, AgentFailure, UserAgent, as_agent
 from .specs import AgentSpec, AgentSpecError
 from .validation import AGENT_EXTRAS_KEY
-from .wire import WireError, decode, encode
+from .wire import WireError, decode, encode, frameable, is_frame, pack_array, unpack_array
 
 #: Spec kinds the isolated door builds in the agent's process (HTTP agents are in another process already).
 ISOLATED_KINDS = ("python", "file", "plugin", "sb3")
@@ -65,6 +68,9 @@ def _serve(conn: Any, payload: tuple) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the evaluating process's to handle
 
     def answer(kind: str, *body: Any) -> None:
+        if kind == "ok" and body[0] == "act" and frameable(body[1]):
+            conn.send_bytes(pack_array("act", body[1]))  # the hot path: the action as raw bytes
+            return
         try:
             conn.send_bytes(encode([kind, *body]))
         except WireError as error:
@@ -82,7 +88,7 @@ def _serve(conn: Any, payload: tuple) -> None:
     pending: list | None = None  # the first error of a one-way hook, reported at the next request
     while True:
         try:
-            op, args, kwargs = conn.recv()
+            op, args, kwargs = _request_of(conn.recv_bytes())
         except EOFError:  # the evaluating process closed the pipe (or ended)
             return
         if op in ONE_WAY:
@@ -101,6 +107,14 @@ def _serve(conn: Any, payload: tuple) -> None:
                 result: Any = pickle.dumps(agent.inner)  # opaque bytes for a twin's process
             elif op == "close":
                 result = agent.close() if hasattr(agent, "close") else None
+            elif op == "act":
+                result = agent.act_unchecked(*args)
+                # A numeric array goes back as it is (the evaluating process's door checks it, with the
+                # same words); anything else is checked here, so that what the wire cannot carry is
+                # refused as the in-process door refuses it.
+                problem = None if frameable(result) else agent.action_problem(result)
+                if problem is not None:
+                    raise AgentFailure(agent.name, problem)
             else:
                 result = getattr(agent, op)(*args, **kwargs)
         except BaseException as error:
@@ -109,6 +123,20 @@ def _serve(conn: Any, payload: tuple) -> None:
             answer("ok", op, None if op in ("close",) else result)
         if op == "close":
             return
+
+
+def _request_of(data: bytes) -> tuple[str, tuple, dict]:
+    """A request from the evaluating process (trusted): an array frame for ``act``, else a pickle."""
+    if is_frame(data):
+        op, observation = unpack_array(data)
+        return op, (observation,), {}
+    return pickle.loads(data)
+
+
+def _pack_request(op: str, args: tuple, kwargs: dict) -> bytes:
+    if op == "act" and len(args) == 1 and not kwargs and frameable(args[0]):
+        return pack_array(op, args[0])
+    return pickle.dumps((op, args, kwargs), protocol=pickle.HIGHEST_PROTOCOL)
 
 
 def _build(payload: tuple) -> UserAgent:
@@ -125,11 +153,15 @@ def _build(payload: tuple) -> UserAgent:
     return as_agent(pickle.loads(data), name=name)
 
 
-def _line(error: BaseException) -> tuple[str, bool]:
-    """The error in one line, and whether it is the benchmark's own message (which names the agent)."""
+def _line(error: BaseException) -> tuple[str, bool | str]:
+    """The error in one line, and whose words it is: ``"failure"``, the door's refusal of what the
+    agent returned (the evaluating process raises it as its own door would, so the run adds the
+    position); True, the benchmark's own message, which names the agent; False, the agent's."""
     user_error = getattr(error, "user_error", None)
-    if isinstance(error, AgentFailure) and user_error is not None:
-        return _line(user_error)  # the agent's own exception, which this process's door caught
+    if isinstance(error, AgentFailure):
+        if user_error is not None:
+            return _line(user_error)  # the agent's own exception, which this process's door caught
+        return error.problem, "failure"
     if isinstance(error, AgentError):
         return str(error), True  # a wrong action's shape, a spec that cannot be built: as in-process
     text = " ".join(str(error).split())
@@ -286,13 +318,13 @@ class IsolatedAgent:
         with self._lock:
             self._used = True
             with contextlib.suppress(OSError):  # the process has ended: its reason comes with the next request
-                self._conn.send((op, args, kwargs))
+                self._conn.send_bytes(_pack_request(op, args, kwargs))
 
     def _request(self, op: str, *args: Any, **kwargs: Any) -> Any:
         with self._lock:
             self._used = True
             with contextlib.suppress(OSError):  # the process has ended: _receive says how
-                self._conn.send((op, args, kwargs))
+                self._conn.send_bytes(_pack_request(op, args, kwargs))
             kind, *body = self._receive(op)
         if kind != "ok" or len(body) != 2:
             raise self._error(body if kind == "err" else [op, f"answered {kind!r}", False])
@@ -306,6 +338,9 @@ class IsolatedAgent:
             code = self._process.exitcode
             return ["err", op, f"ended its process (exit code {code}) before answering", False]
         try:
+            if is_frame(raw):
+                label, action = unpack_array(raw)
+                return ["ok", op, action] if label == op == "act" else ["err", op, f"answered a {label!r} frame", False]
             message = decode(raw)
         except WireError as error:
             return ["err", op, f"answered {error}", False]
@@ -316,9 +351,15 @@ class IsolatedAgent:
     def _error(self, body: list) -> AgentError:
         if len(body) == 3:
             hook, problem, own = str(body[0]), str(body[1]), body[2] is True
+            refused = body[2] == "failure"
         else:
             hook, problem, own = "?", f"answered something that is not an answer: {body!r:.200}", False
+            refused = False
         name = getattr(self, "name", self._label)
+        if refused:  # what the agent returned, refused by the door in its process: as the in-process door says it
+            if hook in ("build", "start"):
+                return AgentSpecError(f"agent {name!r}: {problem}")
+            return AgentFailure(name, problem)
         if hook in ("build", "start"):
             if own:  # the spec's own one-line error (a missing file, an import error), as in-process
                 return AgentSpecError(problem)

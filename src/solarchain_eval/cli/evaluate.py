@@ -64,6 +64,13 @@ USER_AGENTS_HELP = (
 
 # An evaluate option, not a GovernanceRequest field: it schedules this command's episodes (paper and
 # bench-llm run theirs in order), so it lives here, shown in the governance options' help panel.
+ISOLATE = typer.Option(
+    False,
+    "--isolate",
+    help="Run each user agent (module:attr, file.py:attr, plugin, sb3:) in a process of its own that receives "
+    "only the observation, step info and public context; its rows are labelled isolated. "
+    "See docs/evaluate_your_agent.md#isolated-agents.",
+)
 LLM_CONCURRENCY = typer.Option(
     1,
     "--llm-concurrency",
@@ -150,13 +157,7 @@ def evaluate(
     governance: GovernanceRequest = GOVERNANCE,
     llm_concurrency: int = LLM_CONCURRENCY,
     overwrite: bool = OVERWRITE,
-    isolate: bool = typer.Option(
-        False,
-        "--isolate",
-        help="Run each user agent (module:attr, file.py:attr, plugin, sb3:) in a process of its own that receives "
-        "only the observation, step info and public context; its rows are labelled isolated. "
-        "See docs/evaluate_your_agent.md#isolated-agents.",
-    ),
+    isolate: bool = ISOLATE,
     step_format: StepFormat = STEP_FORMAT,
 ) -> None:
     """Evaluate policies over run seeds × episodes.

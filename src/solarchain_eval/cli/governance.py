@@ -40,7 +40,7 @@ from .common import (
     say,
     show_files,
 )
-from .evaluate import AGENT_ARG, OVERWRITE, USER_AGENTS_HELP, VECNORMALIZE
+from .evaluate import AGENT_ARG, ISOLATE, OVERWRITE, USER_AGENTS_HELP, VECNORMALIZE
 
 METADATA = "governance_metadata.json"
 #: The Planner/Auditor options this command offers as they are: the LLM endpoint and its cache
@@ -148,6 +148,7 @@ def governance(
     ),
     agent_arg: list[str] | None = AGENT_ARG,
     vecnormalize: list[str] | None = VECNORMALIZE,
+    isolate: bool = ISOLATE,
     models: list[str] | None = typer.Option(
         None, "--models", metavar="DIR|NAME=PATH", help="Trained models: a directory, or NAME=PATH (repeatable)."
     ),
@@ -187,7 +188,8 @@ def governance(
     figures/ (precision–recall per auditor; Δcost vs Δreward per revision). See docs/governance.md.
 
     --policies also takes your own agents (package.module:attr, path/to/file.py:attr, plugins,
-    NAME=sb3:ALGO:PATH.zip, NAME=http://...; with --agent-arg and --vecnormalize as in evaluate).
+    NAME=sb3:ALGO:PATH.zip, NAME=http://...; with --agent-arg, --vecnormalize and --isolate as in
+    evaluate).
     """
     cfg = load_config(config) if config else BenchmarkConfig()
     check_target(out, overwrite=overwrite)
@@ -237,6 +239,7 @@ def governance(
         models=parse_models(models or []),
         agent_args=agent_args,
         vecnormalize=stats,
+        isolate=isolate,
     )
     names = _check_agents(spec)
     total = len(combinations) * len(chosen_settings) * len(names) * len(spec.run_seeds) * episodes
@@ -294,6 +297,7 @@ def _check_agents(spec: GovernanceSpec) -> list[str]:
         models=spec.models,
         agent_args=spec.agent_args,
         vecnormalize=spec.vecnormalize,
+        isolate=spec.isolate,
     )
     try:
         return check_agents(evaluation)

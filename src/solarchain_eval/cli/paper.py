@@ -41,7 +41,7 @@ from .common import (
     reports_errors,
     results_table,
 )
-from .evaluate import AGENT_ARG, USER_AGENTS_HELP, VECNORMALIZE
+from .evaluate import AGENT_ARG, ISOLATE, USER_AGENTS_HELP, VECNORMALIZE
 from .progress import TrainingProgress
 
 register_user_error(GridError)
@@ -207,6 +207,7 @@ def paper(
     ),
     agent_arg: list[str] | None = AGENT_ARG,
     vecnormalize: list[str] | None = VECNORMALIZE,
+    isolate: bool = ISOLATE,
     extra_policies: str | None = typer.Option(
         None,
         "--extra-policies",
@@ -267,9 +268,9 @@ def paper(
     ROOT/paper_metadata.json and, after a complete grid, the report in ROOT/report.
 
     --policies also takes your own agents (package.module:attr, path/to/file.py:attr, plugins,
-    NAME=sb3:ALGO:PATH.zip, NAME=http://...; with --agent-arg and --vecnormalize as in evaluate):
-    each is evaluated, not trained, in every setting (behind the Planner/Auditor layer in the
-    agentic ones), in units named by the agent.
+    NAME=sb3:ALGO:PATH.zip, NAME=http://...; with --agent-arg, --vecnormalize and --isolate as in
+    evaluate): each is evaluated, not trained, in every setting (behind the Planner/Auditor layer in
+    the agentic ones), in units named by the agent.
 
     --extra-policies ppo-lag adds PPO-Lagrangian (train --algo ppo-lag) in main and no_physics,
     with --cost-limit and --multiplier-lr.
@@ -304,6 +305,7 @@ def paper(
             lagrangian=LagrangianSettings(cost_limit, multiplier_lr),
             agent_args=agent_args,
             vecnormalize=stats,
+            isolate=isolate,
             chunk_steps=chunk_steps,
         )
         if chunk_steps is not None and spec.backend != "jax":
@@ -318,6 +320,7 @@ def paper(
             data_dirs=[data],
             run_seed=spec.seeds[0],
             builtins=builtins or (),
+            isolate=isolate,
         )
         spec = dataclasses.replace(spec, agents=agents)
         spec.validate()

@@ -69,6 +69,8 @@ class GovernanceSpec:
     models: dict[str, Path] = field(default_factory=dict)
     agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
+    #: Run each user agent in a process of its own (``--isolate``; built-ins stay in this process).
+    isolate: bool = False
 
 
 @dataclass
@@ -138,6 +140,7 @@ def run_governance(
                 agentic=options,
                 agent_args=spec.agent_args,
                 vecnormalize=spec.vecnormalize,
+                isolate=spec.isolate,
             )
             run_dir = Path(root) / RUNS_DIR / setting / combination.slug
             outcome = run_evaluation(evaluation, run_dir, on_episode=on_episode, command=command)

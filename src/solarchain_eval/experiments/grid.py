@@ -91,6 +91,8 @@ class GridSpec:
     agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
     #: VecNormalize statistics of ``sb3:`` user agents by name (None: the only one).
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
+    #: Run the user agents' eval units with each agent in a process of its own (``--isolate``).
+    isolate: bool = False
     #: JAX train units: env steps per compiled chunk, after which progress is reported and the
     #: train state checkpointed (None: the algorithm's default). The models do not depend on it,
     #: so it is not part of the grid's identity.

@@ -138,12 +138,14 @@ def _recorded(root: Path, unit: Unit) -> dict[str, Any] | None:
 
 
 def _stale_eval(root: Path, unit: Unit, spec: GridSpec) -> bool:
-    """A done eval unit whose model (learned policy) or agent (user agent) changed since it was evaluated."""
+    """A done eval unit whose model (learned policy) or agent (user agent, or its door) changed since it was evaluated."""
     agent = spec.agent_spec(unit.policy)
     if agent is not None:
         recorded = _recorded(root, unit)
         current = agent_identity(unit.policy, agent, spec.agent_args, spec.vecnormalize)
-        return recorded is None or recorded.get("agent") != current
+        if recorded is None or recorded.get("agent") != current:
+            return True
+        return bool(recorded.get("isolate")) != spec.isolate
     if unit.policy not in TRAINABLE_ALGOS or not unit.depends_on:
         return False
     recorded = _recorded(root, unit)
@@ -322,6 +324,8 @@ def _task(
     agent = spec.agent_spec(unit.policy) if unit.kind == "eval" else None
     if agent is not None:
         unit_identity["agent"] = agent_identity(unit.policy, agent, spec.agent_args, spec.vecnormalize)
+        if spec.isolate:  # the rows' access label differs: a unit run in-process is not reused
+            unit_identity["isolate"] = True
     return UnitTask(
         unit=unit,
         unit_dir=unit.directory(root),
@@ -341,6 +345,7 @@ def _task(
         agent_spec=worker_spec(unit.policy, agent) if agent is not None else None,
         agent_args=spec.agent_args if agent is not None else {},
         vecnormalize=absolute_paths(spec.vecnormalize) if agent is not None else {},
+        isolate=spec.isolate and agent is not None,
         chunk_steps=spec.chunk_steps,
     )
 

@@ -8,7 +8,10 @@ by the next run) or, with ``keep_going``, records it and skips the units that de
 
 Local workers are started with the ``spawn`` method, use one torch thread, ignore Ctrl-C (the
 driver stops them) and, on Linux, are killed by the kernel when the driver dies
-(``PR_SET_PDEATHSIG``), so a killed run never leaves workers writing into the grid. When there
+(``PR_SET_PDEATHSIG``), so a killed run never leaves workers writing into the grid. They are not
+*daemonic* processes, which multiprocessing forbids to start processes of their own: an eval unit
+of an isolated user agent (``--isolate``) starts the agent's process from its worker. The pool
+closes them itself, at :meth:`LocalPool.close` or at the interpreter's exit. When there
 are at least two workers and no more than the CPUs the process may use, each worker is pinned
 to a CPU of its own (:func:`worker_cpus`): XLA keeps a third of a second core busy beside a JAX
 training for no gain in speed (measured: the same steps/s pinned to one core), and unpinned
@@ -17,6 +20,7 @@ that time is taken from the other worker.
 
 from __future__ import annotations
 
+import atexit
 import contextlib
 import multiprocessing as mp
 import os
@@ -135,11 +139,13 @@ class LocalPool:
         self.capacity = self.workers
         self._ctx = mp.get_context(self.context)
         self._pool = [self._start(cpu) for cpu in worker_cpus(self.workers)]
+        # Before multiprocessing's own exit handler, which would wait for non-daemonic workers forever.
+        atexit.register(self.close)
 
     def _start(self, cpu: int | None) -> _Worker:
         parent, child = self._ctx.Pipe()
         process = self._ctx.Process(
-            target=_worker_main, args=(child, os.getpid(), cpu), daemon=True, name="solarchain-unit"
+            target=_worker_main, args=(child, os.getpid(), cpu), daemon=False, name="solarchain-unit"
         )
         process.start()
         child.close()
@@ -195,6 +201,7 @@ class LocalPool:
             worker.process.join(timeout=5)
             worker.conn.close()
         self._pool = []
+        atexit.unregister(self.close)
 
 
 @dataclass

@@ -132,6 +132,7 @@ def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path, policies: GridP
             agents=policies.agents,
             agent_args=policies.agent_args,
             vecnormalize=policies.vecnormalize,
+            isolate=g.isolate,
         )
         spec.validate()
     except ValueError as error:
@@ -156,6 +157,7 @@ def sweep_policies(sweep: Sweep) -> GridPolicies:
             config=sweep.points[0].config,
             agent_args=g.agent_args,
             vecnormalize=g.vecnormalize,
+            isolate=g.isolate,
         )
     except (ValueError, FileNotFoundError) as error:
         raise GridError(f"{sweep.source}: grid.policies: {error}") from None
@@ -171,6 +173,7 @@ def check_sweep_agents(sweep: Sweep, policies: GridPolicies, data_dir: Path) -> 
             vecnormalize=policies.vecnormalize,
             data_dir=data_dir,
             run_seed=sweep.spec.grid.seeds[0],
+            isolate=sweep.spec.grid.isolate,
         )
     except (ValueError, FileNotFoundError) as error:
         raise GridError(f"{sweep.source}: grid.policies on the dataset {data_dir}: {error}") from None

@@ -56,6 +56,8 @@ class SweepGrid(_Section):
     agent_args: dict[str, Any] = Field(default_factory=dict)
     #: VecNormalize statistics of ``sb3:`` agents: a path (the only one) or ``{NAME: PATH}``.
     vecnormalize: str | dict[str, str] | None = None
+    #: Run each user agent in a process of its own, as ``paper --isolate`` does.
+    isolate: bool = False
 
 
 class SweepDataset(_Section):
@@ -127,7 +129,9 @@ class Sweep:
         return tuple(self.spec.axes)
 
     def identity(self) -> dict[str, Any]:
-        return self.spec.model_dump(mode="json")
+        # grid.isolate is left out: the units record their door themselves (a change redoes them),
+        # and a sweep root made before the option existed keeps its identity.
+        return self.spec.model_dump(mode="json", exclude={"grid": {"isolate"}})
 
 
 def _slug(value: Any) -> str:

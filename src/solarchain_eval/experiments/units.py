@@ -58,6 +58,7 @@ class UnitTask:
     agent_spec: str | None = None
     agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
+    isolate: bool = False  # eval units of a user agent: run it in a process of its own
     chunk_steps: int | None = None  # JAX train units: env steps per chunk (None: the algorithm's default)
 
 
@@ -277,6 +278,7 @@ def _evaluate_unit(task: UnitTask) -> None:
         setting_label=unit.setting,
         agent_args=dict(task.agent_args),
         vecnormalize=dict(task.vecnormalize),
+        isolate=task.isolate,
     )
     if spec.setting != unit.setting:
         raise ValueError(f"unit {unit.name}: the task evaluates setting {spec.setting!r}")

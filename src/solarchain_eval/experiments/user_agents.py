@@ -120,6 +120,7 @@ def resolve_agents(
     data_dirs: Sequence[Path | None] | None = None,
     run_seed: int = PAPER_SEED,
     builtins: Sequence[str] = (),
+    isolate: bool = False,
 ) -> GridAgents:
     """Name the user agents of a grid by building each once, before any work.
 
@@ -138,6 +139,8 @@ def resolve_agents(
         The run seed of the first action tried.
     builtins : sequence of str
         The grid's built-in policies, whose names the agents may not take.
+    isolate : bool
+        Build and try each agent in a process of its own (``--isolate``): none of its code runs here.
 
     Returns
     -------
@@ -160,6 +163,7 @@ def resolve_agents(
         config=config,
         agent_args=dict(agent_args or {}),
         vecnormalize=dict(vecnormalize or {}),
+        isolate=isolate,
     )
     if data_dirs is None:
         with ExitStack() as stack:
@@ -180,8 +184,10 @@ def check_resolved(
     vecnormalize: Mapping[str | None, Path] | None = None,
     data_dir: Path | None = None,
     run_seed: int = PAPER_SEED,
+    isolate: bool = False,
 ) -> None:
-    """Try the first action of named agents on ``data_dir`` (e.g. each dataset of a sweep)."""
+    """Try the first action of named agents on ``data_dir`` (e.g. each dataset of a sweep), each in a
+    process of its own with ``isolate``."""
     if not agents:
         return
     check_agents(
@@ -193,6 +199,7 @@ def check_resolved(
             config=config,
             agent_args=dict(agent_args or {}),
             vecnormalize=absolute_paths(vecnormalize or {}),
+            isolate=isolate,
         )
     )
 
@@ -215,6 +222,7 @@ def grid_policies(
     config: BenchmarkConfig,
     agent_args: Mapping[str, Any] | None = None,
     vecnormalize: str | Mapping[str, str] | None = None,
+    isolate: bool = False,
 ) -> GridPolicies:
     """Policy lists (one list, or a list per setting) of built-in names and agent specs, the
     agents named by building each once (no dataset needed; :func:`check_resolved` tries them).
@@ -230,6 +238,8 @@ def grid_policies(
         ``{KEY: VALUE}`` for every agent built from a class or factory, ``{NAME.KEY: VALUE}`` for agent NAME.
     vecnormalize : str or mapping, optional
         The only ``sb3:`` agent's VecNormalize statistics, or ``{NAME: PATH}``.
+    isolate : bool
+        Build each agent in a process of its own (``grid.isolate``).
 
     Raises
     ------
@@ -257,6 +267,7 @@ def grid_policies(
         agent_args=args,
         vecnormalize=paths,
         builtins=choice.builtins,
+        isolate=isolate,
     )
     name_of = dict(zip(texts, (name for name, _ in agents), strict=True))
 
