@@ -8,10 +8,11 @@ import pytest
 from pydantic import ValidationError
 
 from fake_openai import VALID_AUDIT, VALID_PLAN
+from solarchain_eval.common.redaction import remove_secret as redact
 from solarchain_eval.config import MarketConfig
 from solarchain_eval.governance.planner import EpisodeContext, RulePlanner
 from solarchain_eval.governance.schemas import AuditorOutput, PlannerOutput, validate_plan
-from solarchain_eval.llm.errors import CallSite, redact
+from solarchain_eval.llm.errors import CallSite
 from solarchain_eval.market.actions import ActionCodec
 
 CODEC = ActionCodec.from_config(MarketConfig())

@@ -29,6 +29,14 @@ class Steady:
 
     def act(self, observation):
         return np.array([self.level, 0.0, 0.5], dtype=np.float32)
+
+
+class Keyed(Steady):
+    """Steady, with a credential it is built with (which no file of the grid may record)."""
+
+    def __init__(self, level=0.5, api_token=None):
+        super().__init__(level)
+        self.api_token = api_token
 '''
 MODULE = "grid_agents_test_mod"
 MODULE_FILE = """
@@ -351,6 +359,25 @@ class Where:
             out.write(f"{os.getpid()}\\n")
         return [0.5, 0.0, 0.5]
 """
+
+
+def test_no_file_of_a_grid_records_an_agents_credentials(tiny_dataset, agents_dir, tmp_path):
+    root, secret = tmp_path / "root", "sk-grid-secret-1234"
+    url = "http://user:hunter2pass@127.0.0.1:9/act?token=tok-5678"
+    args = _paper(root, tiny_dataset, agents_dir, "--agent-arg", f"keyed.api_token={secret}", "--no-report")
+    args[args.index("main,llm")] = "main"
+    args[args.index("--policies") + 1] = f"static,keyed={agents_dir / 'steady.py'}:Keyed"
+    result = invoke(args)
+    assert result.exit_code == 0, result.output
+    unit = json.loads((root / "units" / "eval" / f"keyed-main-{SEED}" / "unit.json").read_text())
+    assert unit["agent"]["args"] == {"api_token": "[redacted]"}
+    for path in root.rglob("*"):
+        if path.is_file():
+            assert secret.encode() not in path.read_bytes(), path
+    from solarchain_eval.experiments.user_agents import agent_identity
+
+    recorded = agent_identity("remote", f"remote={url}", {}, {})
+    assert "hunter2pass" not in json.dumps(recorded) and "tok-5678" not in json.dumps(recorded)
 
 
 def test_governance_isolate_runs_the_user_agent_in_a_process_of_its_own(tiny_dataset, tmp_path):

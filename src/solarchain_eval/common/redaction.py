@@ -17,6 +17,7 @@ import os
 import re
 from collections.abc import Iterable, Mapping, Sequence
 from typing import Any
+from urllib.parse import urlsplit, urlunsplit
 
 REDACTED = "[redacted]"
 #: Words of an option name (split at - and _) that make its value a secret ("tokens" is a count).
@@ -46,6 +47,17 @@ def redact_url(url: str) -> str:
             for k, eq, v in (part.partition("=") for part in query.split("&"))
         )
     return f"{scheme}{netloc}{path}{question}{query}{hash_}{_redacted(fragment) if fragment else ''}"
+
+
+def strip_url(url: str | None) -> str | None:
+    """``url`` without user info, query or fragment, as an endpoint is recorded (they may carry
+    credentials; unlike :func:`redact_url`, nothing marks where they were)."""
+    if not url:
+        return url
+    parts = urlsplit(url)
+    host = parts.hostname or ""
+    netloc = f"{host}:{parts.port}" if parts.port else host
+    return urlunsplit((parts.scheme, netloc, parts.path, "", ""))
 
 
 def _redacted(value: str) -> str:
@@ -104,6 +116,31 @@ def redact_command(argv: Sequence[str], secrets: Iterable[str | None] = ()) -> l
                 continue
         out.append(redact_text(arg, known))
     return out
+
+
+def remove_secret(text: str, secret: str | None) -> str:
+    """``text`` with every occurrence of ``secret`` (and of its long prefixes) replaced.
+
+    Keys under 4 characters (placeholders such as ``"x"`` for servers that need none) are not
+    secrets and are left alone: replacing them would rewrite ordinary words of every reply.
+    """
+    if not secret or len(secret) < 4:
+        return text
+    out = text.replace(secret, REDACTED)
+    # Servers often echo a shortened key ("sk-abc...xyz"); hide any 8+ character prefix too.
+    if len(secret) >= 8:
+        for length in range(len(secret) - 1, 7, -1):
+            out = out.replace(secret[:length], REDACTED)
+    return out
+
+
+def redact_options(options: Mapping[str, Any]) -> dict[str, Any]:
+    """Keyword options (an agent's ``--agent-arg``) safe to record: the value of every option whose
+    name mentions a key, token, secret or password replaced, and text values redacted as free text."""
+    return {
+        key: REDACTED if _names_secret(str(key)) else (redact_text(value) if isinstance(value, str) else value)
+        for key, value in options.items()
+    }
 
 
 def redact_metadata(metadata: Mapping[str, Any]) -> dict[str, Any]:

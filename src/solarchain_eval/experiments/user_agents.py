@@ -35,6 +35,7 @@ from ..agents.specs import (
     plugin_entry_point,
 )
 from ..common.atomic_files import sha256_file
+from ..common.redaction import redact_options, redact_spec
 from ..config import BenchmarkConfig
 from ..evaluation.reserved import check_reserved, reserved_names
 from ..evaluation.runner import EvaluationSpec, check_agents, make_policies
@@ -335,7 +336,9 @@ def agent_identity(
     and the sha256 of the files it is built from (the Python file or the module's file, a
     plugin's module file and its distribution's version, the SB3 model, the VecNormalize
     statistics). A done unit whose record differs is redone. An HTTP agent is recorded by its
-    URL only: what the server runs is outside the grid's view."""
+    URL only: what the server runs is outside the grid's view. Secrets are recorded redacted
+    (:mod:`~solarchain_eval.common.redaction`): the spec's URL credentials and the value of an
+    option named like a key or token, so a change of only such a value does not redo a unit."""
     spec = _parse(text)
     files: dict[str, str] = {}
     record: dict[str, Any] = {}
@@ -356,7 +359,8 @@ def agent_identity(
         stats = vecnormalize.get(name) or vecnormalize.get(None)
         if stats is not None:
             files["vecnormalize"] = _digest(Path(stats))
-    return {"spec": text, "kind": spec.kind, "args": agent_kwargs(name, agent_args), "sha256": files, **record}
+    args = redact_options(agent_kwargs(name, agent_args))
+    return {"spec": redact_spec(text), "kind": spec.kind, "args": args, "sha256": files, **record}
 
 
 def _module_file(module: str) -> Path | None:

@@ -24,13 +24,15 @@ from dataclasses import dataclass, field
 from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any, TypeVar
-from urllib.parse import parse_qsl, urlsplit, urlunsplit
+from urllib.parse import parse_qsl, urlsplit
 
 from pydantic import BaseModel, SecretStr
 
+from ..common.redaction import remove_secret as redact
+from ..common.redaction import strip_url as safe_url  # an endpoint as recorded: no user info, query or fragment
 from .cache import CACHE_MODES, ResponseCache, request_key
 from .envelopes import READERS
-from .errors import CallSite, LLMCacheMissError, LLMConfigError, LLMError, LLMSchemaError, LLMTransportError, redact
+from .errors import CallSite, LLMCacheMissError, LLMConfigError, LLMError, LLMSchemaError, LLMTransportError
 from .response_format import response_format
 from .retry import exchange, total_tokens
 
@@ -98,16 +100,6 @@ class LLMSettings:
             "seed": self.seed,
             **({"decoding": self.decoding} if self.decoding is not None else {}),
         }
-
-
-def safe_url(url: str | None) -> str | None:
-    """``url`` without user info, query or fragment (they may carry credentials)."""
-    if not url:
-        return url
-    parts = urlsplit(url)
-    host = parts.hostname or ""
-    netloc = f"{host}:{parts.port}" if parts.port else host
-    return urlunsplit((parts.scheme, netloc, parts.path, "", ""))
 
 
 def _first_env(names: tuple[str, ...], environ: Mapping[str, str]) -> str | None:

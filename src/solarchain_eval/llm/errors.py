@@ -1,7 +1,8 @@
 """Typed LLM errors. Each one fails the run; nothing is ever substituted for a failed call.
 
 Messages name the call site (planner, auditor or agent, policy, run seed, episode, step) and never
-contain the API key: :func:`redact` removes it from any text that came from the server.
+contain the API key: :func:`~solarchain_eval.common.redaction.remove_secret` removes it from any text that came
+from the server.
 """
 
 from __future__ import annotations
@@ -81,19 +82,3 @@ class LLMCacheMissError(LLMError):
 
 class LLMCacheError(LLMError):
     what = "the response cache is unusable"
-
-
-def redact(text: str, secret: str | None) -> str:
-    """``text`` with every occurrence of ``secret`` (and of its long prefixes) removed.
-
-    Keys under 4 characters (placeholders such as ``"x"`` for servers that need none) are not
-    secrets and are left alone: replacing them would rewrite ordinary words of every reply.
-    """
-    if not secret or len(secret) < 4:
-        return text
-    out = text.replace(secret, "[redacted]")
-    # Servers often echo a shortened key ("sk-abc...xyz"); hide any 8+ character prefix too.
-    if len(secret) >= 8:
-        for length in range(len(secret) - 1, 7, -1):
-            out = out.replace(secret[:length], "[redacted]")
-    return out
