@@ -19,11 +19,13 @@ RANKS = {
     "records_schema": 0,
     "config": 0,
     "data": 1,
+    "tasks": 1,  # the task interface and registry: what generic wings use to reach a market
     "market": 2,
     "envs": 3,
     "agents": 3,
     "llm": 3,
     "governance": 4,
+    "solar": 4,  # the solar market's task object (its internals: data, market, envs)
     "evaluation": 5,
     "training": 6,
     "experiments": 7,
@@ -200,3 +202,87 @@ def test_generic_layers_reach_the_market_only_through_its_interface(wing):
     assert named <= DOMAIN_INTERFACE[wing], (
         f"{wing} names {sorted(named - DOMAIN_INTERFACE[wing])} outside the interface"
     )
+
+
+#: A task's internals: the solar market's dataset pipeline, dynamics, environments and task object.
+TASK_INTERNALS = ("data", "market", "envs", "solar")
+#: Wings that are generic over tasks: they reach a market only through ``tasks`` (the interface and registry).
+GENERIC_WINGS = (
+    "agents",
+    "llm",
+    "governance",
+    "evaluation",
+    "training",
+    "experiments",
+    "report",
+    "perf",
+    "cli",
+    "jax",
+    "",
+)
+#: Generic modules that still import the solar market's internals directly, at module level or in a
+#: function: the seam's remaining work. The list may only shrink; a module leaves it when it speaks
+#: only the task interface.
+KNOWN_TASK_DEBT = {
+    "",
+    "agents",
+    "agents.adapters",
+    "agents.http_agent",
+    "agents.jax_network",
+    "agents.registry",
+    "agents.sb3",
+    "cli.bench",
+    "cli.bench_agent",
+    "cli.bench_train",
+    "cli.common",
+    "cli.data",
+    "cli.evaluate",
+    "evaluation.fingerprint",
+    "evaluation.runner",
+    "evaluation.settings",
+    "evaluation.verify_checks",
+    "experiments.paper",
+    "experiments.ray_executor",
+    "experiments.sweep",
+    "experiments.sweep_spec",
+    "governance.auditor",
+    "governance.calibrated",
+    "governance.controls",
+    "governance.counterfactual",
+    "governance.factory",
+    "governance.llm_agent",
+    "governance.planner",
+    "governance.scheduler",
+    "governance.schemas",
+    "governance.wrapper",
+    "jax",
+    "perf.agent_bench",
+    "perf.env_bench",
+    "perf.jax_env_bench",
+    "perf.jax_train_bench",
+    "perf.llm_bench",
+    "perf.scale_bench",
+    "perf.train_bench",
+    "report.leaderboard",
+    "report.naming",
+    "report.paper_estimates",
+    "report.provenance",
+    "report.seed_spread",
+    "report.sensitivity",
+    "training.jax_trainer",
+    "training.sb3_trainer",
+}
+
+
+def _task_internal_imports(module: str) -> list[str]:
+    return sorted(t for t in _imports(MODULES[module], top_level_only=False) if _wing(t) in TASK_INTERNALS)
+
+
+def test_generic_wings_reach_a_market_only_through_the_task_interface():
+    offenders = {m for m in MODULES if _wing(m) in GENERIC_WINGS and _task_internal_imports(m)}
+    new = sorted(offenders - KNOWN_TASK_DEBT)
+    assert not new, "generic modules import a task's internals (use solarchain_eval.tasks instead): " + "; ".join(
+        f"{m} imports {', '.join(_task_internal_imports(m))}" for m in new
+    )
+    paid = sorted(KNOWN_TASK_DEBT - offenders)
+    assert not paid, f"no longer importing a task's internals, remove from KNOWN_TASK_DEBT: {', '.join(paid)}"

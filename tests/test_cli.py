@@ -11,8 +11,8 @@ from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
 from solarchain_eval.common.atomic_files import atomic_write_csv, atomic_write_text
-from solarchain_eval.evaluation.metrics import METRIC_NAMES
 from solarchain_eval.evaluation.rollout import STEP_FIELDS
+from solarchain_eval.records_schema import METRIC_NAMES
 
 runner = CliRunner()
 

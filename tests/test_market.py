@@ -9,7 +9,6 @@ import pytest
 from solarchain_eval.config import BenchmarkConfig, MarketConfig
 from solarchain_eval.data.table import load_table
 from solarchain_eval.envs.env import SolarChainEnv
-from solarchain_eval.evaluation.metrics import action_jitter, episode_metrics, max_drawdown, spatial_fairness_index
 from solarchain_eval.market import (
     BATCH,
     SCALAR,
@@ -20,6 +19,7 @@ from solarchain_eval.market import (
     numpy_order_sum,
     numpy_order_variance,
 )
+from solarchain_eval.solar.metrics import action_jitter, episode_metrics, max_drawdown, spatial_fairness_index
 
 F32 = np.float32
 CODEC = ActionCodec.from_config(MarketConfig())

@@ -6,16 +6,14 @@ from collections.abc import Callable, Iterable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
-import numpy as np
-
 from ..agents.adapters import AgentFailure
 from ..agents.base import Policy, is_privileged
-from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
 from ..protocol import paper_episode_seeds
-from .metrics import episode_metrics
+from ..tasks.base import Task
+from ..tasks.registry import get_task
 
-#: Per-step record columns (docs/metrics.md#per-step-record, the original release's names) plus cost and F.
-STEP_FIELDS = STEP_INFO_KEYS
+#: The solar market's per-step record columns (docs/metrics.md#per-step-record); each task declares its own.
+STEP_FIELDS = get_task().step_fields
 
 
 @dataclass
@@ -39,28 +37,29 @@ class EpisodeResult:
 
 
 def run_episode(
-    env: SolarChainEnv,
+    env: Any,
     policy: Policy,
     *,
     episode_seed: int,
     setting: str,
     run_seed: int,
     episode: int,
+    task: Task | None = None,
 ) -> EpisodeResult:
-    """Run one full episode with ``policy`` acting deterministically.
+    """Run one full episode of ``task`` (default: the solar market) in ``env`` with ``policy`` acting deterministically.
 
     A user agent's failure (:class:`~solarchain_eval.agents.adapters.AgentFailure`) leaves with the
     run seed, episode and step it happened at (``begin_episode``: step 0; ``end_episode``: the last).
     """
     step = [0]
     try:
-        return _run_episode(env, policy, episode_seed, setting, run_seed, episode, step)
+        return _run_episode(task or get_task(), env, policy, episode_seed, setting, run_seed, episode, step)
     except AgentFailure as failure:
         raise failure.at(run_seed=run_seed, episode=episode, step=step[0]) from failure.__cause__
 
 
 def _run_episode(
-    env: SolarChainEnv, policy: Policy, episode_seed: int, setting: str, run_seed: int, episode: int, step: list[int]
+    task: Task, env: Any, policy: Policy, episode_seed: int, setting: str, run_seed: int, episode: int, step: list[int]
 ) -> EpisodeResult:
     obs, reset_info = env.reset(seed=episode_seed)
     begin = getattr(policy, "begin_episode", None)
@@ -76,8 +75,9 @@ def _run_episode(
             begin(env=env, **context)
         else:
             begin(**context)
-    columns: dict[str, list] = {name: [] for name in STEP_FIELDS}
-    appenders = [(columns[name].append, name) for name in STEP_FIELDS]
+    columns: dict[str, list] = {name: [] for name in task.step_fields}
+    appenders = [(columns[name].append, name) for name in task.step_fields]
+    extras = task.step_extras
     city_rewards: list[tuple[float, ...]] = []
     observe = getattr(policy, "observe", None)
     truncated = terminated = False
@@ -86,24 +86,11 @@ def _run_episode(
         obs, _, terminated, truncated, info = env.step(action)
         for append, name in appenders:
             append(info[name])
-        city_rewards.append(tuple(info["city_rewards"].values()))
+        city_rewards.append(extras(info))
         if observe is not None:
             observe(info)
         step[0] += 1
-    actions = np.column_stack(
-        [np.asarray(columns[c], dtype=np.float32) for c in ("reward_ratio", "liquidity_ratio", "burn_rate")]
-    )
-    metrics = episode_metrics(
-        reward=np.asarray(columns["reward"]),
-        matched_mwh=np.asarray(columns["matched_energy_MWh"]),
-        violation_rate=np.asarray(columns["physics_violation_rate"]),
-        liquidity=np.asarray(columns["liquidity"]),
-        token_price=np.asarray(columns["token_price"]),
-        actions=actions,
-        slippage=np.asarray(columns["slippage"]),
-        artificial_liquidity_mwh=np.asarray(columns["artificial_liquidity_MWh"]),
-        city_totals=np.asarray(list(env.city_totals.values())),
-    )
+    metrics = task.episode_metrics(columns, env)
     result = EpisodeResult(
         policy=policy.name,
         setting=setting,
@@ -133,7 +120,7 @@ def begin_run(policy: Policy, run_seed: int) -> None:
 
 
 def run_policy(
-    env: SolarChainEnv,
+    env: Any,
     policy: Policy,
     *,
     setting: str,
@@ -141,14 +128,18 @@ def run_policy(
     episodes: int,
     episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds,
     on_episode: Callable[[EpisodeResult], None] | None = None,
+    task: Task | None = None,
 ) -> Iterable[EpisodeResult]:
-    """Yield the episodes of ``policy`` for each run seed (episodes in protocol order)."""
+    """Yield the episodes of ``policy`` in ``env`` (of ``task``, default the solar market) for each run seed
+    (episodes in protocol order)."""
     if env.action_mode != policy.action_mode:
         raise ValueError(f"policy '{policy.name}' acts in {policy.action_mode} mode but the env is {env.action_mode}")
     for run_seed in run_seeds:
         begin_run(policy, run_seed)
         for episode, seed in enumerate(episode_seeds(run_seed, episodes)):
-            result = run_episode(env, policy, episode_seed=seed, setting=setting, run_seed=run_seed, episode=episode)
+            result = run_episode(
+                env, policy, episode_seed=seed, setting=setting, run_seed=run_seed, episode=episode, task=task
+            )
             if on_episode is not None:
                 on_episode(result)
             yield result

@@ -28,13 +28,11 @@ from ..common.atomic_files import atomic_write_json, sha256_file
 from ..common.redaction import redact_command, redact_spec
 from ..common.versions import git_commit, package_versions
 from ..config import BenchmarkConfig
-from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance as dataset_provenance  # re-exported
-from ..data.table import HourlyTable, load_table
-from ..envs.env import SolarChainEnv
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS, episode_seed_rule_name, paper_episode_seeds
 from ..records_schema import RECORDS_SCHEMA_VERSION
+from ..tasks.registry import get_task
 from .fingerprint import protocol_fingerprint, protocol_id
 from .inflight import run_in_flight
 from .record_stream import RecordStream, check_disk_space
@@ -183,8 +181,8 @@ def check_agents(spec: EvaluationSpec) -> list[str]:
         The agents' names (the ``policy`` column of their records), in the spec's order.
     """
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
-    data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
-    table = load_table(data_dir)
+    task = get_task()
+    table = task.load_data(task.data_dir(spec.data_dir, config))
     with ExitStack() as stack:
         agents = make_policies(spec, stack)
         for agent in agents:
@@ -193,13 +191,13 @@ def check_agents(spec: EvaluationSpec) -> list[str]:
         return [agent.name for agent in agents]
 
 
-def _try_first_action(agent: UserAgent, config: BenchmarkConfig, table: HourlyTable, spec: EvaluationSpec) -> None:
+def _try_first_action(agent: UserAgent, config: BenchmarkConfig, table: Any, spec: EvaluationSpec) -> None:
     try:
         # An isolated agent is a copy already (in its process), which this check then closes.
         trial = agent if isinstance(agent.inner, IsolatedAgent) else copy.deepcopy(agent)
     except Exception:  # an agent holding a socket, a lock, a model server: tried on its first step
         return
-    env = SolarChainEnv(config=config, table=table, action_mode=trial.action_mode)
+    env = get_task().make_env(config, table, action_mode=trial.action_mode)
     run_seed = int(spec.run_seeds[0])
     (episode_seed,) = spec.episode_seeds(run_seed, 1)
     obs, info = env.reset(seed=episode_seed)
@@ -265,8 +263,8 @@ def run_evaluation(
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
-    data_dir = resolve_data_dir(spec.data_dir, config.data_dir)
-    table = load_table(data_dir)  # validates before anything is written
+    task = get_task()
+    table = task.load_data(task.data_dir(spec.data_dir, config))  # validates before anything is written
     setting = spec.setting
     episodes = len(spec.policies) * len(spec.run_seeds) * spec.episodes
     check_disk_space(run_dir, episodes, config.episode_steps, len(table.cities), step_format)
@@ -287,7 +285,7 @@ def run_evaluation(
         if spec.concurrency > 1:
             finished = run_in_flight(
                 policies,
-                lambda mode: SolarChainEnv(config=config, table=table, action_mode=mode),
+                lambda mode: task.make_env(config, table, action_mode=mode),
                 setting=setting,
                 run_seeds=spec.run_seeds,
                 episodes=spec.episodes,
@@ -326,18 +324,19 @@ def _run_sequentially(
     policies: Sequence[Policy],
     spec: EvaluationSpec,
     config: BenchmarkConfig,
-    table: HourlyTable,
+    table: Any,
     setting: str,
     on_episode: Callable[[EpisodeResult], None] | None,
     record: Callable[[EpisodeResult], None],
 ) -> None:
     """Every policy's runs and episodes in protocol order, one env per action mode, each
     episode handed to ``record`` as it finishes."""
-    envs: dict[str, SolarChainEnv] = {}
+    task = get_task()
+    envs: dict[str, Any] = {}
     for policy in policies:
         env = envs.get(policy.action_mode)
         if env is None:
-            env = envs[policy.action_mode] = SolarChainEnv(config=config, table=table, action_mode=policy.action_mode)
+            env = envs[policy.action_mode] = task.make_env(config, table, action_mode=policy.action_mode)
         for result in run_policy(
             env,
             policy,
@@ -346,6 +345,7 @@ def _run_sequentially(
             episodes=spec.episodes,
             episode_seeds=spec.episode_seeds,
             on_episode=on_episode,
+            task=task,
         ):
             record(result)
 
@@ -353,7 +353,7 @@ def _run_sequentially(
 def _metadata(
     spec: EvaluationSpec,
     config: BenchmarkConfig,
-    table: HourlyTable,
+    table: Any,
     policies: Sequence[Policy],
     rows: dict[str, int],
     files: dict[str, Path],

@@ -32,11 +32,10 @@ from ..agents.specs import AgentSpecError, parse_agent_spec
 from ..common.errors import NamesOptions
 from ..common.redaction import redact_text
 from ..config import BenchmarkConfig
-from ..data.table import HourlyTable, load_table
-from ..envs.env import SolarChainEnv
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..llm.errors import LLMError
 from ..protocol import EPISODE_SEED_RULES
+from ..tasks.registry import get_task
 from .inflight import is_stateless
 from .records import METRICS_FILE
 from .rollout import begin_run, run_episode
@@ -167,7 +166,7 @@ class _Rerun:
     """What one policy's re-run needs (the run's protocol, rebuilt)."""
 
     config: BenchmarkConfig
-    table: HourlyTable
+    table: Any  # the task's dataset (the solar market: an hourly table)
     setting: str
     run_seeds: list[int]
     episodes: int
@@ -194,12 +193,12 @@ def rerun_policy(
     plan = replay_plan(chosen, rerun.run_seeds, rerun.episodes, stateless=stateless, carry_over=rerun.carry_over)
     wanted = set(chosen)
     compared = replayed = 0
-    env: SolarChainEnv | None = None
+    env: Any = None
     for index, (run_seed, episodes) in enumerate(plan):
         agent = base if stateless or rerun.carry_over or index == 0 else build()
         policy = rerun.governance.wrap(agent) if rerun.governance is not None else agent
         if env is None:
-            env = SolarChainEnv(config=rerun.config, table=rerun.table, action_mode=policy.action_mode)
+            env = get_task().make_env(rerun.config, rerun.table, action_mode=policy.action_mode)
         seeds = rerun.episode_seeds(run_seed, rerun.episodes)
         begin_run(policy, run_seed)
         for episode in episodes:
@@ -390,7 +389,7 @@ def _verify_policies(
     governance = stack.enter_context(Governance(agentic, config.market)) if agentic is not None else None
     rerun = _Rerun(
         config=config,
-        table=load_table(data_dir),
+        table=get_task().load_data(data_dir),
         setting=str(metadata.get("setting")),
         run_seeds=[int(x) for x in metadata.get("run_seeds") or []],
         episodes=int(metadata.get("episodes") or 0),

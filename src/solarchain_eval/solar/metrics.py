@@ -1,6 +1,8 @@
-"""Episode metrics (docs/metrics.md), computed with numpy exactly as the original release does."""
+"""The solar market's episode metrics (docs/metrics.md), computed with numpy exactly as the original release does."""
 
 from __future__ import annotations
+
+from collections.abc import Mapping
 
 import numpy as np
 
@@ -61,3 +63,23 @@ def episode_metrics(
         "final_liquidity": float(liquidity[-1]),
         "final_token_price": float(token_price[-1]),
     }
+
+
+#: The executed action's step fields, in lever order.
+ACTION_FIELDS = ("reward_ratio", "liquidity_ratio", "burn_rate")
+
+
+def episode_metrics_from_steps(steps: Mapping[str, list], city_totals: np.ndarray) -> dict[str, float]:
+    """:func:`episode_metrics` of one episode from its per-step record columns (``STEP_INFO_KEYS``)."""
+    actions = np.column_stack([np.asarray(steps[c], dtype=np.float32) for c in ACTION_FIELDS])
+    return episode_metrics(
+        reward=np.asarray(steps["reward"]),
+        matched_mwh=np.asarray(steps["matched_energy_MWh"]),
+        violation_rate=np.asarray(steps["physics_violation_rate"]),
+        liquidity=np.asarray(steps["liquidity"]),
+        token_price=np.asarray(steps["token_price"]),
+        actions=actions,
+        slippage=np.asarray(steps["slippage"]),
+        artificial_liquidity_mwh=np.asarray(steps["artificial_liquidity_MWh"]),
+        city_totals=city_totals,
+    )

@@ -1,0 +1,102 @@
+"""The solar market as a :class:`~solarchain_eval.tasks.base.Task`: the benchmark's first task.
+
+Everything the generic wings need from the market goes through :data:`SOLAR_TASK`: where its
+dataset is and how it loads, its environment, the per-step fields and episode metrics of its
+records, its protocol identity and its baselines. Its internals are :mod:`solarchain_eval.data`
+(weather to hourly table), :mod:`solarchain_eval.market` (the dynamics) and
+:mod:`solarchain_eval.envs` (the environments).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import BenchmarkConfig, MarketConfig
+from ..data.default import resolve_data_dir
+from ..data.provenance import dataset_provenance
+from ..data.table import HourlyTable, load_table
+from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
+from ..envs.registration import ENV_ID
+from ..market.baselines import BASELINES, make_baseline
+from ..records_schema import EPISODE_METRIC_COLUMNS
+from ..tasks.base import Lever, MetricSpec
+from .metrics import episode_metrics_from_steps
+
+_DEFAULT_MARKET = MarketConfig()
+#: The three levers in [0, 1]³ the agent sets, with the ranges they execute in under the default config.
+SOLAR_LEVERS = (
+    Lever(
+        "reward_ratio",
+        "–",
+        _DEFAULT_MARKET.min_reward_ratio,
+        _DEFAULT_MARKET.max_reward_ratio,
+        "α: the share of matched value paid to producers as reward",
+    ),
+    Lever(
+        "liquidity_ratio",
+        "–",
+        _DEFAULT_MARKET.min_liquidity_ratio,
+        _DEFAULT_MARKET.max_liquidity_ratio,
+        "ℓ: the share of reported supply made available to the market",
+    ),
+    Lever("burn_rate", "–", 0.0, _DEFAULT_MARKET.max_burn_rate, "b: the share of the token supply burnt each hour"),
+)
+#: Each episode metric's template dimension and direction (docs/metrics.md).
+_DECLARED = {
+    "cumulative_reward": ("utility", "higher"),
+    "episode_volume": ("utility", "higher"),
+    "physics_violation_rate": ("safety", "lower"),
+    "max_drawdown": ("stability", "lower"),
+    "max_token_drawdown": ("stability", "lower"),
+    "action_jitter": ("stability", "lower"),
+    "mean_slippage": ("stability", "lower"),
+    "spatial_fairness_index": ("fairness", "lower"),
+    "artificial_liquidity_MWh": ("safety", "lower"),
+    "final_liquidity": ("utility", "none"),
+    "final_token_price": ("stability", "none"),
+}
+SOLAR_METRICS = tuple(MetricSpec(column, *_DECLARED[column.name]) for column in EPISODE_METRIC_COLUMNS)
+
+
+@dataclass(frozen=True)
+class SolarTask:
+    """The solar market (see the module docstring); use :data:`SOLAR_TASK`."""
+
+    name: str = "solar"
+    env_id: str = ENV_ID
+    levers: tuple[Lever, ...] = SOLAR_LEVERS
+    step_fields: tuple[str, ...] = STEP_INFO_KEYS
+    metrics: tuple[MetricSpec, ...] = SOLAR_METRICS
+
+    def data_dir(self, data_dir: str | Path | None, config: Any) -> Path:
+        return resolve_data_dir(data_dir, getattr(config, "data_dir", None))
+
+    def load_data(self, data_dir: Path) -> HourlyTable:
+        return load_table(data_dir)
+
+    def provenance(self, data: HourlyTable) -> dict[str, Any]:
+        return dataset_provenance(data)
+
+    def make_env(self, config: BenchmarkConfig, data: HourlyTable, *, action_mode: str = "continuous") -> SolarChainEnv:
+        return SolarChainEnv(config=config, table=data, action_mode=action_mode)
+
+    def episode_metrics(self, steps: Mapping[str, list], env: SolarChainEnv) -> dict[str, float]:
+        return episode_metrics_from_steps(steps, np.asarray(list(env.city_totals.values())))
+
+    def step_extras(self, info: Mapping[str, Any]) -> tuple[float, ...]:
+        return tuple(info["city_rewards"].values())
+
+    def identity(self, config: BenchmarkConfig) -> dict[str, Any]:
+        return {"env": self.env_id}
+
+    def baselines(self) -> Mapping[str, Callable[..., Any]]:
+        return {name: (lambda config, _name=name: make_baseline(_name, config.market)) for name in BASELINES}
+
+
+#: The solar market task (registered as ``solar`` in :mod:`solarchain_eval.tasks.registry`).
+SOLAR_TASK = SolarTask()
