@@ -270,7 +270,6 @@ KNOWN_TASK_DEBT = {
     "report.seed_spread",
     "report.sensitivity",
     "training.jax_trainer",
-    "training.sb3_trainer",
 }
 
 

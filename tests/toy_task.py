@@ -70,8 +70,8 @@ class ToyTask:
     def provenance(self, data):
         return {"data_dir": None, "files": {}}
 
-    def make_env(self, config, data, *, action_mode="continuous"):
-        return ToyEnv(action_mode)
+    def make_env(self, config, data, *, action_mode=None):
+        return ToyEnv(action_mode or "continuous")
 
     def episode_metrics(self, steps: Mapping[str, list], env) -> dict[str, float]:
         stock = np.asarray(steps["stock"], dtype=np.float64)

@@ -82,7 +82,7 @@ class SolarTask:
     def provenance(self, data: HourlyTable) -> dict[str, Any]:
         return dataset_provenance(data)
 
-    def make_env(self, config: BenchmarkConfig, data: HourlyTable, *, action_mode: str = "continuous") -> SolarChainEnv:
+    def make_env(self, config: BenchmarkConfig, data: HourlyTable, *, action_mode: str | None = None) -> SolarChainEnv:
         return SolarChainEnv(config=config, table=data, action_mode=action_mode)
 
     def episode_metrics(self, steps: Mapping[str, list], env: SolarChainEnv) -> dict[str, float]:

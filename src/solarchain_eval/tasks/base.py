@@ -110,8 +110,9 @@ class Task(Protocol):
         """Where ``data`` came from: ``data_dir`` and the sha256 of each dataset file (``files``)."""
         ...
 
-    def make_env(self, config: Any, data: Any, *, action_mode: str = "continuous") -> Any:
-        """A fresh Gymnasium environment of this task on ``data`` with ``config``."""
+    def make_env(self, config: Any, data: Any, *, action_mode: str | None = None) -> Any:
+        """A fresh Gymnasium environment of this task on ``data`` with ``config``; ``action_mode``
+        ``"continuous"`` or ``"discrete"`` (None: the one the config implies)."""
         ...
 
     def episode_metrics(self, steps: Mapping[str, list], env: Any) -> dict[str, float]:

@@ -45,6 +45,7 @@ from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
 from ..config import BenchmarkConfig
 from ..evaluation.settings import setting_name
+from ..tasks.registry import get_task
 from .lagrangian import LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 
 TRAIN_LOG_FILE = "training_log.csv"
@@ -182,9 +183,8 @@ def _make_vec_env(cfg: BenchmarkConfig, table: Any, n_envs: int) -> Any:
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    from ..envs.env import SolarChainEnv
-
-    return DummyVecEnv([lambda: Monitor(SolarChainEnv(config=cfg, table=table))] * n_envs)
+    task = get_task()
+    return DummyVecEnv([lambda: Monitor(task.make_env(cfg, table))] * n_envs)
 
 
 def _resume_seed(seed: int, steps: int) -> int:
@@ -225,19 +225,16 @@ def train(
         ``out_dir`` holds a different training (the message lists what differs), or
         TensorBoard logging was asked for without the tensorboard package.
     """
-    from ..data.default import resolve_data_dir
-    from ..data.provenance import dataset_provenance
-    from ..data.table import load_table
-
     algo = check_algo(spec.algo)
     if spec.timesteps < 1:
         raise TrainingError(f"timesteps must be at least 1, got {spec.timesteps}")
     if algo == LAGRANGIAN_ALGO and spec.lagrangian is None:
         raise TrainingError.about("ppo-lag needs a cost limit: pass {opt_lagrangian} (the limit D on the episode cost)")
     cfg = spec.resolved_config()
-    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir)
-    table = load_table(data_dir)
-    dataset = dataset_provenance(table)
+    task = get_task()
+    data_dir = task.data_dir(spec.data_dir, cfg)
+    table = task.load_data(data_dir)
+    dataset = task.provenance(table)
     identity = _identity(spec, dataset)
     out_dir = Path(out_dir)
     finished, metadata = _previous_training(out_dir, identity, overwrite)
