@@ -55,6 +55,20 @@ EPISODE_SEED_RULES: dict[str, Callable[[int, int], list[int]]] = {
     "paper": paper_episode_seeds,
     "independent": independent_episode_seeds,
 }
+#: Each rule in a few words (the ``--episode-seeds`` help); the same names as :data:`EPISODE_SEED_RULES`.
+EPISODE_SEED_RULE_LINES: dict[str, str] = {
+    "paper": "episode e of seed s uses s + e (seeds share episodes).",
+    "independent": "non-overlapping seeds from a SeedSequence.",
+}
+
+
+def episode_seed_derivation(name: str) -> str:
+    """How the rule ``name`` derives episode seeds, in words (a paper root's metadata records it):
+    the paper's formula, else the second paragraph of the rule's docstring."""
+    if name == "paper":
+        return "episode e of run seed s is reset with seed s + e"
+    paragraphs = (EPISODE_SEED_RULES[name].__doc__ or "").split("\n\n")
+    return paragraphs[1].strip() if len(paragraphs) > 1 else ""
 
 
 def episode_seed_rule_name(rule: Callable[[int, int], list[int]]) -> str:

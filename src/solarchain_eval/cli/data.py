@@ -19,7 +19,7 @@ from ..data.cities import (
     City,
     parse_city,
 )
-from ..data.fdia import FdiaError, FdiaScenario, parse_severity
+from ..data.fdia import DEFAULT_FDIA_PATTERN, FDIA_PATTERNS, FdiaError, FdiaScenario, fdia_pattern_help, parse_severity
 from ..data.files import DATASET_FILES, MANIFEST_FILE
 from ..data.published import PAPER_WEATHER_SHA256, matches_published
 from ..data.sources import Weather, WeatherSource, choose_weather
@@ -35,10 +35,10 @@ app.add_typer(data_app, name="data")
 register_user_error(FdiaError)
 
 
-class FdiaPattern(StrEnum):
-    uniform = "uniform"
-    clustered = "clustered"
-    stealthy = "stealthy"
+#: The --fdia-pattern choices: the patterns of data/fdia.py.
+FdiaPattern = StrEnum("FdiaPattern", {name: name for name in FDIA_PATTERNS})
+_DEFAULT_PATTERN = FdiaPattern(DEFAULT_FDIA_PATTERN)
+_PATTERN_HELP = fdia_pattern_help("--fdia-burst-hours")
 
 
 def _scenario(rate: float, severity: str | None, pattern: str, burst_hours: int) -> FdiaScenario:
@@ -104,13 +104,7 @@ def build(
         help="Injection multiplier range: an injected daylight reading is P_max x uniform(LO, HI) "
         "(default: the paper's multipliers 0.42, 1.38, 1.55, 1.82).",
     ),
-    fdia_pattern: FdiaPattern = typer.Option(
-        FdiaPattern.uniform,
-        "--fdia-pattern",
-        help="uniform: records drawn uniformly (the paper's). clustered: bursts of --fdia-burst-hours consecutive "
-        "hours in one city, all its nodes. stealthy: daylight records reported at min(m, 1) x P_max, invisible to "
-        "the physics check, marked only by the verification flag.",
-    ),
+    fdia_pattern: FdiaPattern = typer.Option(_DEFAULT_PATTERN, "--fdia-pattern", help=_PATTERN_HELP),
     fdia_burst_hours: int = typer.Option(6, "--fdia-burst-hours", min=1, help="Hours per clustered burst."),
 ) -> None:
     """Build a dataset: nodes, hourly PV generation, false-data injection, market, trades.

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 import dataclasses
-import json
 from pathlib import Path
 from typing import Any
 
@@ -14,11 +13,16 @@ from rich.table import Table
 from ..agents.registry import known_policies, parse_agents
 from ..agents.sb3 import parse_models
 from ..agents.specs import parse_agent_args, parse_vecnormalize
-from ..common.atomic_files import atomic_write_json, sha256_file
 from ..config import BenchmarkConfig, load_config
 from ..evaluation.rundir import RunDirWriter, check_target
 from ..evaluation.settings import AGENTIC_SETTINGS
-from ..experiments.governance import Combination, GovernanceSpec, run_governance
+from ..experiments.governance import (
+    GOVERNANCE_METADATA_FILE,
+    Combination,
+    CombinationRun,
+    GovernanceSpec,
+    run_governance,
+)
 from ..experiments.user_agents import refuse_llm_agent
 from ..governance.calibrated import DEFAULT_TARGET_AUDIT_RATE
 from ..governance.controls import DEFAULT_ORACLE_REWARD_LOSS, TRIGGER_SETS, SchedulerControls
@@ -42,7 +46,7 @@ from .common import (
 )
 from .evaluate import AGENT_ARG, ISOLATE, OVERWRITE, USER_AGENTS_HELP, VECNORMALIZE
 
-METADATA = "governance_metadata.json"
+METADATA = GOVERNANCE_METADATA_FILE  # the name this module always had
 #: The Planner/Auditor options this command offers as they are: the LLM endpoint and its cache
 #: (planners, auditors and the model come from --planner/--auditors; diagnostics are always on).
 LLM_FIELDS = (
@@ -240,6 +244,7 @@ def governance(
         agent_args=agent_args,
         vecnormalize=stats,
         isolate=isolate,
+        unsafe_threshold=unsafe_threshold,
     )
     names = _check_agents(spec)
     total = len(combinations) * len(chosen_settings) * len(names) * len(spec.run_seeds) * episodes
@@ -249,32 +254,26 @@ def governance(
         agentic_cli.serving(llm_request or governance, llm_options),
     ):
         assert writer.staging is not None
+        from ..report.governance_leaderboard import governance_leaderboard, write_governance_leaderboard
+
+        made: dict[str, Any] = {}  # the board (printed below) and its files
+
+        def leaderboard(runs: list[CombinationRun], root: Path) -> dict[str, Path]:
+            made["board"] = governance_leaderboard(runs, threshold=unsafe_threshold, resamples=resamples)
+            made["files"] = write_governance_leaderboard(made["board"], root)
+            return made["files"]
+
         with progress_bar("governing", total) as advance:
-            runs = run_governance(
+            run_governance(
                 spec,
                 writer.staging,
                 on_episode=lambda _r: advance(1),
                 on_combination=lambda c, s: say(f"{s}: {c.planner_label} planner, {c.auditor_label} auditor"),
                 command=invoked_command(),
+                tables=leaderboard,
             )
-        from ..report.governance_leaderboard import governance_leaderboard, write_governance_leaderboard
-
-        board = governance_leaderboard(runs, threshold=unsafe_threshold, resamples=resamples)
-        files = write_governance_leaderboard(board, writer.staging)
-        metadata = {
-            "complete": True,
-            "command": invoked_command(),
-            "unsafe_threshold": unsafe_threshold,
-            "combinations": [
-                {"planner": c.planner_label, "auditor": c.auditor_label, "options": c.options.describe()}
-                for c in (run.combination for run in runs)
-            ],
-            "settings": chosen_settings,
-            "policies": names,
-            "files": {name: sha256_file(path) for name, path in sorted(files.items())},
-        }
-        atomic_write_json(writer.staging / METADATA, json.loads(json.dumps(metadata, default=str)))
         writer.publish()
+    board, files = made["board"], made["files"]
     console.print(
         _leaderboard_table(
             board.ranked, f"Governance leaderboard ({', '.join(names)}; unsafe: avoidable cost > {unsafe_threshold:g})"

@@ -23,7 +23,7 @@ from ..experiments.paper import GridError, run_paper
 from ..experiments.units import UnitProgress, UnitResult
 from ..experiments.user_agents import PolicyChoice, resolve_agents, split_policies
 from ..governance.request import GovernanceRequest
-from ..protocol import PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS
+from ..protocol import EPISODE_SEED_RULE_LINES, EPISODE_SEED_RULES, PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS
 from ..training.jax_progress import DEFAULT_CHUNK_STEPS
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 from . import agentic as agentic_cli
@@ -52,9 +52,9 @@ class Preset(StrEnum):
     smoke = "smoke"
 
 
-class EpisodeSeeds(StrEnum):
-    paper = "paper"
-    independent = "independent"
+#: The --episode-seeds choices: the rules of protocol.py.
+EpisodeSeeds = StrEnum("EpisodeSeeds", {name: name for name in EPISODE_SEED_RULES})
+_EPISODE_SEEDS_HELP = " ".join(f"{name}: {line}" for name, line in EPISODE_SEED_RULE_LINES.items())
 
 
 def _settings(text: str | None) -> tuple[str, ...]:
@@ -235,7 +235,7 @@ def paper(
     episode_seeds: EpisodeSeeds = typer.Option(
         EpisodeSeeds.paper,
         "--episode-seeds",
-        help="paper: episode e of seed s uses s + e (seeds share episodes). independent: non-overlapping seeds from a SeedSequence.",
+        help=_EPISODE_SEEDS_HELP,
     ),
     keep_going: bool = typer.Option(False, "--keep-going", help="Record failing units and carry on with the others."),
     checkpoint_every: int | None = typer.Option(

@@ -8,7 +8,7 @@ import typer
 from rich.text import Text
 
 from ..experiments.grid import Unit
-from ..experiments.paper import GridError
+from ..experiments.grid_root import GridError
 from ..experiments.sweep_spec import SweepError, load_sweep
 from ..experiments.units import UnitResult
 from . import app

@@ -25,7 +25,16 @@ import pandas as pd
 
 FDIA_FRACTION = 0.05
 FDIA_MULTIPLIERS = (0.42, 1.38, 1.55, 1.82)
-FDIA_PATTERNS = ("uniform", "clustered", "stealthy")
+#: The attack patterns, each with its line of the ``--fdia-pattern`` help ("{burst_hours}": where
+#: the burst length is set). The one list: the CLI's choices and the sweep YAML's derive from it.
+FDIA_PATTERN_LINES: dict[str, str] = {
+    "uniform": "records drawn uniformly (the paper's).",
+    "clustered": "bursts of {burst_hours} consecutive hours in one city, all its nodes.",
+    "stealthy": "daylight records reported at min(m, 1) x P_max, invisible to the physics check, marked only by "
+    "the verification flag.",
+}
+FDIA_PATTERNS = tuple(FDIA_PATTERN_LINES)
+DEFAULT_FDIA_PATTERN = "uniform"
 #: A night or near-dark record (P_max_W at most this, W) injected by a non-stealthy attack
 #: reports uniform(350, 1200) W, as in the paper's build.
 DARK_P_MAX_W = 1.0
@@ -54,7 +63,7 @@ class FdiaScenario:
 
     rate: float = FDIA_FRACTION
     severity: tuple[float, float] | None = None
-    pattern: str = "uniform"
+    pattern: str = DEFAULT_FDIA_PATTERN
     burst_hours: int = DEFAULT_BURST_HOURS
 
     def __post_init__(self) -> None:
@@ -80,6 +89,12 @@ class FdiaScenario:
         if self.pattern == "clustered":
             out["burst_hours"] = int(self.burst_hours)
         return out
+
+
+def fdia_pattern_help(burst_hours: str = "burst_hours") -> str:
+    """Every pattern as ``NAME: line``, in one paragraph; ``burst_hours`` names where the burst
+    length is set (the CLI passes its option)."""
+    return " ".join(f"{name}: {line.format(burst_hours=burst_hours)}" for name, line in FDIA_PATTERN_LINES.items())
 
 
 def parse_severity(text: str) -> tuple[float, float]:

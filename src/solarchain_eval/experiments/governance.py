@@ -3,8 +3,12 @@
 Every (planner, auditor) combination governs the same policies over the same run seeds and
 episodes, in each asked setting, with counterfactual diagnostics on. Each combination is one run
 directory (``runs/<setting>/<planner>--<auditor>/``, written by :func:`run_evaluation`), all of
-them inside one leaderboard root published as a whole by :class:`~.rundir.RunDirWriter`; the
-caller (``solarchain-eval governance``) adds the ranked table and figures before publication.
+them inside one leaderboard root published as a whole by :class:`~.rundir.RunDirWriter`. The
+ranked tables and figures are the report layer's, so the caller hands their writer in
+(``tables``; ``solarchain-eval governance`` passes the leaderboard of
+:mod:`solarchain_eval.report.governance_leaderboard`); :func:`run_governance` then writes the
+root's ``governance_metadata.json`` last, with the sha256 of what ``tables`` wrote, so a call from
+Python leaves the root the command leaves.
 
 The ``random`` auditor matches the audits of a reference combination, episode by episode: the
 ``rule`` auditor of the same planner, scheduler controls and setting when it is asked for, else
@@ -14,26 +18,34 @@ the first other one.
 from __future__ import annotations
 
 import dataclasses
+import json
 import statistics
+import sys
 import tempfile
 import time
-from collections.abc import Callable, Sequence
+from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
 import pandas as pd
 
+from ..common.atomic_files import atomic_write_json, sha256_file
+from ..common.redaction import redact_command
 from ..config import BenchmarkConfig
 from ..evaluation.records import diagnostics_frame
 from ..evaluation.rollout import EpisodeResult
 from ..evaluation.runner import EvaluationSpec, run_evaluation
 from ..evaluation.settings import SETTING_AGENTIC, setting_has_physics_penalty
+from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from ..governance.factory import AgenticOptions
 from ..governance.wrapper import EXTRA_LOG_KEY
 from ..protocol import PAPER_EPISODES, PAPER_SEED, PAPER_SEEDS
 
 RUNS_DIR = "runs"
+#: What a leaderboard root was made with, written last (``complete``, the combinations, the sha256
+#: of the tables).
+GOVERNANCE_METADATA_FILE = "governance_metadata.json"
 
 
 @dataclass(frozen=True)
@@ -71,6 +83,8 @@ class GovernanceSpec:
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
     #: Run each user agent in a process of its own (``--isolate``; built-ins stay in this process).
     isolate: bool = False
+    #: A step is unsafe when its proposal's avoidable cost exceeds this (the tables' label; recorded).
+    unsafe_threshold: float = DEFAULT_UNSAFE_THRESHOLD
 
 
 @dataclass
@@ -82,6 +96,12 @@ class CombinationRun:
     run_dir: Path
     results: list[EpisodeResult]
     wall_s: float
+    #: The policies' names (the ``policy`` column), in the spec's order.
+    policies: list[str] = field(default_factory=list)
+
+
+#: Writes a root's tables from its runs into the root; returns them by path relative to the root.
+TablesWriter = Callable[[list[CombinationRun], Path], Mapping[str, Path]]
 
 
 def audit_counts(results: Sequence[EpisodeResult]) -> dict[tuple[str, int, int], int]:
@@ -117,8 +137,12 @@ def run_governance(
     on_episode: Callable[[EpisodeResult], None] | None = None,
     on_combination: Callable[[Combination, str], None] | None = None,
     command: Sequence[str] | None = None,
+    tables: TablesWriter | None = None,
 ) -> list[CombinationRun]:
-    """Evaluate every combination in every setting into ``root/runs/<setting>/<slug>``."""
+    """Evaluate every combination in every setting into ``root/runs/<setting>/<slug>``, then let
+    ``tables`` write the root's tables and write ``governance_metadata.json`` (see the module
+    docstring). Without ``tables`` the metadata lists no files.
+    """
     done: list[CombinationRun] = []
     for setting in spec.settings:
         for combination in _ordered(spec.combinations):
@@ -145,8 +169,35 @@ def run_governance(
             run_dir = Path(root) / RUNS_DIR / setting / combination.slug
             outcome = run_evaluation(evaluation, run_dir, on_episode=on_episode, command=command)
             used = dataclasses.replace(combination, options=options)
-            done.append(CombinationRun(used, setting, run_dir, outcome.results, outcome.wall_s))
+            names = list(outcome.access)  # every policy's name, in the spec's order
+            done.append(CombinationRun(used, setting, run_dir, outcome.results, outcome.wall_s, names))
+    files = dict(tables(done, Path(root))) if tables is not None else {}
+    atomic_write_json(Path(root) / GOVERNANCE_METADATA_FILE, governance_metadata(spec, done, files, command))
     return done
+
+
+def governance_metadata(
+    spec: GovernanceSpec,
+    runs: Sequence[CombinationRun],
+    files: Mapping[str, Path],
+    command: Sequence[str] | None = None,
+) -> dict[str, Any]:
+    """What ``governance_metadata.json`` holds: the command (credentials redacted), the unsafe
+    threshold, each run's combination with its options, the settings, the policies' names and
+    the sha256 of ``files`` (paths relative to the root)."""
+    metadata = {
+        "complete": True,
+        "command": redact_command(command if command is not None else sys.argv),
+        "unsafe_threshold": spec.unsafe_threshold,
+        "combinations": [
+            {"planner": c.planner_label, "auditor": c.auditor_label, "options": c.options.describe()}
+            for c in (run.combination for run in runs)
+        ],
+        "settings": list(spec.settings),
+        "policies": runs[0].policies if runs else [],
+        "files": {name: sha256_file(path) for name, path in sorted(files.items())},
+    }
+    return json.loads(json.dumps(metadata, default=str))  # options' paths and enums as text
 
 
 def leaderboard_frames(runs: Sequence[CombinationRun]) -> tuple[pd.DataFrame, pd.DataFrame]:

@@ -35,11 +35,22 @@ from ..evaluation.records import ACTIONS_FILE, METRICS_FILE
 from ..records_schema import EPISODE_COST
 from .combine import combine_setting
 from .grid import GridSpec, Unit, plan_units, scoped
-from .layout import PAPER_METADATA_FILE, combined_dir
-from .paper import GridError, _executor, _locked, _metadata, _read_metadata, _stale_eval, _task, grid_identity
+from .grid_root import (
+    GridError,
+    finished_units,
+    grid_identity,
+    identity_conflict,
+    locked,
+    make_executor,
+    read_metadata,
+    root_metadata,
+    unit_task,
+    write_metadata,
+)
+from .layout import combined_dir
 from .pool import RunReport, run_units
 from .sweep_spec import Sweep, SweepDataset, SweepPoint, dataset_cities, fdia_scenario
-from .units import UnitResult, UnitTask, read_done, undo
+from .units import UnitResult, UnitTask
 from .user_agents import GridPolicies, check_resolved, grid_policies
 
 DATASETS_DIR = "datasets"
@@ -212,8 +223,7 @@ def _prepare_points(
         spec = _point_spec(sweep, point, data_dir, policies)
         identity = grid_identity(spec, dataset)
         point_root = root / POINTS_DIR / point.point_id
-        previous = _read_metadata(point_root)
-        if previous is not None and previous.get("identity") != identity:
+        if identity_conflict(point_root, identity) is not None:
             raise GridError.about(
                 "{point_root} holds a different grid than point {point} of {source}; use another {opt_root}",
                 point_root=point_root,
@@ -221,9 +231,9 @@ def _prepare_points(
                 source=sweep.source,
             )
         point_root.mkdir(parents=True, exist_ok=True)
-        meta = _metadata(spec, identity, dataset, data_dir, command, 1, None)
+        meta = root_metadata(spec, identity, dataset, data_dir, command, 1, None)
         meta["sweep_point"] = {"point": point.point_id, "values": point.values}
-        atomic_write_json(point_root / PAPER_METADATA_FILE, {**meta, "status": "running", "complete": False})
+        write_metadata(point_root, {**meta, "status": "running", "complete": False})
         units = scoped(plan_units(spec), f"{POINTS_DIR}/{point.point_id}")
         runs.append(_PointRun(point, point_root, data_dir, spec, identity, units))
     return runs
@@ -255,29 +265,23 @@ def run_sweep(
     policies = sweep_policies(sweep)  # user agents named (and built once) before anything is written
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
-    with _locked(root, "sweep"):
+    with locked(root, "sweep"):
         runs = _prepare_points(sweep, root, policies, on_dataset, command)
         by_scope = {f"{POINTS_DIR}/{r.point.point_id}": r for r in runs}
         units = [u for r in runs for u in r.units]
         done: set[str] = set()
-        for run in runs:
-            for unit in run.units:
-                if read_done(unit.directory(root)) is None:
-                    continue
-                if unit.kind == "eval" and _stale_eval(run.root, unit.unscoped(), run.spec):
-                    undo(unit.directory(root))
-                else:
-                    done.add(unit.name)
+        for run in runs:  # each point's units are scoped into run.root, the sub-root finished_units checks
+            done |= finished_units(root, run.units, run.spec)
         already = [u.name for u in units if u.name in done]
         if on_plan is not None:
             on_plan(units, already)
 
         def make_task(unit: Unit) -> UnitTask:
             run = by_scope[unit.scope]
-            task = _task(run.spec, run.root, run.data_dir, run.identity, unit.unscoped(), command)
+            task = unit_task(run.spec, run.root, run.data_dir, run.identity, unit.unscoped(), command)
             return replace(task, unit=unit)
 
-        executor = _executor(ray_address, root, runs[0].data_dir, ray_transfer, workers)
+        executor = make_executor(ray_address, root, runs[0].data_dir, ray_transfer, workers)
         report = run_units(units, done, make_task, executor, keep_going=keep_going, on_result=on_result)
         outcome = SweepOutcome(root, units, already, report)
         for run in runs:
@@ -296,7 +300,7 @@ def run_sweep(
 def _finish_point(root: Path, run: _PointRun, done: set[str]) -> bool:
     """Combine the point's settings when all of its units are done; True if the point is complete."""
     complete = all(u.name in done for u in run.units)
-    meta = _read_metadata(run.root) or {}
+    meta = read_metadata(run.root) or {}
     if complete:
         combined = {}
         for setting in run.spec.settings:
@@ -304,7 +308,7 @@ def _finish_point(root: Path, run: _PointRun, done: set[str]) -> bool:
             combined[setting] = combine_setting(run.root, setting, [u.directory(root) for u in evals])
         meta.update({"combined": combined})
     meta.update({"status": "complete" if complete else "incomplete", "complete": complete})
-    atomic_write_json(run.root / PAPER_METADATA_FILE, meta)
+    write_metadata(run.root, meta)
     return complete
 
 

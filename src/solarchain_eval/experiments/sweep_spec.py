@@ -31,12 +31,18 @@ from ..data.cities import (
     parse_city,
     synthetic_cities,
 )
-from ..data.fdia import FDIA_FRACTION, FdiaScenario, parse_severity
+from ..data.fdia import DEFAULT_FDIA_PATTERN, FDIA_FRACTION, FDIA_PATTERNS, FdiaScenario, parse_severity
+from ..protocol import EPISODE_SEED_RULES
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 
 
 class SweepError(ValueError):
     """A sweep YAML that is unreadable or invalid (the message names the file and key)."""
+
+
+#: The names the YAML accepts, from their one definition (data/fdia.py, protocol.py).
+FdiaPatternName = Literal[FDIA_PATTERNS]  # type: ignore[valid-type]
+EpisodeSeedRuleName = Literal[tuple(EPISODE_SEED_RULES)]  # type: ignore[valid-type]
 
 
 class _Section(BaseModel):
@@ -50,7 +56,7 @@ class SweepGrid(_Section):
     settings: list[str] = Field(default_factory=lambda: ["main", "no_physics"], min_length=1)
     #: A list, or a list per setting: built-in policies and agent specs (paths relative to the YAML).
     policies: list[str] | dict[str, list[str]] | None = None
-    episode_seeds: Literal["paper", "independent"] = "paper"
+    episode_seeds: EpisodeSeedRuleName = "paper"
     checkpoint_every: int = Field(0, ge=0)
     #: Options of the user agents built from a class or factory: ``KEY: VALUE`` or ``NAME.KEY: VALUE``.
     agent_args: dict[str, Any] = Field(default_factory=dict)
@@ -70,7 +76,7 @@ class SweepDataset(_Section):
     nodes_per_city: int = Field(DEFAULT_NODES_PER_CITY, ge=1, le=100_000)
     cities: int | list[str] | None = None
     fdia_rate: float = Field(FDIA_FRACTION, ge=0.0, le=1.0)
-    fdia_pattern: Literal["uniform", "clustered", "stealthy"] = "uniform"
+    fdia_pattern: FdiaPatternName = DEFAULT_FDIA_PATTERN
     fdia_severity: str | None = None
     fdia_burst_hours: int = Field(6, ge=1)
 
