@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import shutil
+import tarfile
 from pathlib import Path
 
 import pytest
@@ -154,8 +155,12 @@ def test_a_malformed_file_is_refused_naming_file_and_field(run, tmp_path, edit, 
     with pytest.raises(RunMetadataError) as refused:
         RunMetadata.read(path)
     assert str(refused.value).startswith(f"{path}: field {field}: ") and why in str(refused.value)
+    tarball = tmp_path / "run.tar.gz"
+    with tarfile.open(tarball, "w:gz") as archive:  # refused before anything is unpacked
+        archive.add(run, arcname="run")
     for command in (("verify", run), ("report", run, "--no-figures", "--out", tmp_path / "r"),
-                    ("leaderboard", run, "--out", tmp_path / "b")):  # fmt: skip
+                    ("leaderboard", run, "--out", tmp_path / "b"),
+                    ("leaderboard", tarball, "--out", tmp_path / "b")):  # fmt: skip
         result = invoke(*command)
         assert result.exit_code == 2, (command, result.output)
         assert f"field {field}:" in " ".join(result.output.split()), (command, result.output)
