@@ -41,6 +41,7 @@ from .records import (
     METRICS_FILE,
     SUMMARY_FILE,
 )
+from .run_metadata import RunMetadata, RunMetadataError
 
 #: The files a run directory's metadata vouches for, when present.
 RUN_FILES = (
@@ -82,8 +83,8 @@ def _describe(run_dir: Path, keep: Sequence[str]) -> str | None:
     metadata = run_dir / METADATA_FILE
     if metadata.is_file():
         try:
-            complete = json.loads(metadata.read_text(encoding="utf-8")).get("complete") is True
-        except (ValueError, OSError, AttributeError):
+            complete = RunMetadata.read(metadata).complete
+        except RunMetadataError:
             complete = False
         if complete:
             return "a finished run"
@@ -338,9 +339,9 @@ def verify_run_dir(run_dir: Path) -> list[str]:
     if not path.is_file():
         return [f"{run_dir} has no {METADATA_FILE}: nothing vouches that its files are one complete run"]
     try:
-        metadata = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, OSError) as error:
-        return [f"{path} is unreadable ({error})"]
-    if not isinstance(metadata, dict) or metadata.get("complete") is not True:
+        metadata = RunMetadata.read(path)
+    except RunMetadataError as error:
+        return [str(error)]
+    if not metadata.complete:
         return [f"{path} does not mark the run complete"]
-    return verify_files(run_dir, metadata.get("files"), path)
+    return verify_files(run_dir, metadata.files, path)

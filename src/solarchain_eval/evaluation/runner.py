@@ -24,7 +24,7 @@ from ..agents.base import Policy, access_label
 from ..agents.isolated import IsolatedAgent, is_isolatable
 from ..agents.registry import known_policies, make_agent, user_agent
 from ..agents.specs import AgentSpecError, check_unique, parse_agent_spec
-from ..common.atomic_files import atomic_write_json, sha256_file
+from ..common.atomic_files import sha256_file
 from ..common.redaction import redact_command, redact_spec
 from ..common.versions import git_commit, package_versions
 from ..config import BenchmarkConfig
@@ -39,6 +39,7 @@ from .record_stream import RecordStream, check_disk_space
 from .records import METADATA_FILE
 from .reserved import check_reserved
 from .rollout import EpisodeResult, begin_run, run_policy
+from .run_metadata import RunMetadata
 from .rundir import RunDirWriter, kill_point
 from .settings import KNOWN_SETTINGS, setting_name
 
@@ -304,7 +305,7 @@ def run_evaluation(
         wall_s = time.perf_counter() - started
         rows = {"metrics": stream.episodes, "actions": stream.steps}
         metadata = _metadata(spec, config, table, policies, rows, files, command, started_at, wall_s, setting)
-        atomic_write_json(writer.staging / METADATA_FILE, metadata)
+        metadata.write(writer.staging / METADATA_FILE)
         writer.publish()
     files = {name: Path(run_dir) / name for name in [*files, METADATA_FILE]}
     return EvaluationOutcome(
@@ -312,9 +313,9 @@ def run_evaluation(
         results=results,
         files=files,
         wall_s=wall_s,
-        protocol=metadata["protocol"],
-        protocol_id=metadata["protocol_id"],
-        access=metadata["policy_access"],
+        protocol=metadata.fingerprint(),
+        protocol_id=str(metadata.protocol_id),
+        access=metadata.policy_access,
         summary=stream.summary,
         episodes=stream.episodes,
     )
@@ -361,7 +362,7 @@ def _metadata(
     started_at: str,
     wall_s: float,
     setting: str,
-) -> dict:
+) -> RunMetadata:
     dataset = dataset_provenance(table)
     governed = spec.agentic is not None
     protocol = protocol_fingerprint(
@@ -373,33 +374,33 @@ def _metadata(
         config=config,
         action_modes={p.name: p.action_mode for p in policies},
     )
-    return {
-        "complete": True,
-        "run_id": uuid.uuid4().hex,
+    return RunMetadata(
+        complete=True,
+        run_id=uuid.uuid4().hex,
         # sha256 of every file this metadata vouches for; ``report`` verifies them.
-        "files": {name: sha256_file(path) for name, path in sorted(files.items())},
-        "command": redact_command(command if command is not None else sys.argv),
-        "started_at": started_at,
-        "wall_s": round(wall_s, 3),
-        "git_commit": git_commit(),
-        "package_versions": package_versions(),
-        "setting": setting,
-        "records_schema_version": RECORDS_SCHEMA_VERSION,
-        "policies": [p.name for p in policies],
-        "policy_specs": [redact_spec(p) if isinstance(p, str) else f"<{type(p).__name__}>" for p in spec.policies],
+        files={name: sha256_file(path) for name, path in sorted(files.items())},
+        command=redact_command(command if command is not None else sys.argv),
+        started_at=started_at,
+        wall_s=round(wall_s, 3),
+        git_commit=git_commit(),
+        package_versions=package_versions(),
+        setting=setting,
+        records_schema_version=RECORDS_SCHEMA_VERSION,
+        policies=[p.name for p in policies],
+        policy_specs=[redact_spec(p) if isinstance(p, str) else f"<{type(p).__name__}>" for p in spec.policies],
         # Behind the Planner/Auditor layer every row is privileged: the layer reads hours ahead.
-        "policy_access": {p.name: "privileged" if governed else access_label(p) for p in policies},
-        "protocol": protocol,
-        "protocol_id": protocol_id(protocol),
-        "agentic": spec.agentic.describe() if spec.agentic is not None else None,
+        policy_access={p.name: "privileged" if governed else access_label(p) for p in policies},
+        protocol=protocol,
+        protocol_id=protocol_id(protocol),
+        agentic=spec.agentic.describe() if spec.agentic is not None else None,
         # the llm-agent's endpoint and cache (what replays it), when it is among the policies
-        "llm_agent": spec.llm.describe() if spec.llm is not None else None,
-        "concurrency": int(spec.concurrency),
-        "run_seeds": [int(s) for s in spec.run_seeds],
-        "episodes": int(spec.episodes),
-        "episode_seed_protocol": getattr(spec.episode_seeds, "__name__", "custom"),
-        "rows": rows,
-        "dataset": dataset,
-        "models": {k: str(v) for k, v in spec.models.items()},
-        "config": config.model_dump(),
-    }
+        llm_agent=spec.llm.describe() if spec.llm is not None else None,
+        concurrency=int(spec.concurrency),
+        run_seeds=[int(s) for s in spec.run_seeds],
+        episodes=int(spec.episodes),
+        episode_seed_protocol=getattr(spec.episode_seeds, "__name__", "custom"),
+        rows=rows,
+        dataset=dataset,
+        models={k: str(v) for k, v in spec.models.items()},
+        config=config.model_dump(),
+    )

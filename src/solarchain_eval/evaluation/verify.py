@@ -39,6 +39,7 @@ from ..tasks.registry import get_task
 from .inflight import is_stateless
 from .records import METRICS_FILE
 from .rollout import begin_run, run_episode
+from .run_metadata import RunMetadata, RunMetadataError
 from .runner import EvaluationSpec, make_policies
 from .verify_checks import (
     Difference,
@@ -265,14 +266,14 @@ def _recorded_builder(
 
 
 def _given_builders(
-    metadata: Mapping[str, Any],
+    metadata: RunMetadata,
     config: BenchmarkConfig,
     models: dict[str, Path],
     options: VerifyOptions,
     stack: ExitStack,
 ) -> dict[str, Callable[[], Policy]]:
     """The builders of the agents given with ``--agent``, by the name they build (checked before any work)."""
-    names = list(metadata.get("policies") or [])
+    names = metadata.policies
     given: dict[str, Callable[[], Policy]] = {}
     for text in options.agents:
         build = _builder(text, config, models, options, stack)
@@ -291,9 +292,9 @@ def _given_builders(
     return given
 
 
-def _agentic(metadata: Mapping[str, Any], options: VerifyOptions) -> AgenticOptions | str | None:
+def _agentic(metadata: RunMetadata, options: VerifyOptions) -> AgenticOptions | str | None:
     """The recorded Planner/Auditor options (None: not governed), or why they cannot be rebuilt."""
-    record = metadata.get("agentic")
+    record = metadata.agentic
     if record is None:
         return None
     if record.get("llm") is not None and options.llm_cache is None:
@@ -319,16 +320,14 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
     run_dir = Path(run_dir)
     metadata = read_metadata(run_dir)
     checksums = check_checksums(run_dir, metadata, options.grid_files)
-    files_checked = len(metadata.get("files") or {})
-    names = [str(n) for n in metadata.get("policies") or []]
+    files_checked = len(metadata.files or {})
+    names = metadata.policies
     try:
-        config = BenchmarkConfig.model_validate(metadata.get("config") or {})
-    except ValueError as error:
-        why = f"the recorded config is invalid: {str(error).splitlines()[0]}"
+        config = metadata.task_config()
+    except RunMetadataError as error:
+        why = f"the recorded config is invalid: {error}"
         cannot = tuple(PolicyVerification(n, CANNOT_REBUILD, reason=why) for n in names)
-        return RunVerification(
-            run_dir, tuple(checksums), str(metadata.get("protocol_id") or ""), (why,), cannot, files_checked
-        )
+        return RunVerification(run_dir, tuple(checksums), metadata.protocol_id or "", (why,), cannot, files_checked)
     protocol = check_protocol(metadata, config)
     recorded, rollouts = read_rollouts(run_dir, metadata)
     data_dir, no_data = resolve_dataset(metadata, options.data_dir)
@@ -344,7 +343,7 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
     return RunVerification(
         run_dir,
         tuple(checksums),
-        str(metadata.get("protocol_id") or ""),
+        metadata.protocol_id or "",
         tuple(protocol),
         tuple(results),
         files_checked,
@@ -354,7 +353,7 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
 
 def _verify_policies(
     run_dir: Path,
-    metadata: Mapping[str, Any],
+    metadata: RunMetadata,
     config: BenchmarkConfig,
     data_dir: Path | None,
     no_data: str,
@@ -364,9 +363,8 @@ def _verify_policies(
     stack: ExitStack,
     recorded: dict[tuple[str, int, int], dict[str, str]],
 ) -> list[PolicyVerification]:
-    names = [str(n) for n in metadata.get("policies") or []]
-    specs = [str(s) for s in metadata.get("policy_specs") or []]
-    protocol = metadata.get("protocol") or {}
+    names, specs = metadata.policies, metadata.policy_specs
+    protocol = metadata.protocol or {}
     rule = EPISODE_SEED_RULES.get(str(protocol.get("episode_seed_rule")))
     agentic = _agentic(metadata, options)
     metrics_path = run_dir / METRICS_FILE
@@ -390,22 +388,22 @@ def _verify_policies(
     rerun = _Rerun(
         config=config,
         table=get_task().load_data(data_dir),
-        setting=str(metadata.get("setting")),
-        run_seeds=[int(x) for x in metadata.get("run_seeds") or []],
-        episodes=int(metadata.get("episodes") or 0),
+        setting=metadata.setting,
+        run_seeds=metadata.run_seeds,
+        episodes=metadata.episodes,
         episode_seeds=rule,
         governance=governance,
         recorded=recorded,
         # The runner drives one agent through every run seed, unless episodes ran in flight
         # (a private copy per run seed, :mod:`.inflight`).
-        carry_over=int(metadata.get("concurrency", 1)) <= 1,
+        carry_over=metadata.concurrency <= 1,
     )
-    seed = options.seed if options.seed is not None else default_seed(str(metadata.get("run_id", "")))
+    seed = options.seed if options.seed is not None else default_seed(metadata.run_id)
     chosen = choose_episodes(rerun.run_seeds, rerun.episodes, options.episodes, seed)
     modes = protocol.get("action_modes") or {}
     results = []
     for name, text in zip(names, specs, strict=True):
-        build = given.get(name) or _recorded_builder(text, config, models, options, stack, metadata.get("llm_agent"))
+        build = given.get(name) or _recorded_builder(text, config, models, options, stack, metadata.llm_agent)
         if isinstance(build, str):
             results.append(PolicyVerification(name, CANNOT_REBUILD, reason=build))
             continue

@@ -14,12 +14,10 @@ from __future__ import annotations
 
 import csv
 import io
-import json
 import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
-from typing import Any
 
 from ..common.errors import NamesOptions
 from ..config import BenchmarkConfig
@@ -28,6 +26,7 @@ from ..data.table import load_table
 from .fingerprint import protocol_fingerprint, protocol_id
 from .records import METADATA_FILE, METRICS_FILE, REPORT_DIR, metrics_frame
 from .rollout import EpisodeResult
+from .run_metadata import RunMetadata, RunMetadataError
 from .rundir import verify_files
 
 
@@ -46,8 +45,8 @@ class Difference:
     rerun: str
 
 
-def read_metadata(run_dir: Path) -> dict[str, Any]:
-    """``run_dir/run_metadata.json`` (a :class:`VerifyError` when absent or unreadable)."""
+def read_metadata(run_dir: Path) -> RunMetadata:
+    """``run_dir/run_metadata.json`` (a :class:`VerifyError` when absent, unreadable or malformed)."""
     run_dir = Path(run_dir)
     if not run_dir.is_dir():
         raise VerifyError(f"{run_dir}: no such run directory")
@@ -55,15 +54,12 @@ def read_metadata(run_dir: Path) -> dict[str, Any]:
     if not path.is_file():
         raise VerifyError(f"{run_dir} has no {METADATA_FILE}: nothing records what the run was")
     try:
-        metadata = json.loads(path.read_text(encoding="utf-8"))
-    except (ValueError, OSError) as error:
-        raise VerifyError(f"{path} is unreadable ({error})") from None
-    if not isinstance(metadata, dict):
-        raise VerifyError(f"{path} does not hold a JSON object")
-    return metadata
+        return RunMetadata.read(path)
+    except RunMetadataError as error:
+        raise VerifyError(str(error)) from None
 
 
-def check_checksums(run_dir: Path, metadata: Mapping[str, Any], grid_files: Sequence[str] = ()) -> list[str]:
+def check_checksums(run_dir: Path, metadata: RunMetadata, grid_files: Sequence[str] = ()) -> list[str]:
     """Problems of every file in ``run_dir`` against the metadata's sha256 (empty: all match).
 
     Every recorded file must be there with its sha256, and every other entry of the directory
@@ -71,11 +67,11 @@ def check_checksums(run_dir: Path, metadata: Mapping[str, Any], grid_files: Sequ
     """
     run_dir = Path(run_dir)
     path = run_dir / METADATA_FILE
-    problems = [] if metadata.get("complete") is True else [f"{path} does not mark the run complete"]
+    problems = [] if metadata.complete else [f"{path} does not mark the run complete"]
     skipped = {METADATA_FILE, *grid_files}
     # The report's folder (``solarchain-eval report RUN``) is derived from the vouched files.
     entries = sorted(p for p in run_dir.iterdir() if p.name not in skipped and not _is_report_dir(p))
-    problems += verify_files(run_dir, metadata.get("files"), path, [p.name for p in entries if p.is_file()])
+    problems += verify_files(run_dir, metadata.files, path, [p.name for p in entries if p.is_file()])
     problems += [f"{p} is not a file and is not vouched for by {METADATA_FILE}" for p in entries if not p.is_file()]
     return problems
 
@@ -84,20 +80,20 @@ def _is_report_dir(path: Path) -> bool:
     return path.name == REPORT_DIR and path.is_dir()
 
 
-def check_protocol(metadata: Mapping[str, Any], config: BenchmarkConfig) -> list[str]:
+def check_protocol(metadata: RunMetadata, config: BenchmarkConfig) -> list[str]:
     """Where the recorded fingerprint disagrees with its id or with the rest of the metadata."""
-    recorded = metadata.get("protocol")
-    if not isinstance(recorded, dict):
+    recorded = metadata.protocol
+    if not metadata.protocol_recorded or recorded is None:  # one computed on read vouches for nothing
         return ["run_metadata.json records no protocol fingerprint (written by an older version?)"]
     problems = []
-    if protocol_id(recorded) != metadata.get("protocol_id"):
-        problems.append(f"protocol_id {metadata.get('protocol_id')!r} is not the id of the recorded fingerprint")
+    if protocol_id(recorded) != metadata.protocol_id:
+        problems.append(f"protocol_id {metadata.protocol_id!r} is not the id of the recorded fingerprint")
     expected = protocol_fingerprint(
-        dataset_sha256=(metadata.get("dataset") or {}).get("files") or {},
-        run_seeds=metadata.get("run_seeds") or [],
-        episodes=int(metadata.get("episodes") or 0),
+        dataset_sha256=metadata.dataset.files,
+        run_seeds=metadata.run_seeds,
+        episodes=metadata.episodes,
         episode_seed_rule=str(recorded.get("episode_seed_rule")),
-        setting=str(metadata.get("setting")),
+        setting=metadata.setting,
         config=config,
         action_modes=recorded.get("action_modes") or {},
     )
@@ -126,14 +122,13 @@ def dataset_problem(data_dir: Path, recorded: Mapping[str, str]) -> str | None:
     return None
 
 
-def resolve_dataset(metadata: Mapping[str, Any], data_dir: Path | None) -> tuple[Path | None, str]:
+def resolve_dataset(metadata: RunMetadata, data_dir: Path | None) -> tuple[Path | None, str]:
     """The dataset to re-run on and, when there is none, why.
 
     ``data_dir`` (when given) must hold the recorded CSVs (a :class:`VerifyError` otherwise);
     else the recorded ``data_dir`` is used if its CSVs still have the recorded sha256.
     """
-    dataset = metadata.get("dataset") or {}
-    recorded = dataset.get("files") or {}
+    recorded = metadata.dataset.files
     if not recorded:
         return None, "the run records no dataset sha256"
     if data_dir is not None:
@@ -143,7 +138,7 @@ def resolve_dataset(metadata: Mapping[str, Any], data_dir: Path | None) -> tuple
                 "{opt_data_dir} {path} is not the run's dataset: {problem}", path=data_dir, problem=problem
             )
         return Path(data_dir), ""
-    recorded_dir = Path(str(dataset.get("data_dir", "")))
+    recorded_dir = Path(metadata.dataset.data_dir)
     problem = dataset_problem(recorded_dir, recorded) if recorded_dir.is_dir() else f"{recorded_dir} is missing"
     if problem is not None:
         return None, f"dataset: {problem}; pass --data DIR with the recorded CSVs"
@@ -209,23 +204,23 @@ def read_metrics_rows(path: Path) -> list[dict[str, str]]:
     return rows
 
 
-def check_rollouts(metadata: Mapping[str, Any], rows: Sequence[Mapping[str, str]]) -> list[str]:
+def check_rollouts(metadata: RunMetadata, rows: Sequence[Mapping[str, str]]) -> list[str]:
     """Whether ``metrics.csv``'s ``rows`` are exactly the run's rollouts (:func:`rollout_set_problem`)
     and as many as ``run_metadata.json`` records (empty: they are)."""
     problems = []
-    recorded = (metadata.get("rows") or {}).get("metrics") if isinstance(metadata.get("rows"), dict) else None
-    if recorded is not None and int(recorded) != len(rows):
+    recorded = metadata.rows.get("metrics")
+    if recorded is not None and recorded != len(rows):
         problems.append(f"{METRICS_FILE} holds {len(rows)} rows; {METADATA_FILE} records {recorded}")
     problem = rollout_set_problem(
         ((r["policy"], int(r["run_seed"]), int(r["episode"])) for r in rows),
-        [str(p) for p in metadata.get("policies") or []],
-        [int(s) for s in metadata.get("run_seeds") or []],
-        int(metadata.get("episodes") or 0),
+        metadata.policies,
+        metadata.run_seeds,
+        metadata.episodes,
     )
     return problems + ([f"{METRICS_FILE}: {problem}"] if problem else [])
 
 
-def read_rollouts(run_dir: Path, metadata: Mapping[str, Any]) -> tuple[dict[RolloutKey, dict[str, str]], list[str]]:
+def read_rollouts(run_dir: Path, metadata: RunMetadata) -> tuple[dict[RolloutKey, dict[str, str]], list[str]]:
     """``run_dir``'s ``metrics.csv`` rows by rollout and the problems of its rollout set (:func:`check_rollouts`).
 
     The rows are returned only when there is no problem (a repeated key would hide a row);
@@ -242,7 +237,7 @@ def read_rollouts(run_dir: Path, metadata: Mapping[str, Any]) -> tuple[dict[Roll
     return ({} if problems else {(r["policy"], int(r["run_seed"]), int(r["episode"])): r for r in rows}), problems
 
 
-def keeper_models(metadata: Mapping[str, Any], given: Mapping[str, Path], within: Path | None) -> dict[str, Path]:
+def keeper_models(metadata: RunMetadata, given: Mapping[str, Path], within: Path | None) -> dict[str, Path]:
     """The model files verify may load: those the keeper passed (``given``, ``--models``) and, for
     the units of a grid root the keeper named (``within``), the recorded ones that lie inside it.
 
@@ -251,8 +246,8 @@ def keeper_models(metadata: Mapping[str, Any], given: Mapping[str, Path], within
     models = {str(k): Path(v) for k, v in given.items()}
     if within is not None:
         root = Path(within).resolve()
-        for name, path in (metadata.get("models") or {}).items():
-            resolved = Path(str(path)).resolve()
+        for name, path in metadata.models.items():
+            resolved = Path(path).resolve()
             if str(name) not in models and resolved.is_relative_to(root):
                 models[str(name)] = resolved
     return models

@@ -13,7 +13,6 @@ done units, tasks, executor) is :mod:`.grid_root`, shared with ``sweep``.
 
 from __future__ import annotations
 
-import json
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -23,8 +22,10 @@ from typing import Any
 from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
-from ..evaluation.fingerprint import merge_fingerprints, protocol_id
+from ..evaluation.fingerprint import protocol_id
 from ..evaluation.records import METADATA_FILE
+from ..evaluation.run_metadata import RunMetadata, RunMetadataError
+from ..evaluation.run_metadata import setting_protocol as merge_setting_protocol
 from .combine import combine_setting
 from .grid import GridSpec, Unit, plan_units
 from .grid_root import (
@@ -151,15 +152,14 @@ def _combine_and_record(spec: GridSpec, outcome: PaperOutcome, done: set[str], m
 
 
 def setting_protocol(unit_dirs: list[Path]) -> dict[str, Any]:
-    """``{"protocol": fingerprint, "protocol_id": id}`` of a setting's eval units (empty for units
-    written before runs carried a fingerprint)."""
-    fingerprints = []
-    for directory in unit_dirs:
-        meta = json.loads((Path(directory) / METADATA_FILE).read_text(encoding="utf-8"))
-        if "protocol" not in meta:
-            return {}
-        fingerprints.append(meta["protocol"])
-    merged = merge_fingerprints(fingerprints)
+    """``{"protocol": fingerprint, "protocol_id": id}`` of a setting's eval units, merged as the
+    leaderboard merges them (:func:`~solarchain_eval.evaluation.run_metadata.setting_protocol`);
+    empty when a unit written before runs carried a fingerprint has none that can be computed."""
+    runs = {str(d): RunMetadata.read(Path(d) / METADATA_FILE) for d in unit_dirs}
+    try:
+        merged = merge_setting_protocol(runs)
+    except RunMetadataError:
+        return {}
     return {"protocol": merged, "protocol_id": protocol_id(merged)}
 
 

@@ -27,34 +27,25 @@ from pathlib import Path
 from typing import Any
 
 import pandas as pd
-from pydantic import ValidationError
 
 from ..common.errors import NamesOptions
 from ..config import BenchmarkConfig
-from ..evaluation.fingerprint import (
-    merge_fingerprints,
-    protocol_difference,
-    protocol_fingerprint,
-    protocol_id,
-    task_config_sha256,
-)
+from ..evaluation.fingerprint import protocol_difference, protocol_id, task_config_sha256
+
+# The legacy names live with the run record's model now (LEGACY_*, UNKNOWN_ACCESS, rule_name: kept importable here).
+from ..evaluation.run_metadata import LEGACY_ACCESS as LEGACY_ACCESS
+from ..evaluation.run_metadata import LEGACY_ENV_ID as LEGACY_ENV_ID
+from ..evaluation.run_metadata import LEGACY_PROTOCOL_KEYS as LEGACY_PROTOCOL_KEYS
+from ..evaluation.run_metadata import UNKNOWN_ACCESS as UNKNOWN_ACCESS
+from ..evaluation.run_metadata import ProtocolMismatch, RunMetadata, RunMetadataError, setting_protocol
+from ..evaluation.run_metadata import rule_name as rule_name
 from ..evaluation.verify_checks import rollout_set_problem
 from ..experiments.layout import METADATA_FILE, UNITS_DIR, is_done
-from ..protocol import EPISODE_SEED_RULES
-from ..records_schema import RECORDS_SCHEMA_VERSION
 from .loading import load_report_data
 from .tarballs import TarballLimits, TarballRefused, unpack_tarball
 
-#: The environment every run that records no protocol ran (the only one before protocols were recorded).
-LEGACY_ENV_ID = "SolarChainEval-v0"
-#: ``run_metadata.json`` keys from which the protocol of a run that records none is computed.
-LEGACY_PROTOCOL_KEYS = ("dataset", "run_seeds", "episodes", "episode_seed_protocol", "setting", "config")
 #: Names of inputs read as tarballs of a run directory or a paper root.
 TARBALL_SUFFIXES = (".tar", ".tar.gz", ".tgz", ".tar.bz2", ".tbz2", ".tar.xz", ".txz")
-#: Access label of a policy whose run did not record what it could see.
-UNKNOWN_ACCESS = "unknown"
-#: Labels of older runs, by today's name: "public" rows ran in the evaluating process.
-LEGACY_ACCESS = {"public": "in-process"}
 
 
 class LeaderboardError(NamesOptions, ValueError):
@@ -112,77 +103,32 @@ def board_fingerprint(fingerprint: Mapping[str, Any], config: BenchmarkConfig) -
     return board
 
 
-def rule_name(recorded: str) -> str:
-    """An episode-seed rule's name from what older metadata recorded (the function's name)."""
-    for name, rule in EPISODE_SEED_RULES.items():
-        if recorded in (name, rule.__name__):
-            return name
-    return recorded if recorded.startswith("custom:") else f"custom:{recorded}"
+def run_protocol(metadata: RunMetadata) -> tuple[dict[str, Any], dict[str, Any]]:
+    """(fingerprint, board fingerprint) of a run from its ``run_metadata.json``.
 
-
-def _config(metadata: Mapping[str, Any], path: Path) -> BenchmarkConfig:
-    if "config" not in metadata:
-        raise LeaderboardError(f"{path} records no config; its protocol cannot be compared (evaluate it again)")
-    try:
-        return BenchmarkConfig.model_validate(metadata["config"])
-    except ValidationError as error:
-        problem = error.errors()[0]
-        where = ".".join(str(p) for p in problem["loc"]) or "<top level>"
-        raise LeaderboardError(f"{path}: its config is not readable ({where}: {problem['msg']})") from None
-
-
-def run_protocol(metadata: Mapping[str, Any], path: Path) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(fingerprint, board fingerprint) of a run from its ``run_metadata.json`` (read from ``path``).
-
-    A run that records no ``protocol`` (written before protocols were recorded) gets one computed
-    from its dataset checksums, run seeds, episodes, episode-seed rule, setting and config; its
-    environment is :data:`LEGACY_ENV_ID` and its action modes are not known.
+    A run that records no ``protocol`` (written before protocols were recorded) is ranked under the
+    one :class:`~solarchain_eval.evaluation.run_metadata.RunMetadata` computes for it on read.
 
     Raises
     ------
     LeaderboardError
-        The metadata lacks what the protocol needs, or its recorded protocol disagrees with its
-        recorded id or config.
+        No protocol can be established, the recorded config is not readable, or the recorded
+        protocol disagrees with its recorded id or config.
     """
-    config = _config(metadata, path)
-    recorded = metadata.get("protocol")
-    if isinstance(recorded, dict):
-        fingerprint = dict(recorded)
-        if "protocol_id" in metadata and protocol_id(fingerprint) != metadata["protocol_id"]:
+    path = metadata.where
+    try:
+        config = metadata.task_config()
+        fingerprint = metadata.fingerprint()
+    except RunMetadataError as error:
+        raise LeaderboardError(
+            f"{error}; its protocol cannot be compared (evaluate the agent again to rank it)"
+        ) from None
+    if metadata.protocol_recorded:
+        if protocol_id(fingerprint) != metadata.protocol_id:
             raise LeaderboardError(f"{path}: its protocol does not hash to its protocol_id (edited by hand?)")
         if fingerprint.get("config_sha256") != task_config_sha256(config):
             raise LeaderboardError(f"{path}: its protocol's config_sha256 does not match its config (edited by hand?)")
-    else:
-        missing = [key for key in LEGACY_PROTOCOL_KEYS if key not in metadata]
-        files = metadata.get("dataset", {}).get("files") if isinstance(metadata.get("dataset"), dict) else None
-        if not files and "dataset" not in missing:
-            missing.append("dataset.files")
-        if missing:
-            raise LeaderboardError(
-                f"{path} records no protocol and lacks {', '.join(missing)} to compute one "
-                "(written by an older version); evaluate the agent again to rank it"
-            )
-        fingerprint = protocol_fingerprint(
-            dataset_sha256=files,
-            run_seeds=metadata["run_seeds"],
-            episodes=metadata["episodes"],
-            episode_seed_rule=rule_name(str(metadata["episode_seed_protocol"])),
-            setting=metadata["setting"],
-            config=config,
-            action_modes={},
-        )
-        fingerprint["env"] = LEGACY_ENV_ID
-        fingerprint["records_schema_version"] = int(metadata.get("records_schema_version", RECORDS_SCHEMA_VERSION))
     return fingerprint, board_fingerprint(fingerprint, config)
-
-
-def _access(metadata: Mapping[str, Any]) -> dict[str, str]:
-    recorded = metadata.get("policy_access")
-    policies = metadata.get("policies") or []
-    access = {str(p): UNKNOWN_ACCESS for p in policies}
-    if isinstance(recorded, dict):
-        access.update({str(k): LEGACY_ACCESS.get(str(v), str(v)) for k, v in recorded.items()})
-    return access
 
 
 def _check_rollouts(section: Section) -> None:
@@ -200,24 +146,31 @@ def _check_rollouts(section: Section) -> None:
         raise LeaderboardError(f"{section.where}: {problem}; a board ranks only whole runs")
 
 
-def _run_sections(source: str, root: Path, metrics: pd.DataFrame, metadata: dict[str, Any]) -> list[Section]:
-    fingerprint, board = run_protocol(metadata, root / METADATA_FILE)
+def _run_sections(source: str, root: Path, metrics: pd.DataFrame, metadata: RunMetadata | None) -> list[Section]:
+    if metadata is None:
+        raise LeaderboardError(f"{root} has no {METADATA_FILE}; a leaderboard needs every run's protocol")
+    fingerprint, board = run_protocol(metadata)
     setting = fingerprint["setting"]
     other = sorted(set(metrics["setting"].astype(str)) - {setting})
     if other:
         raise LeaderboardError(f"{root}: metrics.csv holds setting {other[0]!r} but its protocol is of {setting!r}")
-    return [Section(source, f"{source} [{setting}]", setting, fingerprint, board, metrics, _access(metadata))]
+    return [
+        Section(source, f"{source} [{setting}]", setting, fingerprint, board, metrics, dict(metadata.policy_access))
+    ]
 
 
 def _paper_sections(source: str, root: Path, data) -> list[Section]:
-    """One section per setting of a paper root, its protocol merged from its finished eval units."""
-    units: dict[str, list[tuple[str, dict, dict, dict]]] = {}
-    for name, metadata in sorted(data.unit_metadata.items()):
+    """One section per setting of a paper root, its protocol merged from its finished eval units
+    (:func:`~solarchain_eval.evaluation.run_metadata.setting_protocol`, as the paper root records it)."""
+    units: dict[str, dict[str, RunMetadata]] = {}
+    configs: dict[str, BenchmarkConfig] = {}
+    for name, metadata in sorted(data.unit_run_metadata.items()):
         unit_dir = root / UNITS_DIR / "eval" / name
-        if not metadata or not is_done(unit_dir):
+        if not is_done(unit_dir):
             continue
-        fingerprint, board = run_protocol(metadata, unit_dir / METADATA_FILE)
-        units.setdefault(fingerprint["setting"], []).append((f"{unit_dir}", fingerprint, board, _access(metadata)))
+        fingerprint, _ = run_protocol(metadata)  # each unit's own protocol checked
+        units.setdefault(fingerprint["setting"], {})[str(unit_dir)] = metadata
+        configs.setdefault(fingerprint["setting"], metadata.task_config())
     sections = []
     for setting in data.settings:
         group = units.get(setting)
@@ -226,24 +179,20 @@ def _paper_sections(source: str, root: Path, data) -> list[Section]:
                 f"{source}: no finished evaluation unit under {UNITS_DIR}/eval records the protocol of setting "
                 f"{setting!r}; a leaderboard needs every run's protocol"
             )
-        where, merged, board, _ = group[0]
+        try:
+            merged = setting_protocol(group)
+        except ProtocolMismatch as error:
+            raise LeaderboardError(str(error)) from None
         access: dict[str, str] = {}
-        for unit_where, unit_fp, _, unit_access in group:
-            # A unit evaluates one run seed: the setting's run seeds are the units' together.
-            try:
-                merged = merge_fingerprints([merged, unit_fp])
-            except ValueError as error:
-                raise LeaderboardError(
-                    f"{where} and {unit_where} were evaluated under different protocols: {error}"
-                ) from None
-            access.update(unit_access)
-        board = {**board, "run_seeds": merged["run_seeds"], "action_modes": merged["action_modes"]}
+        for metadata in group.values():
+            access.update(metadata.policy_access)
         metrics = data.rollouts(setting).reset_index(drop=True)
         unrecorded = sorted(set(metrics["policy"].astype(str)) - set(access))
         if unrecorded:
             raise LeaderboardError(
                 f"{source} [{setting}]: no evaluation unit records policy {unrecorded[0]!r} of combined/{setting}"
             )
+        board = board_fingerprint(merged, configs[setting])
         sections.append(Section(source, f"{source} [{setting}]", setting, merged, board, metrics, access))
     return sections
 
@@ -262,7 +211,9 @@ def read_input(path: Path, source: str | None = None) -> list[Section]:
     source = source or str(path)
     data = load_report_data(path)
     run = data.kind == "run"
-    sections = _run_sections(source, path, data.metrics, data.metadata) if run else _paper_sections(source, path, data)
+    sections = (
+        _run_sections(source, path, data.metrics, data.run_metadata) if run else _paper_sections(source, path, data)
+    )
     for section in sections:
         _check_rollouts(section)
     return sections

@@ -17,6 +17,7 @@ import pandas as pd
 
 from ..common.redaction import redact_metadata
 from ..evaluation.records import DIAGNOSTICS_FILE, PARQUET_TWINS, SUMMARY_FILE
+from ..evaluation.run_metadata import RunMetadata, RunMetadataError
 from ..evaluation.rundir import verify_files, verify_run_dir
 from ..experiments.layout import (
     ACTIONS_FILE,
@@ -91,9 +92,12 @@ class ReportData:
         One row per rollout, per step, per step and city, per agentic log step (frames may be
         empty when the run did not write that file). ``logs`` gains ``start_hour``.
     metadata
-        ``paper_metadata.json`` (paper root) or ``run_metadata.json`` (run directory), or ``{}``.
+        ``paper_metadata.json`` (paper root) or ``run_metadata.json`` (run directory, as
+        :class:`~solarchain_eval.evaluation.run_metadata.RunMetadata` reads it), or ``{}``, redacted.
     unit_metadata
-        ``run_metadata.json`` of every evaluation unit of a paper root, by unit name.
+        ``run_metadata.json`` of every evaluation unit of a paper root, by unit name (the same way).
+    run_metadata, unit_run_metadata
+        The run directory's record and the evaluation units' records, typed (absent files left out).
     sources
         The files read, by table name.
     unverified
@@ -109,6 +113,8 @@ class ReportData:
     logs: pd.DataFrame
     metadata: dict[str, Any] = field(default_factory=dict)
     unit_metadata: dict[str, dict[str, Any]] = field(default_factory=dict)
+    run_metadata: RunMetadata | None = None
+    unit_run_metadata: dict[str, RunMetadata] = field(default_factory=dict)
     sources: dict[str, list[Path]] = field(default_factory=dict)
     unverified: list[str] = field(default_factory=list)
     #: ``governance_diagnostics.csv`` rows (counterfactual step records; empty without them).
@@ -271,8 +277,19 @@ def _redacted(metadata: dict[str, Any]) -> dict[str, Any]:
     return redact_metadata(metadata) if isinstance(metadata, dict) else metadata
 
 
-def _unit_metadata(root: Path) -> dict[str, dict[str, Any]]:
-    return {unit.name: _redacted(_read_json(unit / METADATA_FILE)) for unit in eval_unit_dirs(root)}
+def _run_metadata(run_dir: Path) -> RunMetadata | None:
+    """``run_dir``'s record (None when it has none: the checksums say so)."""
+    path = run_dir / METADATA_FILE
+    if not path.is_file():
+        return None
+    try:
+        return RunMetadata.read(path)
+    except RunMetadataError as error:
+        raise ReportDataError(str(error)) from None
+
+
+def _shown(record: RunMetadata | None) -> dict[str, Any]:
+    return _redacted(record.to_dict()) if record is not None else {}
 
 
 def verify_report_inputs(root: Path, kind: str) -> list[str]:
@@ -345,7 +362,6 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
     log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
     diagnostics, diagnostic_paths = _read_table(root, DIAGNOSTICS_FILE, DIAGNOSTICS_REQUIRED, kind)
-    metadata_file = PAPER_METADATA_FILE if kind == "paper" else METADATA_FILE
     # Checked after the files parse, so a malformed file gets the message naming its row.
     unverified = verify_report_inputs(root, kind)
     if unverified and not allow_unverified:
@@ -355,6 +371,8 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
             problem=unverified[0],
             more=more,
         )
+    run_metadata = _run_metadata(root) if kind == "run" else None
+    units = {unit.name: _run_metadata(unit) for unit in eval_unit_dirs(root)} if kind == "paper" else {}
     return ReportData(
         root=root,
         kind=kind,
@@ -362,8 +380,10 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
         actions=actions,
         city_hour=city_hour,
         logs=log_frame,
-        metadata=_redacted(_read_json(root / metadata_file)),
-        unit_metadata=_unit_metadata(root) if kind == "paper" else {},
+        metadata=_redacted(_read_json(root / PAPER_METADATA_FILE)) if kind == "paper" else _shown(run_metadata),
+        unit_metadata={name: _shown(record) for name, record in units.items()},
+        run_metadata=run_metadata,
+        unit_run_metadata={name: record for name, record in units.items() if record is not None},
         sources={
             METRICS_FILE: metric_paths,
             ACTIONS_FILE: action_paths,

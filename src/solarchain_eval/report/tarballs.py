@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
 
+from ..evaluation.run_metadata import RunMetadata, RunMetadataError
 from ..experiments.layout import COMBINED_DIR, DONE_MARKER, METADATA_FILE, PAPER_METADATA_FILE, UNITS_DIR
 from .options import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
 
@@ -82,9 +83,16 @@ def _top(names: list[PurePosixPath]) -> PurePosixPath:
     return PurePosixPath()
 
 
-def _recorded(metadata: Any, key: str) -> list[str]:
-    files = metadata.get(key) if isinstance(metadata, dict) else None
-    return [str(name) for name in files] if isinstance(files, dict) else []
+def _run_files(read_json: Callable[[str], Any], path: str) -> list[str] | None:
+    """The files a ``run_metadata.json`` in the archive vouches for (None: there is none).
+
+    Raises
+    ------
+    RunMetadataError
+        It is malformed (the message names it and the field).
+    """
+    data = read_json(path)
+    return None if data is None else list(RunMetadata.from_record(data, path).files or {})
 
 
 def vouched_files(read_json: Callable[[str], Any], folders: set[str]) -> set[str]:
@@ -95,7 +103,7 @@ def vouched_files(read_json: Callable[[str], Any], folders: set[str]) -> set[str
     """
     paper = read_json(PAPER_METADATA_FILE)
     if paper is None:
-        return {METADATA_FILE, *_recorded(read_json(METADATA_FILE), "files")}
+        return {METADATA_FILE, *(_run_files(read_json, METADATA_FILE) or [])}
     vouched = {PAPER_METADATA_FILE}
     combined = paper.get("combined_sha256") if isinstance(paper, dict) else None
     for setting, files in (combined or {}).items() if isinstance(combined, dict) else ():
@@ -103,9 +111,9 @@ def vouched_files(read_json: Callable[[str], Any], folders: set[str]) -> set[str
             vouched |= {f"{COMBINED_DIR}/{setting}/{name}" for name in files}
     prefix = f"{UNITS_DIR}/eval/"
     for folder in sorted(f for f in folders if f.startswith(prefix) and "/" not in f[len(prefix) :]):
-        unit = read_json(f"{folder}/{METADATA_FILE}")
+        unit = _run_files(read_json, f"{folder}/{METADATA_FILE}")
         if unit is not None:
-            names = [METADATA_FILE, *_recorded(unit, "files"), *UNIT_BOOKKEEPING]
+            names = [METADATA_FILE, *unit, *UNIT_BOOKKEEPING]
             vouched |= {f"{folder}/{name}" for name in names}
     return vouched
 
@@ -150,7 +158,10 @@ def unpack_tarball(tarball: Path, into: Path, limits: TarballLimits | None = Non
                     f"{tarball}: holds no {METADATA_FILE} or {PAPER_METADATA_FILE} at its top or in its one folder; "
                     "pack one run directory or paper root (tar czf run.tar.gz RUN_DIR)"
                 )
-            vouched = vouched_files(read_json, folders)
+            try:
+                vouched = vouched_files(read_json, folders)
+            except RunMetadataError as error:
+                raise TarballRefused(f"{tarball}: {error}") from None
             stray = sorted(rel for rel in files if rel not in vouched)
             if stray:
                 more = f" (and {len(stray) - 1} more)" if len(stray) > 1 else ""
