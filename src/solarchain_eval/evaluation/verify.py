@@ -34,6 +34,7 @@ from ..common.redaction import redact_text
 from ..config import BenchmarkConfig
 from ..data.table import HourlyTable, load_table
 from ..envs.env import SolarChainEnv
+from ..governance.errors import GovernanceConfigError
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..llm.errors import LLMError
 from ..protocol import EPISODE_SEED_RULES
@@ -301,7 +302,7 @@ def _agentic(metadata: Mapping[str, Any], options: VerifyOptions) -> AgenticOpti
         return "LLM calls; pass --llm-cache"
     try:
         return AgenticOptions.from_record(record, llm_cache=options.llm_cache)
-    except (LLMError, TypeError, ValueError) as error:
+    except (GovernanceConfigError, LLMError, TypeError, ValueError) as error:
         return f"the recorded Planner/Auditor options: {error}"
 
 

@@ -21,7 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..common.errors import NamesOptions
+from ..common.errors import InputDataError, NamesOptions
 from ..config import BenchmarkConfig
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
@@ -31,7 +31,7 @@ from .rollout import EpisodeResult
 from .rundir import verify_files
 
 
-class VerifyError(NamesOptions, ValueError):
+class VerifyError(NamesOptions, InputDataError, ValueError):
     """A verification that cannot start: no run directory or metadata, or unusable options."""
 
 

@@ -29,7 +29,7 @@ from typing import Any
 import pandas as pd
 from pydantic import ValidationError
 
-from ..common.errors import NamesOptions
+from ..common.errors import InputDataError, NamesOptions
 from ..config import BenchmarkConfig
 from ..evaluation.fingerprint import (
     merge_fingerprints,
@@ -57,7 +57,7 @@ UNKNOWN_ACCESS = "unknown"
 LEGACY_ACCESS = {"public": "in-process"}
 
 
-class LeaderboardError(NamesOptions, ValueError):
+class LeaderboardError(NamesOptions, InputDataError, ValueError):
     """The inputs cannot be ranked on one board (the one-line message names the inputs and why)."""
 
 
