@@ -233,3 +233,14 @@ def test_a_bug_keeps_its_traceback():
     result = CliRunner().invoke(_command(ValueError("a plain ValueError is not a package error")), [])
     assert result.exit_code == 1 and isinstance(result.exception, ValueError)
     assert not issubclass(ValueError, SolarChainError)
+
+
+def test_the_public_api_page_lists_every_error_under_its_type():
+    page = (PACKAGE.parents[1] / "docs" / "public_api.md").read_text(encoding="utf-8")
+    listed: dict[str, str] = {}
+    for row in page.split("## Errors", 1)[1].splitlines():
+        cells = [cell.strip() for cell in row.strip("|").split("|")]
+        if len(cells) == 3 and cells[0].strip("`") in TYPES:
+            listed.update({name.strip(" `"): cells[0].strip("`") for name in cells[2].split(",")})
+    expected = {n: (ancestors(n, FOUND) & TYPES).pop() for n in set(FOUND) - FAMILIES - TYPES - OUTSIDE_THE_BASE}
+    assert listed == expected
