@@ -35,8 +35,9 @@ RANKS = {
     "": 9,  # the package's face: solarchain_eval/__init__.py
     "cli": 10,
 }
-#: Within the bottom layer, config.py may read its defaults from protocol.py.
-BOTTOM_EXCEPTIONS = {("config", "protocol")}
+#: Within the bottom layer, config.py may read its defaults from protocol.py and base its error on
+#: common/errors.py's types.
+BOTTOM_EXCEPTIONS = {("config", "protocol"), ("config", "common")}
 #: The package's top level: its face and three contracts every layer reads.
 TOP_LEVEL = {"__init__.py", "config.py", "protocol.py", "records_schema.py", "py.typed"}
 

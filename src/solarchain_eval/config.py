@@ -14,10 +14,11 @@ from typing import Any, Literal
 import yaml
 from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
 
+from .common.errors import OptionsError
 from .protocol import PAPER_EPISODES, PAPER_SEED
 
 
-class ConfigError(ValueError):
+class ConfigError(OptionsError, ValueError):
     """A configuration file is missing, unreadable or invalid."""
 
 

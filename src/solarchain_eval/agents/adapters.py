@@ -20,6 +20,7 @@ from typing import Any
 
 import numpy as np
 
+from ..common.errors import UserAgentError
 from ..config import BenchmarkConfig
 from ..market.spaces import n_discrete_actions
 from .names import name_problem
@@ -55,7 +56,7 @@ def is_builtin_policy(agent: Any) -> bool:
     return f"{cls.__module__}.{cls.__qualname__}" in BUILTIN_POLICY_CLASSES
 
 
-class AgentError(ValueError):
+class AgentError(UserAgentError, ValueError):
     """An agent that cannot take part as given: bad name, action mode, action or hook."""
 
 

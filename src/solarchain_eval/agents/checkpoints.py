@@ -12,7 +12,7 @@ import json
 from pathlib import Path
 from typing import Any
 
-from ..common.errors import NamesOptions
+from ..common.errors import NamesOptions, OptionsError
 
 ALGOS = ("ppo", "sac", "dqn")
 #: Algorithm -> the env action mode it trains and acts in.
@@ -27,7 +27,7 @@ MODEL_FILE = "model.zip"
 TRAIN_CONFIG_FILE = "train_config.json"
 
 
-class TrainingError(NamesOptions, ValueError):
+class TrainingError(NamesOptions, OptionsError, ValueError):
     """A training request that cannot be carried out as given (reported without a traceback)."""
 
 

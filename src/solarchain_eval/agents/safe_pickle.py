@@ -19,6 +19,8 @@ import io
 import pickle
 from typing import Any
 
+from ..common.errors import RefusedError
+
 #: (module, name) pairs allowed as they are: numpy's array, scalar and generator rebuilders and containers.
 _EXACT = {
     *((m, n) for m in ("numpy.core.multiarray", "numpy._core.multiarray") for n in ("_reconstruct", "scalar")),
@@ -39,7 +41,7 @@ _EXACT = {
 _CLASS_MODULES = ("gymnasium.spaces.", "stable_baselines3.", "sb3_contrib.", "torch.nn.", "torch.optim.")
 
 
-class UnsafePickle(pickle.UnpicklingError):
+class UnsafePickle(RefusedError, pickle.UnpicklingError):
     """A pickle that names something a model's parts never need (refused before it is called)."""
 
 

@@ -33,7 +33,7 @@ from typing import Any
 
 import numpy as np
 
-from ..common.errors import NamesOptions
+from ..common.errors import InputDataError, NamesOptions, RefusedError
 from ..config import BenchmarkConfig
 from ..market.observation import OBSERVATION_SHAPE
 from .checkpoints import MODEL_FILE, TRAINABLE_ACTION_MODES, algorithm_class, trained_algo
@@ -103,7 +103,7 @@ def resolve_model_path(name: str, models: dict[str, Path]) -> Path:
     )
 
 
-class ModelNotFoundError(NamesOptions, FileNotFoundError):
+class ModelNotFoundError(NamesOptions, InputDataError, FileNotFoundError):
     """No trained model for a learned policy (the message lists where it looked)."""
 
 
@@ -114,7 +114,7 @@ _SCHEDULES = ("learning_rate", "lr_schedule", "clip_range", "clip_range_vf", "ex
 _NEEDED = ("observation_space", "action_space", "policy_class", "policy_kwargs")
 
 
-class UnsafeModel(ValueError):
+class UnsafeModel(RefusedError, ValueError):
     """A model file whose pickled parts name code a model never needs (refused, nothing run)."""
 
 

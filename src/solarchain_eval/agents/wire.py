@@ -23,12 +23,14 @@ from typing import Any
 
 import numpy as np
 
+from ..common.errors import UserAgentError
+
 #: Numpy dtypes an answer may carry: boolean, integer and floating, written as ``dtype.str``.
 _DTYPE = re.compile(r"^[<>|=]?[biuf][1-9][0-9]?$")
 _KINDS = "returns None, numbers, strings, bytes, lists, tuples, dicts with string keys and numeric numpy arrays"
 
 
-class WireError(ValueError):
+class WireError(UserAgentError, ValueError):
     """A value that has no data-only encoding, or an answer that is not one."""
 
 

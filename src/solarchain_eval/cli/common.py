@@ -17,11 +17,9 @@ from rich.progress import BarColumn, MofNCompleteColumn, Progress, TextColumn, T
 from rich.table import Table
 from rich.text import Text
 
-from ..common.errors import NamesOptions, flag_of
+from ..common.errors import NamesOptions, OptionsError, SolarChainError, flag_of
 from ..common.redaction import redact_text
-from ..config import ConfigError, check_seeds
-from ..data.errors import DatasetError
-from ..data.weather import WeatherError
+from ..config import check_seeds
 from .help import get_current_context
 
 # Every text printed comes from users, files or servers somewhere (paths, city names, server
@@ -32,20 +30,22 @@ _PLAIN = {"markup": False, "emoji": False, "highlight": False}
 console = Console(width=None if Console().is_terminal else 140, **_PLAIN)
 err_console = Console(stderr=True, **_PLAIN)
 
-#: Errors caused by the user's input: reported in one line, exit status 2, no traceback.
-USER_ERRORS: tuple[type[BaseException], ...] = (DatasetError, WeatherError, ConfigError)
+#: Errors caused by the user's input: reported in one line, exit status 2, no traceback. Every
+#: error the package raises on purpose is a SolarChainError (common/errors.py); anything else is a
+#: bug and keeps its traceback.
+USER_ERRORS: tuple[type[BaseException], ...] = (SolarChainError,)
 # Library errors name options by field; the CLI shows them as the flags the user typed (see option_errors).
 EXIT_USAGE = 2
 
 F = TypeVar("F", bound=Callable)
 
 
-class CliError(Exception):
+class CliError(OptionsError):
     """A problem with the command's arguments or inputs, reported without a traceback."""
 
 
 def register_user_error(*types: type[BaseException]) -> None:
-    """Let other modules (training, LLM client) add their input errors to the list."""
+    """Add error types from outside the package (whose own errors are all covered) to the list."""
     global USER_ERRORS
     USER_ERRORS = tuple(dict.fromkeys((*USER_ERRORS, *types)))
 
@@ -93,7 +93,7 @@ def reports_errors(func: F) -> F:
     def wrapper(*args, **kwargs):
         try:
             return func(*args, **kwargs)
-        except (CliError, *USER_ERRORS) as error:
+        except USER_ERRORS as error:
             _show_traceback(error)
             message = error.message_for(_flag_of) if isinstance(error, NamesOptions) else str(error)
             message = redact_text(message)  # a spec or URL the error repeats may carry credentials

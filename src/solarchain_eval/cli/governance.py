@@ -27,8 +27,8 @@ from ..experiments.user_agents import refuse_llm_agent
 from ..governance.calibrated import DEFAULT_TARGET_AUDIT_RATE
 from ..governance.controls import DEFAULT_ORACLE_REWARD_LOSS, TRIGGER_SETS, SchedulerControls
 from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ..governance.errors import GovernanceConfigError
 from ..governance.request import GovernanceRequest
-from ..llm.errors import LLMConfigError
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
 from . import agentic as agentic_cli
 from . import app
@@ -100,7 +100,7 @@ def _combination(
     assert options is not None
     try:
         options = dataclasses.replace(options, **extra)
-    except LLMConfigError as error:
+    except GovernanceConfigError as error:
         raise cli_error(error) from None
     return Combination(planner, auditor, options), request
 
@@ -216,7 +216,7 @@ def governance(
     for trigger_set in _split(triggers, "trigger sets"):
         try:
             controls = SchedulerControls(triggers=trigger_set, max_audits=max_audits, cooldown_steps=cooldown)
-        except LLMConfigError as error:
+        except GovernanceConfigError as error:
             raise cli_error(error) from None
         extra = {
             "controls": controls,

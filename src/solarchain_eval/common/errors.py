@@ -1,4 +1,24 @@
-"""Errors that name options: by field name in the library, by flag on the command line.
+"""The package's errors: one base, user errors by type, and errors that name options.
+
+Every exception the package raises on purpose derives from :class:`SolarChainError` through one
+of its types, each a kind of user mistake or of trouble outside the package:
+
+- :class:`InputDataError`: a file, folder or record given to the package is missing, malformed or
+  inconsistent (a dataset, a weather payload, a run directory to report, rank or verify, a model
+  file, a recorded LLM response, a request to the local model server);
+- :class:`OptionsError`: an option, a configuration file or a combination of them is invalid;
+- :class:`UserAgentError`: a user's agent cannot take part or failed while it was driven;
+- :class:`RefusedError`: an untrusted submission (a pickled model, a tarball) refused before
+  anything in it is run or extracted;
+- :class:`ServiceError`: a service the run needs is unavailable or failed (an LLM endpoint or the
+  local model server, a Ray cluster).
+
+Each error class keeps its builtin base too (``ValueError``, ``FileNotFoundError``,
+``RuntimeError``, ``pickle.UnpicklingError``), so catching that still works. A bug is never a
+:class:`SolarChainError`: the command line prints any of these as one line and exits with status 2,
+and shows everything else as a traceback. Internal signals that never leave the module raising
+them stay outside the base, so that one escaping by mistake shows its traceback (today only
+``llm.serving.jump_forward._OutOfTokens``, which ends a decoding loop).
 
 A library error about an argument names the argument as the library knows it (``overwrite``,
 ``llm_cache_mode``); the command line shows the flag the user typed (``--overwrite``,
@@ -45,8 +65,33 @@ def flag_of(field: str) -> str:
     return "--" + field.replace("_", "-")
 
 
-class NamesOptions(Exception):
-    """Mixin of errors whose message names options (see the module docstring)."""
+class SolarChainError(Exception):
+    """Base of every error the package raises on purpose: a user's mistake or an unavailable service."""
+
+
+class InputDataError(SolarChainError):
+    """A file, folder or record given to the package is missing, malformed or inconsistent."""
+
+
+class OptionsError(SolarChainError):
+    """An option, a configuration file or a combination of them is invalid."""
+
+
+class UserAgentError(SolarChainError):
+    """A user's agent cannot take part as given, or failed while it was driven."""
+
+
+class RefusedError(SolarChainError):
+    """An untrusted submission refused before anything in it is run or extracted."""
+
+
+class ServiceError(SolarChainError):
+    """A service the run needs is unavailable or failed (an LLM endpoint, a local server, a Ray cluster)."""
+
+
+class NamesOptions(SolarChainError):
+    """Mixin of errors whose message names options (see the module docstring); each error class
+    that uses it also derives from one of the types above."""
 
     template: str | None = None
     values: Mapping[str, Any] = {}

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from ..common.errors import InputDataError
 
-class DatasetError(ValueError):
+
+class DatasetError(InputDataError, ValueError):
     """A dataset directory is missing a file or holds invalid data."""
 
     def __init__(self, path: Path | str, message: str, column: str | None = None, row: int | None = None):

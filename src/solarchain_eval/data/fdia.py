@@ -23,6 +23,8 @@ from typing import Any
 import numpy as np
 import pandas as pd
 
+from ..common.errors import OptionsError
+
 FDIA_FRACTION = 0.05
 FDIA_MULTIPLIERS = (0.42, 1.38, 1.55, 1.82)
 #: The attack patterns, each with its line of the ``--fdia-pattern`` help ("{burst_hours}": where
@@ -41,7 +43,7 @@ DARK_P_MAX_W = 1.0
 DEFAULT_BURST_HOURS = 6
 
 
-class FdiaError(ValueError):
+class FdiaError(OptionsError, ValueError):
     """An attack scenario that is invalid or cannot be carried out on the table."""
 
 

@@ -16,10 +16,11 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..common.atomic_files import atomic_write_text
+from ..common.errors import InputDataError
 from .cities import City
 
 
-class WeatherError(ValueError):
+class WeatherError(InputDataError, ValueError):
     """A weather payload is missing, malformed or does not cover what the build needs."""
 
 

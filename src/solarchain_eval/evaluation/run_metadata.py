@@ -19,6 +19,7 @@ from typing import Any
 from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError, model_validator
 
 from ..common.atomic_files import atomic_write_json
+from ..common.errors import InputDataError
 from ..config import BenchmarkConfig
 from ..protocol import EPISODE_SEED_RULES
 from ..records_schema import RECORDS_SCHEMA_VERSION
@@ -35,7 +36,7 @@ UNKNOWN_ACCESS = "unknown"
 LEGACY_ACCESS = {"public": "in-process"}
 
 
-class RunMetadataError(ValueError):
+class RunMetadataError(InputDataError, ValueError):
     """A ``run_metadata.json`` that cannot be read: one line naming the file and the field."""
 
 
@@ -241,7 +242,7 @@ class RunMetadata(BaseModel):
         return dict(self.protocol)
 
 
-class ProtocolMismatch(ValueError):
+class ProtocolMismatch(InputDataError, ValueError):
     """Runs of one setting evaluated under different protocols (the message names both runs)."""
 
 

@@ -29,7 +29,7 @@ from pathlib import Path
 from types import TracebackType
 
 from ..common.atomic_files import sha256_file
-from ..common.errors import NamesOptions
+from ..common.errors import NamesOptions, OptionsError
 from .records import (
     ACTIONS_FILE,
     ACTIONS_PARQUET,
@@ -59,7 +59,7 @@ KILL_AT_ENV = "SOLARCHAIN_TEST_KILL_AT"
 KILL_POINTS = ("staged", "metadata", "old-moved", "published")
 
 
-class RunDirError(NamesOptions, ValueError):
+class RunDirError(NamesOptions, OptionsError, ValueError):
     """The run directory cannot be written (a one-line message naming it and why)."""
 
 

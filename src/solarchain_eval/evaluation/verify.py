@@ -32,6 +32,7 @@ from ..agents.specs import AgentSpecError, parse_agent_spec
 from ..common.errors import NamesOptions
 from ..common.redaction import redact_text
 from ..config import BenchmarkConfig
+from ..governance.errors import GovernanceConfigError
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..llm.errors import LLMError
 from ..protocol import EPISODE_SEED_RULES
@@ -301,7 +302,7 @@ def _agentic(metadata: RunMetadata, options: VerifyOptions) -> AgenticOptions | 
         return "LLM calls; pass --llm-cache"
     try:
         return AgenticOptions.from_record(record, llm_cache=options.llm_cache)
-    except (LLMError, TypeError, ValueError) as error:
+    except (GovernanceConfigError, LLMError, TypeError, ValueError) as error:
         return f"the recorded Planner/Auditor options: {error}"
 
 

@@ -19,7 +19,7 @@ from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
-from ..common.errors import NamesOptions
+from ..common.errors import InputDataError, NamesOptions
 from ..config import BenchmarkConfig
 from ..data.provenance import dataset_provenance
 from ..data.table import load_table
@@ -30,7 +30,7 @@ from .run_metadata import RunMetadata, RunMetadataError
 from .rundir import verify_files
 
 
-class VerifyError(NamesOptions, ValueError):
+class VerifyError(NamesOptions, InputDataError, ValueError):
     """A verification that cannot start: no run directory or metadata, or unusable options."""
 
 

@@ -28,7 +28,7 @@ from typing import Any
 
 from ..agents.checkpoints import ALGOS, MODEL_FILE, TRAINABLE_ALGOS
 from ..common.atomic_files import atomic_write_json
-from ..common.errors import NamesOptions
+from ..common.errors import NamesOptions, OptionsError
 from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
 from ..evaluation.settings import KNOWN_SETTINGS, setting_has_physics_penalty
@@ -41,7 +41,7 @@ from .units import UNIT_FILE, UnitProgress, UnitTask, model_digest, read_done, u
 from .user_agents import absolute_paths, agent_identity, worker_spec
 
 
-class GridError(NamesOptions, ValueError):
+class GridError(NamesOptions, OptionsError, ValueError):
     """The grid cannot run as asked (a different grid in ROOT, a busy ROOT, bad arguments)."""
 
 

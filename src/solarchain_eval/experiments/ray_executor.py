@@ -24,14 +24,14 @@ from pathlib import Path
 from typing import Any
 
 from ..common.atomic_files import atomic_write_bytes
-from ..common.errors import NamesOptions
+from ..common.errors import NamesOptions, ServiceError
 from ..data.files import DATASET_FILES, MANIFEST_FILE
 from .units import UnitResult, UnitTask, collect_files, execute_unit, write_done
 
 TOKEN_FILE = ".grid-token"
 
 
-class RayUnavailableError(NamesOptions, RuntimeError):
+class RayUnavailableError(NamesOptions, ServiceError, RuntimeError):
     """``--ray-address`` was given but ray is not installed or the cluster cannot be reached."""
 
 

@@ -18,6 +18,7 @@ from typing import Any, Literal
 
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
+from ..common.errors import OptionsError
 from ..config import BenchmarkConfig, ConfigError, _read_text, _UniqueKeyLoader, config_from_mapping, load_config
 from ..data.cities import (
     DEFAULT_END,
@@ -36,7 +37,7 @@ from ..protocol import EPISODE_SEED_RULES
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 
 
-class SweepError(ValueError):
+class SweepError(OptionsError, ValueError):
     """A sweep YAML that is unreadable or invalid (the message names the file and key)."""
 
 

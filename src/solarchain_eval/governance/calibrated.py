@@ -13,8 +13,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..llm.errors import CallSite, LLMConfigError
+from ..llm.errors import CallSite
 from ..market.actions import ActionCodec
+from .errors import GovernanceConfigError
 from .planner import EpisodeContext, PlanOutcome, RulePlanner
 from .schemas import (
     GAP_THRESHOLD_RANGE,
@@ -106,12 +107,14 @@ class CalibratedRulePlanner(RulePlanner):
     def __init__(self, codec: ActionCodec, target_rate: float = DEFAULT_TARGET_AUDIT_RATE) -> None:
         super().__init__(codec)
         if not 0.0 < target_rate <= 1.0:
-            raise LLMConfigError(f"the calibrated planner's target audit rate must be in (0, 1], got {target_rate}")
+            raise GovernanceConfigError(
+                f"the calibrated planner's target audit rate must be in (0, 1], got {target_rate}"
+            )
         self.target_rate = float(target_rate)
 
     def plan(self, context: EpisodeContext, site: CallSite) -> PlanOutcome:
         if context.hourly_signals is None:
-            raise LLMConfigError("the calibrated planner needs the episode's hourly signals (episode_context)")
+            raise GovernanceConfigError("the calibrated planner needs the episode's hourly signals (episode_context)")
         rule = self.output(context)
         (tv, tg, ts), rate = calibrated_thresholds(context.hourly_signals, self.target_rate)
         steps = context.episode_steps

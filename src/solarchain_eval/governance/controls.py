@@ -25,10 +25,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..llm.errors import CallSite, LLMConfigError
+from ..llm.errors import CallSite
 from ..market.actions import ActionCodec
 from .auditor import REVISION_TOLERANCE, AuditOutcome, RuleAuditor, StepContext
 from .counterfactual import executed_form, step_cost
+from .errors import GovernanceConfigError
 from .scheduler import HARD_REASONS, Decision, action_delta
 
 #: Trigger sets of the ablations: every trigger, the hard ones, the soft one, or one hard trigger.
@@ -58,11 +59,13 @@ class SchedulerControls:
 
     def __post_init__(self) -> None:
         if self.triggers not in TRIGGER_SETS:
-            raise LLMConfigError(f"unknown trigger set {self.triggers!r} (choose from {', '.join(TRIGGER_SETS)})")
+            raise GovernanceConfigError(
+                f"unknown trigger set {self.triggers!r} (choose from {', '.join(TRIGGER_SETS)})"
+            )
         if self.max_audits is not None and self.max_audits < 1:
-            raise LLMConfigError(f"max audits must be at least 1, got {self.max_audits}")
+            raise GovernanceConfigError(f"max audits must be at least 1, got {self.max_audits}")
         if self.cooldown_steps is not None and self.cooldown_steps < 0:
-            raise LLMConfigError(f"cooldown must be non-negative, got {self.cooldown_steps}")
+            raise GovernanceConfigError(f"cooldown must be non-negative, got {self.cooldown_steps}")
 
     @property
     def is_default(self) -> bool:
@@ -168,7 +171,7 @@ class OracleAuditor:
 
     def __init__(self, codec: ActionCodec, reward_loss: float = DEFAULT_ORACLE_REWARD_LOSS) -> None:
         if not (reward_loss >= 0):
-            raise LLMConfigError(f"the oracle's reward-loss bound must be non-negative, got {reward_loss}")
+            raise GovernanceConfigError(f"the oracle's reward-loss bound must be non-negative, got {reward_loss}")
         self.codec = codec
         self.reward_loss = float(reward_loss)
         self.grid = codec.discrete_table(ORACLE_GRID_LEVELS)
@@ -181,7 +184,7 @@ class OracleAuditor:
         those, the least cost, then the highest reward, then the first in grid order."""
         evaluate = context.counterfactual
         if evaluate is None:
-            raise LLMConfigError("the oracle auditor needs the counterfactual evaluator (a governed env step)")
+            raise GovernanceConfigError("the oracle auditor needs the counterfactual evaluator (a governed env step)")
         base = evaluate(context.bounded_action)
         floor = base.reward - self.reward_loss if math.isfinite(self.reward_loss) else -math.inf
         best, best_cost, best_reward = context.bounded_action, step_cost(base), base.reward

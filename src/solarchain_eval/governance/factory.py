@@ -15,6 +15,7 @@ from ..market.actions import ActionCodec
 from .auditor import AUDITOR_KINDS, ApproveOnlyAuditor, Auditor, LLMAuditor, RuleAuditor
 from .calibrated import DEFAULT_TARGET_AUDIT_RATE, CalibratedRulePlanner
 from .controls import DEFAULT_ORACLE_REWARD_LOSS, AlwaysAuditAuditor, OracleAuditor, RandomAuditor, SchedulerControls
+from .errors import GovernanceConfigError
 from .planner import PLANNER_KINDS, DefaultPlanner, LLMPlanner, Planner, RulePlanner
 from .wrapper import GovernedPolicy
 
@@ -83,9 +84,9 @@ class AgenticOptions:
 
     def __post_init__(self) -> None:
         if self.planner not in PLANNER_KINDS:
-            raise LLMConfigError(f"unknown planner {self.planner!r} (choose from {', '.join(PLANNER_KINDS)})")
+            raise GovernanceConfigError(f"unknown planner {self.planner!r} (choose from {', '.join(PLANNER_KINDS)})")
         if self.auditor not in AUDITOR_KINDS:
-            raise LLMConfigError(f"unknown auditor {self.auditor!r} (choose from {', '.join(AUDITOR_KINDS)})")
+            raise GovernanceConfigError(f"unknown auditor {self.auditor!r} (choose from {', '.join(AUDITOR_KINDS)})")
         if self.uses_llm and self.llm is None:
             raise LLMConfigError.about(
                 "an LLM planner or auditor needs LLM settings ({opt_llm_api}, {opt_llm_model}, ...)"
@@ -131,8 +132,10 @@ class AgenticOptions:
 
         Raises
         ------
+        GovernanceConfigError
+            An unknown planner, auditor or trigger set, or a control out of range.
         LLMConfigError
-            An unknown planner, auditor or trigger set, or LLM components without ``llm_cache``.
+            LLM components without ``llm_cache``.
         """
         llm: LLMOptions | None = None
         described_llm = record.get("llm")

@@ -14,7 +14,7 @@ from dataclasses import dataclass, field, fields, replace
 from pathlib import Path
 from typing import Any
 
-from ..common.errors import NamesOptions
+from ..common.errors import NamesOptions, OptionsError
 from ..llm.cache import CACHE_MODES
 from ..llm.client import (
     DEFAULT_MAX_OUTPUT_TOKENS,
@@ -33,7 +33,7 @@ AGENTIC_MODES = ("none", "planner_auditor")
 LLM_BACKENDS = ("remote", "local")
 
 
-class GovernanceRequestError(NamesOptions, ValueError):
+class GovernanceRequestError(NamesOptions, OptionsError, ValueError):
     """Inconsistent governance options (the message names the fields at fault)."""
 
 

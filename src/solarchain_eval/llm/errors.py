@@ -10,7 +10,7 @@ from __future__ import annotations
 from collections.abc import Callable
 from dataclasses import dataclass
 
-from ..common.errors import NamesOptions, flag_of, render
+from ..common.errors import InputDataError, NamesOptions, OptionsError, ServiceError, flag_of, render
 
 
 @dataclass(frozen=True)
@@ -30,6 +30,11 @@ class CallSite:
 
 class LLMError(NamesOptions, RuntimeError):
     """Base class: an LLM call could not produce a valid structured output.
+
+    Each subclass is also of one error type of :mod:`solarchain_eval.common.errors`: settings are
+    an :class:`~solarchain_eval.common.errors.OptionsError`, the response cache an
+    :class:`~solarchain_eval.common.errors.InputDataError`, the model's or endpoint's failures a
+    :class:`~solarchain_eval.common.errors.ServiceError`.
 
     ``what`` and the detail may name options as ``{opt_<field>}`` (see :mod:`solarchain_eval.common.errors`).
     """
@@ -56,29 +61,29 @@ class LLMError(NamesOptions, RuntimeError):
         return located
 
 
-class LLMConfigError(LLMError):
+class LLMConfigError(LLMError, OptionsError):
     what = "LLM settings are incomplete"
 
 
-class LLMRefusalError(LLMError):
+class LLMRefusalError(LLMError, ServiceError):
     what = "the model refused"
 
 
-class LLMTruncatedError(LLMError):
+class LLMTruncatedError(LLMError, ServiceError):
     what = "the output was truncated (raise {opt_llm_max_output_tokens})"
 
 
-class LLMSchemaError(LLMError):
+class LLMSchemaError(LLMError, ServiceError):
     what = "the output does not match the required schema"
 
 
-class LLMTransportError(LLMError):
+class LLMTransportError(LLMError, ServiceError):
     what = "the endpoint could not be reached or answered with an error (after retries)"
 
 
-class LLMCacheMissError(LLMError):
+class LLMCacheMissError(LLMError, InputDataError):
     what = "no recorded response for this request in replay mode"
 
 
-class LLMCacheError(LLMError):
+class LLMCacheError(LLMError, InputDataError):
     what = "the response cache is unusable"

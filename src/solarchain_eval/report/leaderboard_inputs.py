@@ -28,7 +28,7 @@ from typing import Any
 
 import pandas as pd
 
-from ..common.errors import NamesOptions
+from ..common.errors import InputDataError, NamesOptions
 from ..config import BenchmarkConfig
 from ..evaluation.fingerprint import protocol_difference, protocol_id, task_config_sha256
 
@@ -48,7 +48,7 @@ from .tarballs import TarballLimits, TarballRefused, unpack_tarball
 TARBALL_SUFFIXES = (".tar", ".tar.gz", ".tgz", ".tar.bz2", ".tbz2", ".tar.xz", ".txz")
 
 
-class LeaderboardError(NamesOptions, ValueError):
+class LeaderboardError(NamesOptions, InputDataError, ValueError):
     """The inputs cannot be ranked on one board (the one-line message names the inputs and why)."""
 
 

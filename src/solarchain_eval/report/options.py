@@ -8,7 +8,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 from typing import Literal
 
-from ..common.errors import NamesOptions
+from ..common.errors import InputDataError, NamesOptions
 from ..protocol import PAPER_SEED
 
 #: Resamples per bootstrap interval (rliable's examples use 2,000).
@@ -25,7 +25,7 @@ AGAINST_CHOICES = ("paper",)
 LEADERBOARD_FORMATS = ("csv", "md", "html")
 
 
-class ReportDataError(NamesOptions, ValueError):
+class ReportDataError(NamesOptions, InputDataError, ValueError):
     """The run's files are missing, malformed or inconsistent (the message names file, column, row)."""
 
 

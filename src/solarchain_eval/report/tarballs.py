@@ -21,6 +21,7 @@ from dataclasses import dataclass
 from pathlib import Path, PurePosixPath
 from typing import Any
 
+from ..common.errors import RefusedError
 from ..evaluation.run_metadata import RunMetadata, RunMetadataError
 from ..experiments.layout import COMBINED_DIR, DONE_MARKER, METADATA_FILE, PAPER_METADATA_FILE, UNITS_DIR
 from .options import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
@@ -31,7 +32,7 @@ METADATA_MAX_BYTES = 64 * 2**20
 UNIT_BOOKKEEPING = ("unit.json", "unit.log", DONE_MARKER)
 
 
-class TarballRefused(ValueError):
+class TarballRefused(RefusedError, ValueError):
     """A tarball refused before extraction (the one-line message names it and why)."""
 
 

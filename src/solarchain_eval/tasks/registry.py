@@ -13,6 +13,7 @@ import importlib
 import re
 from importlib.metadata import entry_points
 
+from ..common.errors import OptionsError
 from .base import Task
 
 #: The task of every run that does not name one (the paper's solar market).
@@ -25,7 +26,7 @@ _NAME = re.compile(r"^[a-z][a-z0-9-]{0,39}$")
 _registered: dict[str, Task] = {}
 
 
-class UnknownTaskError(ValueError):
+class UnknownTaskError(OptionsError, ValueError):
     """A task name that no built-in task, plugin or :func:`register_task` call provides."""
 
 

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 from decimal import ROUND_CEILING, ROUND_FLOOR, Decimal
 from typing import Any
 
+from ...common.errors import InputDataError
+
 #: Digits allowed in a number's integer part, fraction and exponent: those of llama.cpp's JSON
 #: grammar (``[1-9] [0-9]{0,15}`` and ``[0-9]{1,16}``), so a greedy model repeating a digit must
 #: still end the value, and a two-digit exponent, so every number is a finite double.
@@ -61,7 +63,7 @@ def _char_run(char_class: str) -> re.Pattern[str]:
     return re.compile(f"{char_class}*")
 
 
-class UnsupportedSchema(ValueError):
+class UnsupportedSchema(InputDataError, ValueError):
     """The schema is not a fixed template (alternatives, arrays, optional keys, ...)."""
 
 

@@ -42,7 +42,11 @@ class Reply:
 
 
 class _OutOfTokens(Exception):
-    pass
+    """The token budget ran out mid-template: caught in this module to end decoding.
+
+    Deliberately not a :class:`~solarchain_eval.common.errors.SolarChainError` (a user error): it
+    never leaves this module, and one that escaped would be a bug, shown with its traceback.
+    """
 
 
 class JumpForwardDecoder:

@@ -35,6 +35,7 @@ from pathlib import Path
 import httpx
 
 from ...common.cpus import available_cpus
+from ...common.errors import ServiceError
 from ..errors import LLMConfigError, LLMError, LLMTransportError
 from .jump_forward import CHAT_FORMAT
 
@@ -164,7 +165,7 @@ def free_port() -> int:
         return int(sock.getsockname()[1])
 
 
-class PortInUseError(LLMError):
+class PortInUseError(LLMError, ServiceError):
     """The server's port on 127.0.0.1 cannot be listened on (``port`` says which, ``problem`` why)."""
 
     what = "the local model server cannot start"

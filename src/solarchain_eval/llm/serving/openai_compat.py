@@ -33,6 +33,8 @@ from typing import Any
 
 from pydantic import BaseModel, ValidationError
 
+from ...common.errors import InputDataError
+
 CHAT_PATH = "/v1/chat/completions"
 #: The JSON endpoints whose bodies are checked: the chat endpoint, and those with a request model.
 CHECKED_PATHS = (CHAT_PATH, "/v1/completions", "/v1/embeddings")
@@ -47,7 +49,7 @@ Receive = Callable[[], Awaitable[dict[str, Any]]]
 Send = Callable[[dict[str, Any]], Awaitable[None]]
 
 
-class InvalidRequest(ValueError):
+class InvalidRequest(InputDataError, ValueError):
     """A request the API refuses: ``message`` says why, ``param`` names the field (or None)."""
 
     def __init__(self, message: str, param: str | None = None) -> None:
