@@ -235,7 +235,6 @@ KNOWN_TASK_DEBT = {
     "cli.bench",
     "cli.bench_agent",
     "cli.bench_train",
-    "cli.common",
     "cli.data",
     "cli.evaluate",
     "evaluation.fingerprint",

@@ -8,6 +8,7 @@ import ast
 import builtins
 import importlib
 from pathlib import Path
+from types import SimpleNamespace
 
 import pytest
 import typer
@@ -45,6 +46,9 @@ BUILTIN_BASES = {
     "FdiaError": "ValueError",
     "GovernanceRequestError": "ValueError",
     "GridError": "ValueError",
+    "RunMetadataError": "ValueError",
+    "ProtocolMismatch": "ValueError",
+    "UnknownTaskError": "ValueError",
     "HttpAgentError": "ValueError",
     "InvalidRequest": "ValueError",
     "IsolatedAgentError": "ValueError",
@@ -191,7 +195,8 @@ def test_governance_options_raise_the_governance_type(build, message):
 
 
 def test_verify_reports_a_recorded_unknown_planner_instead_of_raising():
-    reason = _agentic({"agentic": {"planner": "wizard", "auditor": "rule"}}, VerifyOptions())
+    recorded = SimpleNamespace(agentic={"planner": "wizard", "auditor": "rule"})  # a run's metadata, as far as read
+    reason = _agentic(recorded, VerifyOptions())
     assert (
         reason
         == f"the recorded Planner/Auditor options: unknown planner 'wizard' (choose from {', '.join(PLANNER_KINDS)})"
