@@ -257,7 +257,7 @@ def governance(
                 on_combination=lambda c, s: say(f"{s}: {c.planner_label} planner, {c.auditor_label} auditor"),
                 command=invoked_command(),
             )
-        from ..report.governance_leaderboard import governance_leaderboard, write_governance_leaderboard
+        from ..report.governance.leaderboard import governance_leaderboard, write_governance_leaderboard
 
         board = governance_leaderboard(runs, threshold=unsafe_threshold, resamples=resamples)
         files = write_governance_leaderboard(board, writer.staging)
