@@ -61,7 +61,7 @@ def runs(tmp_path_factory, tiny_dataset) -> dict:
     from solarchain_eval.config import BenchmarkConfig
     from solarchain_eval.envs.jax_env import make_env_params
     from solarchain_eval.training.jax_chunks import ChunkedTraining
-    from solarchain_eval.training.jax_trainer import compile_training
+    from solarchain_eval.training.jax_algorithm import compile_training
 
     root = tmp_path_factory.mktemp("jax-resume")
     spec = JaxTrainSpec("sac", SEEDS, STEPS, data_dir=tiny_dataset, chunk_steps=CHUNK)
