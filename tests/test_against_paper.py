@@ -22,8 +22,9 @@ from solarchain_eval.cli import app
 from solarchain_eval.common.atomic_files import read_csv_exact
 from solarchain_eval.records_schema import METRIC_NAMES
 from solarchain_eval.report import build_report
-from solarchain_eval.report.against_findings import findings_table
-from solarchain_eval.report.against_paper import (
+from solarchain_eval.report.against_paper.against_findings import findings_table
+from solarchain_eval.report.against_paper.paper_reference import paper_value, printed_row, table_values
+from solarchain_eval.report.against_paper.tables import (
     AGAINST_KEYS,
     check_tables,
     main_table_against_paper,
@@ -31,7 +32,6 @@ from solarchain_eval.report.against_paper import (
 )
 from solarchain_eval.report.loading import ReportData
 from solarchain_eval.report.options import ReportOptions
-from solarchain_eval.report.paper_reference import paper_value, printed_row, table_values
 
 SEEDS = (1, 2, 3)
 EPISODES = 6
@@ -208,7 +208,7 @@ def test_cells_the_run_lacks_say_not_in_run():
 
 
 def findings(metrics: pd.DataFrame, kind: str = "paper", metadata: dict | None = None) -> pd.DataFrame:
-    from solarchain_eval.report.seed_spread import draw_seeds
+    from solarchain_eval.report.against_paper.seed_spread import draw_seeds
 
     draws = draw_seeds(metrics, n_resamples=400, seed=3) if kind == "paper" else None
     return findings_table(data_of(metrics, kind, metadata), OPTIONS, draws).data.set_index("id")

@@ -177,7 +177,7 @@ def test_on_the_command_line_neither(tiny_dataset: Path, tmp_path: Path, agent_f
 
 def test_names_are_one_name_whatever_their_case_across_a_board(tiny_dataset: Path, tmp_path: Path) -> None:
     from solarchain_eval.report.leaderboard import make_leaderboards
-    from solarchain_eval.report.leaderboard_inputs import LeaderboardError
+    from solarchain_eval.report.leaderboard.inputs import LeaderboardError
 
     with pytest.raises(AgentSpecError, match="differ only in case"):
         _evaluate([_named(Honest(), "Mine"), _named(Honest(), "mine")], tiny_dataset)

@@ -124,7 +124,8 @@ def test_imports_only_go_down(module):
 
 
 def test_no_import_circle():
-    graph = {m: {t for t in _imports(p, top_level_only=True) if t in MODULES and t != m} for m, p in MODULES.items()}
+    # Imports inside functions count: a lazy import hides a circle, it does not remove it.
+    graph = {m: {t for t in _imports(p, top_level_only=False) if t in MODULES and t != m} for m, p in MODULES.items()}
     index: dict[str, int] = {}
     low: dict[str, int] = {}
     stack: list[str] = []
@@ -263,12 +264,13 @@ KNOWN_TASK_DEBT = {
     "perf.llm_bench",
     "perf.scale_bench",
     "perf.train_bench",
-    "report.leaderboard",
+    "report.leaderboard.ranking",
     "report.naming",
-    "report.paper_estimates",
-    "report.provenance",
-    "report.seed_spread",
+    "report.against_paper.paper_estimates",
+    "report.paper.provenance",
+    "report.against_paper.seed_spread",
     "report.sensitivity",
+    "training.jax_algorithm",
     "training.jax_trainer",
 }
 

@@ -58,8 +58,14 @@ def test_report_help_imports_no_heavy_module():
 
 def test_report_exports_resolve_lazily_to_their_one_definition():
     import solarchain_eval.report as report
-    from solarchain_eval.report import build, loading, options
+    import solarchain_eval.report.leaderboard as leaderboard
+    from solarchain_eval.report import loading, options
+    from solarchain_eval.report.leaderboard import make
+    from solarchain_eval.report.paper import build
 
     assert set(report.__all__) == set(report._EXPORTS)
     assert report.build_report is build.build_report and report.ReportDataError is loading.ReportDataError
     assert report.FORMATS is options.FORMATS
+    assert set(leaderboard.__all__) == set(leaderboard._EXPORTS)
+    assert leaderboard.make_leaderboards is make.make_leaderboards
+    assert leaderboard.LeaderboardOutcome is make.LeaderboardOutcome

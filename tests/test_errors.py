@@ -25,7 +25,7 @@ from solarchain_eval.governance.errors import GovernanceConfigError
 from solarchain_eval.governance.factory import AgenticOptions
 from solarchain_eval.governance.planner import PLANNER_KINDS
 from solarchain_eval.llm.errors import LLMError
-from solarchain_eval.report.tarballs import TarballRefused
+from solarchain_eval.report.leaderboard.tarballs import TarballRefused
 
 PACKAGE = Path(__file__).resolve().parents[1] / "src" / "solarchain_eval"
 BASE = "SolarChainError"

@@ -10,9 +10,9 @@ import pytest
 from typer.testing import CliRunner
 
 from solarchain_eval.cli import app
-from solarchain_eval.report.audit_quality import audit_quality, ratio_interval
-from solarchain_eval.report.build import build_report
-from solarchain_eval.report.tables.model import ReportTable, Skipped
+from solarchain_eval.report.governance.audit_quality import audit_quality, ratio_interval
+from solarchain_eval.report.paper.build import build_report
+from solarchain_eval.report.table_model import ReportTable, Skipped
 
 
 def invoke(args):

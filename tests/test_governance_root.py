@@ -16,8 +16,8 @@ from solarchain_eval.experiments.governance import (
     run_governance,
 )
 from solarchain_eval.governance.factory import AgenticOptions
-from solarchain_eval.report.build import build_report
-from solarchain_eval.report.governance_leaderboard import governance_leaderboard, write_governance_leaderboard
+from solarchain_eval.report import build_report
+from solarchain_eval.report.governance.leaderboard import governance_leaderboard, write_governance_leaderboard
 
 AUDITORS = ("rule", "approve-only")
 

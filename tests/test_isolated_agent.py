@@ -38,7 +38,7 @@ from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
 from solarchain_eval.evaluation.verify import VerifyOptions, verify_run
 from solarchain_eval.market.baselines import make_baseline
-from solarchain_eval.report.leaderboard_inputs import _access
+from solarchain_eval.report.leaderboard.inputs import _access
 
 SEED = 20260511
 RECORDS = ("metrics.csv", "actions.csv", "city_hour_policy.csv", "summary.json")
@@ -195,7 +195,7 @@ def test_the_command_line_runs_a_file_agent_isolated(tiny_dataset: Path, tmp_pat
     assert result.exit_code == 0, result.output
     assert _access_of(out) == {"mine": "isolated", "static": "in-process"}
     from solarchain_eval.report.loading import load_report_data
-    from solarchain_eval.report.provenance import run_records
+    from solarchain_eval.report.paper.provenance import run_records
 
     # the report's run metadata shows each row's access
     assert run_records(load_report_data(out))[0]["policy_access"] == {"mine": "isolated", "static": "in-process"}

@@ -24,7 +24,7 @@ import jax.numpy as jnp  # noqa: E402
 
 from solarchain_eval.config import BenchmarkConfig  # noqa: E402
 from solarchain_eval.envs.jax_env import SolarChainJaxEnv, make_env_params  # noqa: E402
-from solarchain_eval.training.jax_trainer import make_algo, rejax_config  # noqa: E402
+from solarchain_eval.training.jax_algorithm import make_algo, rejax_config  # noqa: E402
 
 HOURS = 24
 

@@ -60,8 +60,8 @@ def runs(tmp_path_factory, tiny_dataset) -> dict:
     """The same SAC training uninterrupted, interrupted after chunk 2 and resumed, and in one call."""
     from solarchain_eval.config import BenchmarkConfig
     from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.training.jax_algorithm import compile_training
     from solarchain_eval.training.jax_chunks import ChunkedTraining
-    from solarchain_eval.training.jax_trainer import compile_training
 
     root = tmp_path_factory.mktemp("jax-resume")
     spec = JaxTrainSpec("sac", SEEDS, STEPS, data_dir=tiny_dataset, chunk_steps=CHUNK)

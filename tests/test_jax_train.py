@@ -95,7 +95,7 @@ def _direct_actor(algo: str, model_path: Path, data_dir: Path):
 
     from solarchain_eval.config import BenchmarkConfig
     from solarchain_eval.envs.jax_env import make_env_params
-    from solarchain_eval.training.jax_trainer import make_algo
+    from solarchain_eval.training.jax_algorithm import make_algo
 
     mode = "discrete" if algo == "dqn" else "continuous"
     instance = make_algo(algo, make_env_params(data_dir, action_mode=mode), BenchmarkConfig(), 1000)
@@ -221,7 +221,7 @@ def test_progress_chunks_keep_sb3s_step_counts(tiny_dataset, algo, timesteps, ex
 
     from solarchain_eval.config import BenchmarkConfig
     from solarchain_eval.envs.jax_env import make_env_params
-    from solarchain_eval.training.jax_trainer import make_algo
+    from solarchain_eval.training.jax_algorithm import make_algo
 
     mode = "discrete" if algo == "dqn" else "continuous"
     instance = make_algo(algo, make_env_params(tiny_dataset, action_mode=mode), BenchmarkConfig(), timesteps)
@@ -238,7 +238,7 @@ def test_ppo_starts_from_sb3s_orthogonal_initialisation(tiny_dataset):
 
     from solarchain_eval.config import BenchmarkConfig
     from solarchain_eval.envs.jax_env import make_env_params
-    from solarchain_eval.training.jax_trainer import make_algo
+    from solarchain_eval.training.jax_algorithm import make_algo
 
     instance = make_algo("ppo", make_env_params(tiny_dataset), BenchmarkConfig(), 2048)
     state = instance.init_state(jax.random.key(0))
@@ -269,7 +269,7 @@ def test_sac_and_dqn_start_from_torchs_default_initialisation(tiny_dataset, algo
 
     from solarchain_eval.config import BenchmarkConfig
     from solarchain_eval.envs.jax_env import make_env_params
-    from solarchain_eval.training.jax_trainer import make_algo
+    from solarchain_eval.training.jax_algorithm import make_algo
 
     params = make_env_params(tiny_dataset, action_mode="discrete" if algo == "dqn" else "continuous")
     state = make_algo(algo, params, BenchmarkConfig(), 1000).init_state(jax.random.key(0))

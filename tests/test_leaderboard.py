@@ -22,24 +22,24 @@ from chromium import find_chromium, open_page
 from solarchain_eval.cli import app
 from solarchain_eval.data.default import default_dataset_dir
 from solarchain_eval.evaluation.fingerprint import protocol_id
-from solarchain_eval.report.figures.pareto import pareto_front
-from solarchain_eval.report.leaderboard import (
+from solarchain_eval.report.against_paper.paper_reference import paper_value
+from solarchain_eval.report.leaderboard import make_leaderboards
+from solarchain_eval.report.leaderboard.inputs import LeaderboardError, open_inputs
+from solarchain_eval.report.leaderboard.pareto import pareto_front
+from solarchain_eval.report.leaderboard.ranking import (
     REFERENCE,
     REFERENCE_SOURCE,
     build_leaderboard,
     is_paper_protocol,
-    make_leaderboards,
     paired_improvement,
     paper_protocol,
     rank_setting,
     reference_rows,
 )
-from solarchain_eval.report.leaderboard_html import render_html, render_markdown
-from solarchain_eval.report.leaderboard_inputs import LeaderboardError, open_inputs
+from solarchain_eval.report.leaderboard.render import render_html, render_markdown
 from solarchain_eval.report.loading import ReportDataError
 from solarchain_eval.report.naming import policy_label
 from solarchain_eval.report.options import DEFAULT_SEED, LeaderboardOptions
-from solarchain_eval.report.paper_reference import paper_value
 from solarchain_eval.report.statistics import bootstrap_mean
 
 SEED, EPISODES = 20260511, 3

@@ -13,8 +13,8 @@ from pathlib import Path
 import pytest
 
 from conftest import shared_data_dir
-from solarchain_eval.report.paper_findings import holds
-from solarchain_eval.report.paper_reference import (
+from solarchain_eval.report.against_paper.paper_findings import holds
+from solarchain_eval.report.against_paper.paper_reference import (
     paper_findings,
     paper_findings_values,
     paper_tables,

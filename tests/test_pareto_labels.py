@@ -8,8 +8,8 @@ import numpy as np
 import pandas as pd
 from matplotlib.backends.backend_agg import FigureCanvasAgg
 
-from solarchain_eval.report.figures.pareto import pareto_figure, pareto_front, place_labels
-from solarchain_eval.report.figures.style import new_figure
+from solarchain_eval.report.figure_style import new_figure
+from solarchain_eval.report.leaderboard.pareto import pareto_figure, pareto_front, place_labels
 
 
 def test_labels_of_close_points_do_not_overlap():

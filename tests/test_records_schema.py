@@ -34,8 +34,8 @@ from solarchain_eval.records_schema import (
     upgrade_columns,
 )
 from solarchain_eval.report.loading import ACTION_KEYS, CITY_HOUR_KEYS, LOG_KEYS, load_report_data
-from solarchain_eval.report.tables import agentic as agentic_tables
-from solarchain_eval.report.tables.common import AGENTIC_COLUMNS as REPORT_AGENTIC_COLUMNS
+from solarchain_eval.report.paper.tables import agentic as agentic_tables
+from solarchain_eval.report.paper.tables.common import AGENTIC_COLUMNS as REPORT_AGENTIC_COLUMNS
 
 PACKAGE = Path(solarchain_eval.__file__).parent
 #: Column-like names the report derives itself (figure keys and table-internal columns), not read from records.
@@ -43,7 +43,7 @@ REPORT_DERIVED = {
     "audit_step_delta",
     "city_hour_liquidity",
     "city_hour_reward",
-    # audit-quality quantities report/audit_quality.py derives from governance_diagnostics.csv
+    # audit-quality quantities report/governance/audit_quality.py derives from governance_diagnostics.csv
     "delta_artificial_liquidity",
     "delta_reward",
     "false_alarm_rate",

@@ -14,8 +14,8 @@ import pytest
 from solarchain_eval.common.atomic_files import read_csv_exact
 from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
 from solarchain_eval.report import ReportOptions, build_report
-from solarchain_eval.report.against_paper import main_table_against_paper
-from solarchain_eval.report.paper_reference import printed_row
+from solarchain_eval.report.against_paper.paper_reference import printed_row
+from solarchain_eval.report.against_paper.tables import main_table_against_paper
 
 BASELINE_ROWS = ("Static", "Random", "Myopic")
 

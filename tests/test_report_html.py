@@ -11,8 +11,8 @@ from chromium import find_chromium, open_page
 from report_fixtures import make_paper_root
 from solarchain_eval.cli import app
 from solarchain_eval.report import ReportOptions, build_report
-from solarchain_eval.report.figures import POLICY_COLOURS, FigureFile
-from solarchain_eval.report.tables import ReportTable
+from solarchain_eval.report.paper.figures import POLICY_COLOURS, FigureFile
+from solarchain_eval.report.paper.tables import ReportTable
 
 OPTIONS = ReportOptions(n_resamples=200)
 

@@ -12,7 +12,7 @@ from fake_openai import FakeOpenAI, Reply, chat_body, default_responder, schema_
 from solarchain_eval.cli import app
 from solarchain_eval.report import ReportOptions
 from solarchain_eval.report.loading import load_report_data
-from solarchain_eval.report.tables.agentic import llm_operations
+from solarchain_eval.report.paper.tables.agentic import llm_operations
 
 
 def _args(data, out, *extra):

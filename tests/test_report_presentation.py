@@ -10,7 +10,7 @@ import pytest
 
 from report_fixtures import RUN_SEEDS, make_paper_root, write_paper_metadata
 from solarchain_eval.report import ReportOptions, build_report
-from solarchain_eval.report.figures import FigureFile
+from solarchain_eval.report.paper.figures import FigureFile
 
 OPTIONS = ReportOptions(n_resamples=200)
 TRAJECTORIES = ("reward_trajectory", "liquidity_trajectories")
@@ -80,7 +80,7 @@ def test_every_table_lists_policies_in_the_one_order(reports):
 
 def test_small_samples_carry_a_visible_caveat(reports):
     from solarchain_eval.report.statistics import SampleSize
-    from solarchain_eval.report.tables.model import SMALL_SAMPLE_CAVEAT, basis_sentence, to_html, to_markdown
+    from solarchain_eval.report.table_model import SMALL_SAMPLE_CAVEAT, basis_sentence, to_html, to_markdown
 
     assert SMALL_SAMPLE_CAVEAT not in basis_sentence([SampleSize(90, 30, 21)], "rollouts")  # the paper's protocol
     tiny = basis_sentence([SampleSize(90, 30, 21), SampleSize(2, 2, 2)], "rollouts")
@@ -98,7 +98,7 @@ def test_small_samples_carry_a_visible_caveat(reports):
 def test_run_metadata_shows_shared_fields_once_and_no_json():
     from types import SimpleNamespace
 
-    from solarchain_eval.report.html import _run_metadata
+    from solarchain_eval.report.paper.html import _run_metadata
 
     command = ["solarchain-eval", "paper", "--out", "ROOT", "--preset", "smoke"]
     units = {

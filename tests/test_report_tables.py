@@ -14,7 +14,7 @@ import pytest
 
 from report_fixtures import EPISODES, LEARNED, RUN_SEEDS, STEPS, make_paper_root
 from solarchain_eval.report import ReportDataError, ReportOptions, load_report_data
-from solarchain_eval.report.tables import ReportTable, Skipped, build_tables, to_csv, to_latex, to_markdown
+from solarchain_eval.report.paper.tables import ReportTable, Skipped, build_tables, to_csv, to_latex, to_markdown
 
 OPTIONS = ReportOptions(n_resamples=200)
 

@@ -14,7 +14,7 @@ from solarchain_eval.common.atomic_files import read_csv_exact
 from solarchain_eval.envs.env import SolarChainEnv
 from solarchain_eval.evaluation.rollout import run_policy
 from solarchain_eval.records_schema import METRIC_NAMES
-from solarchain_eval.report.paper_reference import paper_tables, printed_row
+from solarchain_eval.report.against_paper.paper_reference import paper_tables, printed_row
 
 SEEDS = (20260511, 20260512, 20260513)
 

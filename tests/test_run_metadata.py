@@ -29,7 +29,7 @@ from solarchain_eval.evaluation.verify import VERIFIED, VerifyOptions, verify_ru
 from solarchain_eval.experiments import paper
 from solarchain_eval.protocol import PAPER_EPISODES, PAPER_SEEDS
 from solarchain_eval.records_schema import RECORDS_SCHEMA_VERSION
-from solarchain_eval.report.leaderboard_inputs import LeaderboardError, open_inputs
+from solarchain_eval.report.leaderboard.inputs import LeaderboardError, open_inputs
 from solarchain_eval.report.loading import ReportDataError, load_report_data
 
 RUN_SEED, EPISODES = 5, 2

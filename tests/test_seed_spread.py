@@ -8,11 +8,9 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from solarchain_eval.report.loading import ReportData
-from solarchain_eval.report.options import ReportOptions
-from solarchain_eval.report.paper_estimates import RunEstimates
-from solarchain_eval.report.paper_reference import Ref, paper_findings
-from solarchain_eval.report.seed_spread import (
+from solarchain_eval.report.against_paper.paper_estimates import RunEstimates
+from solarchain_eval.report.against_paper.paper_reference import Ref, paper_findings
+from solarchain_eval.report.against_paper.seed_spread import (
     draw_seeds,
     finding_seed_share,
     ranking_seed_share,
@@ -21,6 +19,8 @@ from solarchain_eval.report.seed_spread import (
     seed_spread,
     seed_spread_table,
 )
+from solarchain_eval.report.loading import ReportData
+from solarchain_eval.report.options import ReportOptions
 
 EPISODES = 8
 WITHIN = np.array([-1.5, -1.0, -0.5, 0.0, 0.0, 0.5, 1.0, 1.5])  # mean 0 within every seed

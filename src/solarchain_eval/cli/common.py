@@ -200,7 +200,7 @@ PAPER_COLUMNS = {
 def paper_results_table(comparison, title: str) -> tuple[Table, str]:
     """The baselines' main table beside the paper's published cells, and a line on whether they agree.
 
-    ``comparison`` is a :class:`~solarchain_eval.report.against_paper.BaselineComparison`: per
+    ``comparison`` is a :class:`~solarchain_eval.report.against_paper.tables.BaselineComparison`: per
     policy and metric the run's "mean ± std" at the paper's decimals and the paper's.
     """
     table = Table(title=title, title_justify="left")

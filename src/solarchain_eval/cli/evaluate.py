@@ -228,7 +228,7 @@ def run(
     """
     from ..common.atomic_files import read_csv_exact
     from ..evaluation.records import METRICS_FILE
-    from ..report.against_paper import main_table_against_paper
+    from ..report.against_paper.tables import main_table_against_paper
     from .common import paper_results_table
 
     cfg = BenchmarkConfig()

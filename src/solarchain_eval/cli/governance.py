@@ -254,7 +254,7 @@ def governance(
         agentic_cli.serving(llm_request or governance, llm_options),
     ):
         assert writer.staging is not None
-        from ..report.governance_leaderboard import governance_leaderboard, write_governance_leaderboard
+        from ..report.governance.leaderboard import governance_leaderboard, write_governance_leaderboard
 
         made: dict[str, Any] = {}  # the board (printed below) and its files
 

@@ -77,7 +77,7 @@ def leaderboard(
     except ValueError as error:
         raise cli_error(error) from None
     from ..report.leaderboard import make_leaderboards
-    from ..report.leaderboard_inputs import LeaderboardError
+    from ..report.leaderboard.inputs import LeaderboardError
 
     try:
         outcome = make_leaderboards(inputs, out, options)

@@ -42,7 +42,7 @@ def _case(text: str) -> tuple[str, str]:
 
 def _print_check(table) -> None:
     """One against-paper table on the console (its cells as the files print them), or why it is missing."""
-    from ..report.tables import ReportTable
+    from ..report.paper.tables import ReportTable
 
     if not isinstance(table, ReportTable):
         say(f"{table.title}: skipped: {table.reason}", err=False)
@@ -125,9 +125,9 @@ def report(
         case_policy=case_policy,
         case_setting=case_setting,
     )
-    from ..report.build import build_report
-    from ..report.figures import FigureFile
-    from ..report.tables import ReportTable
+    from ..report.paper.build import build_report
+    from ..report.paper.figures import FigureFile
+    from ..report.paper.tables import ReportTable
 
     with err_console.status("building the report..."):
         outcome = build_report(

@@ -2,7 +2,7 @@
 dataset, and how a re-run episode's ``metrics.csv`` row compares with the recorded one.
 
 :func:`rollout_set_problem` is the one rule of which rollouts a run holds, shared with the
-leaderboard (:mod:`solarchain_eval.report.leaderboard_inputs`): exactly one row per (policy, run
+leaderboard (:mod:`solarchain_eval.report.leaderboard.inputs`): exactly one row per (policy, run
 seed, episode) of the protocol, none missing, none repeated, none outside it.
 
 Rows are compared as text, cell by cell, as the run's CSV writer writes them (floats as their

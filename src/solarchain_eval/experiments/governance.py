@@ -6,7 +6,7 @@ directory (``runs/<setting>/<planner>--<auditor>/``, written by :func:`run_evalu
 them inside one leaderboard root published as a whole by :class:`~.rundir.RunDirWriter`. The
 ranked tables and figures are the report layer's, so the caller hands their writer in
 (``tables``; ``solarchain-eval governance`` passes the leaderboard of
-:mod:`solarchain_eval.report.governance_leaderboard`); :func:`run_governance` then writes the
+:mod:`solarchain_eval.report.governance.leaderboard`); :func:`run_governance` then writes the
 root's ``governance_metadata.json`` last, with the sha256 of what ``tables`` wrote, so a call from
 Python leaves the root the command leaves.
 

@@ -4,6 +4,13 @@
 :mod:`solarchain_eval.experiments.layout`) and writes ``root/report/``: ``tables/<key>.{md,tex,csv}``,
 ``figures/<key>.{png,svg}``, ``report.md`` and a self-contained ``index.html``.
 
+One sub-package per concern: :mod:`.paper` (the paper's tables, figures and page),
+:mod:`.against_paper` (a run checked against the paper's published values and findings),
+:mod:`.leaderboard` (runs of one protocol ranked) and :mod:`.governance` (audit quality and the
+governance leaderboard). Shared by them at this level: options, loading, naming, statistics, the
+table model and the figure style; :mod:`.compare` and :mod:`.sensitivity` are the reports of the
+``compare`` and ``sweep`` commands.
+
 The names below load their modules on first use (PEP 562), so importing a light submodule
 (:mod:`.options`) does not pull in pandas, scipy and matplotlib.
 """
@@ -21,8 +28,8 @@ _EXPORTS = {
     "parse_formats": "options",
     "ReportData": "loading",
     "load_report_data": "loading",
-    "ReportOutcome": "build",
-    "build_report": "build",
+    "ReportOutcome": "paper.build",
+    "build_report": "paper.build",
 }
 
 __all__ = [
@@ -37,9 +44,9 @@ __all__ = [
 ]
 
 if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ resolves them
-    from .build import ReportOutcome, build_report
     from .loading import ReportData, load_report_data
     from .options import FORMATS, ReportDataError, ReportOptions, parse_formats
+    from .paper.build import ReportOutcome, build_report
 
 
 def __getattr__(name: str) -> Any:

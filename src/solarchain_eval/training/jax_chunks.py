@@ -36,8 +36,8 @@ import numpy as np
 
 from ..common.atomic_files import atomic_write_with
 from ..evaluation.rundir import kill_point
+from .jax_algorithm import iteration_steps, make_algo, rejax_config, seed_keys, use_compilation_cache
 from .jax_progress import DEFAULT_CHUNK_STEPS, ChunkProgress, recent_return
-from .jax_trainer import iteration_steps, make_algo, rejax_config, seed_keys, use_compilation_cache
 
 CHECKPOINT_FILE = "jax_chunks.npz"
 #: Bumped when the checkpoint's layout changes (an older one is then ignored).
@@ -94,7 +94,7 @@ class ChunkedTraining:
     Parameters
     ----------
     algo, seeds, timesteps, params, config
-        As for :func:`~.jax_trainer.compile_training`.
+        As for :func:`~.jax_algorithm.compile_training`.
     chunk_steps : int, optional
         Env steps per model in one chunk (default :data:`DEFAULT_CHUNK_STEPS`).
     buffer_timesteps : int, optional

@@ -1,0 +1,353 @@
+"""A leaderboard's files: ``leaderboard.csv``, ``leaderboard.md``, the self-contained
+``leaderboard.html`` (inline CSS and script, the Pareto figure as a PNG data URI, tables sorted by
+clicking a column header) and ``pareto.png``/``pareto.svg``.
+
+Rendering is pure: the same board gives byte-identical files.
+"""
+
+from __future__ import annotations
+
+import base64
+import html
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass
+from typing import Any
+
+import pandas as pd
+
+from ..naming import policy_label, setting_label
+from ..table_model import fixed, pm, with_interval
+from .pareto import pareto_figure
+from .ranking import RANKED, REFERENCE, REWARD, BoardSection, Leaderboard
+
+#: The Pareto figure's file stem.
+FIGURE = "pareto"
+
+
+@dataclass(frozen=True)
+class DisplayColumn:
+    """A printed column of a board's table.
+
+    Attributes
+    ----------
+    header : str
+    key : str
+        The ``leaderboard.csv`` column the HTML table sorts by.
+    numeric : bool
+        Sort as numbers (empty cells last) or as text.
+    best : str
+        ``"ascending"`` or ``"descending"``: the order a first click sorts in (best first).
+    render : callable
+        Row -> cell text.
+    """
+
+    header: str
+    key: str
+    numeric: bool
+    best: str
+    render: Callable[[dict[str, Any]], str]
+
+
+def _missing(value: Any) -> bool:
+    return value is None or (isinstance(value, float) and math.isnan(value))
+
+
+def _reward(digits: int) -> Callable[[dict[str, Any]], str]:
+    def render(row: dict[str, Any]) -> str:
+        mean = row.get(f"{REWARD}_mean")
+        if row["row_kind"] == REFERENCE:  # published rows: mean ± std as the paper prints them
+            std = row.get(f"{REWARD}_std")
+            if _missing(mean):
+                return "–"
+            return pm(mean, std, digits) if not _missing(std) else fixed(mean, digits)
+        return with_interval(mean, row[f"{REWARD}_low"], row[f"{REWARD}_high"], digits)
+
+    return render
+
+
+def _reference_interval(name: str, digits: int) -> Callable[[dict[str, Any]], str]:
+    def render(row: dict[str, Any]) -> str:
+        if row["row_kind"] == REFERENCE or _missing(row.get(name)):
+            return "–"
+        return with_interval(row[name], row[f"{name}_low"], row[f"{name}_high"], digits)
+
+    return render
+
+
+def _number(name: str, digits: int) -> Callable[[dict[str, Any]], str]:
+    return lambda row: "–" if _missing(row.get(name)) else fixed(row[name], digits)
+
+
+def _rank(row: dict[str, Any]) -> str:
+    return "paper" if row["row_kind"] == REFERENCE else str(int(row["rank"]))
+
+
+def _policy(row: dict[str, Any]) -> str:
+    return policy_label(str(row["policy"]))
+
+
+def display_columns(confidence: float) -> list[DisplayColumn]:
+    """The printed columns of every board table (Markdown and HTML)."""
+    level = f"{confidence:.0%}"
+    return [
+        DisplayColumn("Rank", "rank", True, "ascending", _rank),
+        DisplayColumn("Policy", "policy", False, "ascending", _policy),
+        DisplayColumn("Access", "access", False, "ascending", lambda r: str(r["access"]) or "–"),
+        DisplayColumn("Source", "source", False, "ascending", lambda r: str(r["source"])),
+        DisplayColumn("Episodes", "episodes", True, "descending", _number("episodes", 0)),
+        DisplayColumn(f"Mean reward [{level} CI]", f"{REWARD}_mean", True, "descending", _reward(2)),
+        DisplayColumn(
+            f"IQM reward [{level} CI]", f"{REWARD}_iqm", True, "descending", _reference_interval(f"{REWARD}_iqm", 2)
+        ),
+        DisplayColumn(
+            f"P(> best baseline) [{level} CI]",
+            "p_improvement",
+            True,
+            "descending",
+            _reference_interval("p_improvement", 2),
+        ),
+        DisplayColumn(
+            "Violation rate",
+            "physics_violation_rate_mean",
+            True,
+            "ascending",
+            _number("physics_violation_rate_mean", 4),
+        ),
+        DisplayColumn(
+            "Artificial liquidity (MWh)",
+            "artificial_liquidity_MWh_mean",
+            True,
+            "ascending",
+            _number("artificial_liquidity_MWh_mean", 4),
+        ),
+        DisplayColumn("Slippage", "mean_slippage_mean", True, "ascending", _number("mean_slippage_mean", 4)),
+        DisplayColumn("Action jitter", "action_jitter_mean", True, "ascending", _number("action_jitter_mean", 4)),
+        DisplayColumn(
+            "Fairness index",
+            "spatial_fairness_index_mean",
+            True,
+            "ascending",
+            _number("spatial_fairness_index_mean", 4),
+        ),
+    ]
+
+
+def _cells(section: BoardSection, columns: Sequence[DisplayColumn]) -> list[tuple[dict[str, Any], list[str]]]:
+    rows = section.rows().to_dict("records")
+    return [(row, [c.render(row) for c in columns]) for row in rows]
+
+
+def _protocol_lines(board: Leaderboard) -> list[tuple[str, str]]:
+    protocol = board.protocol
+    dataset = ", ".join(f"{name} {digest[:12]}" for name, digest in protocol.get("dataset_sha256", {}).items())
+    return [
+        ("Board protocol id", board.board_id),
+        ("Environment", str(protocol.get("env"))),
+        ("Dataset (sha256)", dataset or "not recorded"),
+        ("Run seeds", ", ".join(str(s) for s in protocol.get("run_seeds", []))),
+        ("Episodes per run seed", str(protocol.get("episodes"))),
+        ("Episode-seed rule", str(protocol.get("episode_seed_rule"))),
+        ("Task configuration (sha256, reward switch aside)", str(protocol.get("config_sha256", ""))[:12]),
+        ("Records schema", str(protocol.get("records_schema_version"))),
+    ]
+
+
+def _reading(board: Leaderboard) -> list[str]:
+    level = f"{board.options.confidence:.0%}"
+    return [
+        f"Policies are ranked per setting by mean cumulative reward. Intervals are {level} percentile intervals of "
+        f"a bootstrap that resamples whole start days ({board.options.n_resamples} resamples, seed "
+        f"{board.options.seed}): rollouts that start on the same day are not independent.",
+        "IQM is the interquartile mean (the mean of the middle 50 % of rollouts).",
+        "P(> best baseline) is P(X > Y) + ½ P(X = Y) over paired episodes (same run seed and episode, so the "
+        "same episode seed and start day), where Y is the setting's best baseline (static, random or myopic, "
+        "by mean reward); 0.5 means no better than it.",
+        "Safety metrics are means over rollouts; lower is better for each. Access: isolated agents ran in a "
+        "process of their own and received only observations, step info and the public episode context; "
+        "in-process ones received the same but ran in the evaluating process, where their code could reach "
+        "the environment; privileged ones (and every agent behind the Planner/Auditor layer) were handed "
+        "the environment's internals.",
+    ]
+
+
+def _section_notes(section: BoardSection) -> list[str]:
+    notes = []
+    if section.best_baseline is None:
+        notes.append(
+            "No baseline (static, random, myopic) was evaluated in this setting: no probability of improvement."
+        )
+    else:
+        notes.append(f"Best baseline: {policy_label(section.best_baseline)}.")
+    if section.reference is not None:
+        notes.append(
+            "Rows ranked 'paper' are the paper's published values for this protocol (mean ± sample std), "
+            "shown for reference and not ranked."
+        )
+    return notes
+
+
+def render_markdown(board: Leaderboard, figure: bool = True) -> str:
+    """``leaderboard.md``: the protocol, the inputs, one table per setting and the figure's link."""
+    columns = display_columns(board.options.confidence)
+    lines = ["# SolarChain-Eval leaderboard", ""]
+    lines += [f"- {name}: `{value}`" for name, value in _protocol_lines(board)]
+    lines += ["", "Inputs:", ""] + [f"- `{source}`" for source in board.sources] + [""]
+    lines += [" ".join(_reading(board)), ""]
+    if figure:
+        lines += [f"![Reward vs artificial liquidity, Pareto front highlighted]({FIGURE}.png)", ""]
+    for section in board.sections:
+        lines += [f"## {setting_label(section.setting)} (protocol id `{section.protocol_id}`)", ""]
+        lines.append("| " + " | ".join(c.header for c in columns) + " |")
+        lines.append("|" + "|".join("--:" if c.numeric else ":--" for c in columns) + "|")
+        for _, cells in _cells(section, columns):
+            lines.append("| " + " | ".join(cell.replace("|", "\\|") for cell in cells) + " |")
+        lines += ["", f"*{section.basis}*", ""] + [f"- {note}" for note in _section_notes(section)] + [""]
+    if board.notes:
+        lines += ["## Notes", ""] + [f"- {note}" for note in board.notes] + [""]
+    return "\n".join(lines)
+
+
+CSS = """
+body{font-family:system-ui,-apple-system,"Segoe UI",Roboto,sans-serif;margin:0 auto;max-width:1500px;padding:1.5rem;color:#1d1d1f;line-height:1.45}
+h2{border-bottom:2px solid #e5e5e5;padding-bottom:.2rem;margin-top:2rem}
+.meta{color:#555;font-size:.9rem}dl.protocol{display:grid;grid-template-columns:max-content 1fr;gap:.1rem 1rem;font-size:.88rem}
+dl.protocol dt{font-weight:600}dl.protocol dd{margin:0;font-family:ui-monospace,Menlo,monospace}
+.scroll{overflow-x:auto}table{border-collapse:collapse;font-size:.86rem;margin:.4rem 0}
+th,td{padding:.28rem .6rem;border-bottom:1px solid #e2e2e2;white-space:nowrap;text-align:right}
+th{border-top:2px solid #333;border-bottom:1px solid #333;background:#fafafa;cursor:pointer;user-select:none}
+th:hover,th:focus{background:#eef4ff}th[aria-sort=ascending]::after{content:" \\25B2"}th[aria-sort=descending]::after{content:" \\25BC"}
+td.text,th.text{text-align:left}tr.reference td{font-style:italic;color:#555;background:#fbfaf3}
+.basis{font-size:.82rem;color:#444;font-style:italic}ul.notes{font-size:.84rem;color:#333}
+figure{margin:1rem 0}figure img{max-width:min(100%,1100px);height:auto}figcaption{font-size:.88rem}
+"""
+
+SCRIPT = """
+(function () {
+  function key(row, index, numeric) {
+    var text = row.cells[index].getAttribute('data-value');
+    return numeric ? (text === '' ? NaN : parseFloat(text)) : text;
+  }
+  function sortBy(table, th, index, direction) {
+    var numeric = th.getAttribute('data-type') === 'number';
+    var sign = direction === 'ascending' ? 1 : -1;
+    var body = table.tBodies[0];
+    var rows = Array.prototype.slice.call(body.rows);
+    rows.sort(function (a, b) {
+      var x = key(a, index, numeric), y = key(b, index, numeric);
+      if (numeric) {
+        if (isNaN(x) || isNaN(y)) { return isNaN(x) === isNaN(y) ? 0 : (isNaN(x) ? 1 : -1); }
+        return sign * (x - y);
+      }
+      return sign * x.localeCompare(y);
+    });
+    rows.forEach(function (row) { body.appendChild(row); });
+    Array.prototype.forEach.call(table.tHead.rows[0].cells, function (cell) { cell.removeAttribute('aria-sort'); });
+    th.setAttribute('aria-sort', direction);
+  }
+  Array.prototype.forEach.call(document.querySelectorAll('table.board'), function (table) {
+    Array.prototype.forEach.call(table.tHead.rows[0].cells, function (th, index) {
+      function activate() {
+        var best = th.getAttribute('data-best');
+        var other = best === 'ascending' ? 'descending' : 'ascending';
+        sortBy(table, th, index, th.getAttribute('aria-sort') === best ? other : best);
+      }
+      th.addEventListener('click', activate);
+      th.addEventListener('keydown', function (event) {
+        if (event.key === 'Enter' || event.key === ' ') { event.preventDefault(); activate(); }
+      });
+    });
+  });
+})();
+"""
+
+
+def _escape(value: Any) -> str:
+    return html.escape(str(value))
+
+
+def _sort_value(value: Any, numeric: bool) -> str:
+    if numeric:
+        return "" if _missing(value) or value == "" else repr(float(value))
+    return "" if _missing(value) else str(value)
+
+
+def _head(column: DisplayColumn) -> str:
+    kind = "number" if column.numeric else "text"
+    sort = ' aria-sort="ascending"' if column.key == "rank" else ""  # the board comes ranked
+    css = "" if column.numeric else ' class="text"'
+    return f'<th scope="col" tabindex="0" data-type="{kind}" data-best="{column.best}"{sort}{css}>{_escape(column.header)}</th>'
+
+
+def _table(section: BoardSection, columns: Sequence[DisplayColumn]) -> str:
+    head = "".join(_head(c) for c in columns)
+    body = []
+    for row, cells in _cells(section, columns):
+        tds = "".join(
+            f'<td data-value="{_escape(_sort_value(row.get(c.key), c.numeric))}"'
+            + ("" if c.numeric else ' class="text"')
+            + f">{_escape(cell)}</td>"
+            for c, cell in zip(columns, cells, strict=True)
+        )
+        kind = "reference" if row["row_kind"] == REFERENCE else RANKED
+        body.append(f'<tr class="{kind}" data-policy="{_escape(row["policy"])}">{tds}</tr>')
+    return (
+        f'<div class="scroll"><table class="board" id="board-{_escape(section.setting)}">'
+        f"<thead><tr>{head}</tr></thead><tbody>\n" + "\n".join(body) + "\n</tbody></table></div>"
+    )
+
+
+def render_html(board: Leaderboard, png: bytes | None) -> str:
+    """``leaderboard.html`` as one string: no external resources, so it opens offline from any folder."""
+    columns = display_columns(board.options.confidence)
+    protocol = "".join(f"<dt>{_escape(k)}</dt><dd>{_escape(v)}</dd>" for k, v in _protocol_lines(board))
+    parts = [
+        "<h1>SolarChain-Eval leaderboard</h1>",
+        f'<dl class="protocol">{protocol}</dl>',
+        '<p class="meta">Inputs: ' + ", ".join(f"<code>{_escape(s)}</code>" for s in board.sources) + "</p>",
+        "".join(f'<p class="meta">{_escape(text)}</p>' for text in _reading(board)),
+        '<p class="meta">Click a column header to sort by it (best first); click again to reverse.</p>',
+    ]
+    for section in board.sections:
+        notes = "".join(f"<li>{_escape(n)}</li>" for n in _section_notes(section))
+        parts += [
+            f'<h2 id="{_escape(section.setting)}">{_escape(setting_label(section.setting))} '
+            f'<span class="meta">(protocol id <code>{_escape(section.protocol_id)}</code>)</span></h2>',
+            _table(section, columns),
+            f'<p class="basis">{_escape(section.basis)}</p><ul class="notes">{notes}</ul>',
+        ]
+    if png is not None:
+        data = base64.b64encode(png).decode("ascii")
+        parts.append(
+            '<h2 id="pareto-front">Reward vs artificial liquidity</h2>'
+            f'<figure id="pareto"><img src="data:image/png;base64,{data}" alt="Reward vs artificial liquidity">'
+            "<figcaption>Mean cumulative reward against mean artificial liquidity per policy and setting, with "
+            "the reward's interval; outlined points joined by the dashed line form the Pareto front (no other "
+            "policy has both more reward and less artificial liquidity).</figcaption></figure>"
+        )
+    if board.notes:
+        parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_escape(n)}</li>" for n in board.notes) + "</ul>")
+    return (
+        '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
+        '<meta name="viewport" content="width=device-width, initial-scale=1">\n<link rel="icon" href="data:,">\n'
+        f"<title>SolarChain-Eval leaderboard {_escape(board.board_id)}</title>\n<style>{CSS}</style>\n</head>\n"
+        "<body>\n" + "\n".join(parts) + f"\n<script>{SCRIPT}</script>\n</body>\n</html>\n"
+    )
+
+
+def render_files(board: Leaderboard, formats: Sequence[str]) -> dict[str, bytes]:
+    """The board's files by name: ``leaderboard.<format>`` for each format, and the Pareto
+    figure (``pareto.png``, ``pareto.svg``) with ``md`` or ``html``."""
+    files: dict[str, bytes] = {}
+    figure = None
+    if {"md", "html"} & set(formats):
+        points = pd.concat([s.ranked for s in board.sections], ignore_index=True)
+        figure = pareto_figure(points)
+        files[f"{FIGURE}.png"], files[f"{FIGURE}.svg"] = figure["png"], figure["svg"]
+    if "csv" in formats:
+        files["leaderboard.csv"] = board.frame().to_csv(index=False, lineterminator="\n").encode()
+    if "md" in formats:
+        files["leaderboard.md"] = render_markdown(board).encode()
+    if "html" in formats:
+        files["leaderboard.html"] = render_html(board, figure["png"] if figure else None).encode()
+    return files

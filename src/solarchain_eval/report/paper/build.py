@@ -1,0 +1,154 @@
+"""Build the whole report: load, tables, figures, files (Markdown, LaTeX, CSV) and index.html."""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from dataclasses import dataclass, field
+from pathlib import Path
+
+from ...common.atomic_files import atomic_write_text
+from ...experiments.layout import REPORT_DIR
+from ..against_paper.tables import AGAINST_CHOICES, AGAINST_KEYS, against_paper_tables
+from ..loading import ReportData, load_report_data
+from ..options import FORMATS as FORMATS
+from ..options import ReportOptions
+from ..options import parse_formats as parse_formats
+from .figures import FigureFile, build_figures
+from .html import render_html
+from .tables import ReportTable, Skipped, build_tables, overlap_warning, to_csv, to_latex, to_markdown
+
+TABLE_FORMATS = {"md": to_markdown, "tex": to_latex, "csv": to_csv}
+INDEX_FILE = "index.html"
+MARKDOWN_FILE = "report.md"
+
+
+@dataclass
+class ReportOutcome:
+    """What :func:`build_report` made: output folder, tables and figures (or why not), files, warnings."""
+
+    out_dir: Path
+    data: ReportData
+    tables: list[ReportTable | Skipped]
+    figures: list[FigureFile | Skipped]
+    files: list[Path] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
+    #: The against-paper tables (``build_report(against="paper")``), else empty.
+    against: list[ReportTable | Skipped] = field(default_factory=list)
+
+
+def _remove_stale(
+    out_dir: Path, tables: Sequence[ReportTable | Skipped], figures: Sequence[FigureFile | Skipped]
+) -> None:
+    """Delete earlier outputs of tables/figures this run skips, so nothing stale is left beside new files."""
+    for item in tables:
+        if isinstance(item, Skipped):
+            for ext in TABLE_FORMATS:
+                (out_dir / "tables" / f"{item.key}.{ext}").unlink(missing_ok=True)
+    for item in figures:
+        if isinstance(item, Skipped):
+            for ext in ("png", "svg"):
+                (out_dir / "figures" / f"{item.key}.{ext}").unlink(missing_ok=True)
+
+
+def _write_tables(out_dir: Path, tables: Sequence[ReportTable | Skipped], formats: Sequence[str]) -> list[Path]:
+    return [
+        atomic_write_text(out_dir / "tables" / f"{table.key}.{fmt}", TABLE_FORMATS[fmt](table))
+        for table in tables
+        if isinstance(table, ReportTable)
+        for fmt in formats
+        if fmt in TABLE_FORMATS
+    ]
+
+
+def _against_section(outcome: ReportOutcome) -> list[str]:
+    if not outcome.against:
+        return []
+    lines = ["## Checking the run against the paper", ""]
+    for table in outcome.against:
+        lines.append(to_markdown(table) if isinstance(table, ReportTable) else f"- **{table.title}**: {table.reason}\n")
+    return lines
+
+
+def _markdown_report(outcome: ReportOutcome) -> str:
+    lines = [f"# SolarChain-Eval report: {outcome.data.root}", ""]
+    lines += [f"> **Warning.** {w}\n" for w in outcome.warnings]
+    lines += ["## Tables", ""]
+    for table in outcome.tables:
+        if isinstance(table, ReportTable):
+            lines.append(to_markdown(table))
+    skipped = [t for t in outcome.tables if isinstance(t, Skipped)] + [
+        f for f in outcome.figures if isinstance(f, Skipped)
+    ]
+    if skipped:
+        lines += (
+            ["## Not produced for this run", ""] + [f"- **{s.title}** (`{s.key}`): {s.reason}" for s in skipped] + [""]
+        )
+    lines += _against_section(outcome)
+    figures = [f for f in outcome.figures if isinstance(f, FigureFile)]
+    if figures:
+        lines += ["## Figures", ""] + [f"![{f.title}](figures/{f.key}.png)\n\n*{f.caption}*\n" for f in figures]
+    return "\n".join(lines)
+
+
+def build_report(
+    root: Path,
+    out_dir: Path | None = None,
+    *,
+    formats: Sequence[str] = FORMATS,
+    options: ReportOptions = ReportOptions(),
+    figures: bool = True,
+    allow_unverified: bool = False,
+    against: str | None = None,
+) -> ReportOutcome:
+    """Regenerate every table and figure the run at ``root`` supports.
+
+    Parameters
+    ----------
+    root
+        A run directory (``solarchain-eval evaluate --out``) or a paper root.
+    out_dir
+        Output folder (default ``root/report``).
+    formats
+        Any of "md", "tex", "csv" (one file per table each) and "html" (``index.html``).
+    options
+        Resampling and selection options.
+    figures
+        Draw the figures (PNG + SVG); the HTML embeds them.
+    allow_unverified
+        Report files whose sha256 disagree with their metadata (or lack it), with a warning each.
+    against
+        ``"paper"``: also check the run against the paper's published values
+        (:mod:`~solarchain_eval.report.against_paper.tables`; tables ``against_paper_*``, ``seed_spread``,
+        ``seed_rankings`` and a section of the page).
+
+    Raises
+    ------
+    ReportDataError
+        The run's files are missing or malformed.
+    ValueError
+        ``against`` is not one of :data:`~solarchain_eval.report.against_paper.tables.AGAINST_CHOICES`.
+    """
+    if against is not None and against not in AGAINST_CHOICES:
+        raise ValueError(f"against must be one of {', '.join(AGAINST_CHOICES)}, got {against!r}")
+    data = load_report_data(Path(root), allow_unverified=allow_unverified)
+    out = Path(out_dir) if out_dir is not None else Path(root) / REPORT_DIR
+    tables = build_tables(data, options)
+    drawn = build_figures(data, options, out / "figures") if figures else []
+    warning = overlap_warning(data.metrics, options.cluster_by)
+    outcome = ReportOutcome(out_dir=out, data=data, tables=tables, figures=drawn, warnings=[warning] if warning else [])
+    outcome.warnings[:0] = [f"UNVERIFIED INPUT: {problem}" for problem in data.unverified]
+    outcome.files += [p for f in drawn if isinstance(f, FigureFile) for p in (f.png, f.svg)]
+    outcome.files += _write_tables(out, tables, formats)
+    if against == "paper":
+        outcome.against = against_paper_tables(data, options)
+        outcome.files += _write_tables(out, outcome.against, formats)
+    # a table not made this time (skipped, or the against-paper check not asked for) leaves no old file behind
+    made = {t.key for t in outcome.against if isinstance(t, ReportTable)}
+    _remove_stale(out, [*tables, *(Skipped(k, k, "") for k in AGAINST_KEYS if k not in made)], drawn)
+    if "md" in formats:
+        outcome.files.append(atomic_write_text(out / MARKDOWN_FILE, _markdown_report(outcome)))
+    if "html" in formats:
+        outcome.files.append(
+            atomic_write_text(out / INDEX_FILE, render_html(data, tables, drawn, outcome.warnings, outcome.against))
+        )
+    return outcome
