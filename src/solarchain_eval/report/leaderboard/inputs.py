@@ -41,7 +41,7 @@ from ...evaluation.run_metadata import ProtocolMismatch, RunMetadata, RunMetadat
 from ...evaluation.run_metadata import rule_name as rule_name
 from ...evaluation.verify_checks import rollout_set_problem
 from ...experiments.layout import METADATA_FILE, UNITS_DIR, is_done
-from .loading import load_report_data
+from ..loading import load_report_data
 from .tarballs import TarballLimits, TarballRefused, unpack_tarball
 
 #: Names of inputs read as tarballs of a run directory or a paper root.

@@ -24,7 +24,7 @@ from typing import Any
 from ...common.errors import RefusedError
 from ...evaluation.run_metadata import RunMetadata, RunMetadataError
 from ...experiments.layout import COMBINED_DIR, DONE_MARKER, METADATA_FILE, PAPER_METADATA_FILE, UNITS_DIR
-from .options import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
+from ..options import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
 
 #: A metadata file larger than this is not read (no real run's comes near it).
 METADATA_MAX_BYTES = 64 * 2**20
