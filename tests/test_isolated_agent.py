@@ -38,7 +38,6 @@ from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.evaluation.runner import EvaluationSpec, run_evaluation
 from solarchain_eval.evaluation.verify import VerifyOptions, verify_run
 from solarchain_eval.market.baselines import make_baseline
-from solarchain_eval.report.leaderboard.inputs import _access
 
 SEED = 20260511
 RECORDS = ("metrics.csv", "actions.csv", "city_hour_policy.csv", "summary.json")
@@ -400,11 +399,8 @@ def test_observations_and_actions_cross_as_frames_with_their_exact_bits() -> Non
     shell.close()
 
 
-def test_labels_old_runs_and_the_benchmarks_own_agents() -> None:
-    assert _access({"policies": ["a", "b"], "policy_access": {"a": "public", "b": "privileged"}}) == {
-        "a": "in-process",
-        "b": "privileged",
-    }
+def test_labels_the_benchmarks_own_agents_and_refuses_a_users_claim() -> None:
+    # (older runs' "public" label reads as "in-process": tests/test_run_metadata.py)
     assert access_label(make_baseline("static", BenchmarkConfig().market)) == "in-process"
 
     class Claims:
