@@ -17,8 +17,9 @@ The names below load their modules on first use (PEP 562), so importing a light 
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from ..common.lazy import lazy_getattr
 
 #: Public name -> the submodule that defines it.
 _EXPORTS = {
@@ -49,10 +50,4 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ resolve
     from .paper.build import ReportOutcome, build_report
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value  # resolved once
-    return value
+__getattr__ = lazy_getattr(__name__, _EXPORTS, globals())

@@ -8,8 +8,9 @@ not pull in matplotlib.
 
 from __future__ import annotations
 
-import importlib
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING
+
+from ...common.lazy import lazy_getattr
 
 #: Public name -> the submodule that defines it.
 _EXPORTS = {"LeaderboardOutcome": "make", "make_leaderboards": "make"}
@@ -20,10 +21,4 @@ if TYPE_CHECKING:  # for type checkers and IDEs; at run time __getattr__ resolve
     from .make import LeaderboardOutcome, make_leaderboards
 
 
-def __getattr__(name: str) -> Any:
-    module = _EXPORTS.get(name)
-    if module is None:
-        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
-    value = getattr(importlib.import_module(f"{__name__}.{module}"), name)
-    globals()[name] = value  # resolved once
-    return value
+__getattr__ = lazy_getattr(__name__, _EXPORTS, globals())
