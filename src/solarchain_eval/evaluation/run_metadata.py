@@ -80,6 +80,8 @@ class RunMetadata(BaseModel):
     git_commit: str | None
     package_versions: dict[str, str]
     setting: str
+    #: The task (market) the run evaluated (:mod:`solarchain_eval.tasks`); runs before tasks existed ran ``solar``.
+    task: str = "solar"
     records_schema_version: int = RECORDS_SCHEMA_VERSION
     policies: list[str]
     policy_specs: list[str]
