@@ -90,6 +90,30 @@ class ToyTask:
     def baselines(self):
         return {"steady": lambda config: SteadyPolicy()}
 
+    # evaluation and records: the toy market has no configuration (None, recorded as {})
+    def default_config(self):
+        return None
+
+    def setting_config(self, config, *, no_physics_penalty):
+        return config
+
+    def config_record(self, config):
+        return {}
+
+    def config_from_record(self, record):
+        if record:
+            raise ValueError(f"the toy market has no configuration, got {sorted(record)}")
+        return None
+
+    def protocol_config(self, config):
+        return {}
+
+    def episode_steps(self, config):
+        return STEPS
+
+    def step_extra_names(self, data):
+        return ()
+
 
 class SteadyPolicy:
     name = "steady"

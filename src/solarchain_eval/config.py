@@ -94,6 +94,11 @@ class EvaluationConfig(_Section):
     policies: list[str] = Field(default_factory=lambda: ["static", "random", "myopic"], min_length=1)
 
 
+#: The :class:`BenchmarkConfig` fields that decide the solar market's task (hashed into a run's protocol);
+#: paths, training budgets and evaluation defaults do not.
+TASK_CONFIG_FIELDS = ("episode_steps", "discrete_levels", "no_physics_penalty", "market", "reward")
+
+
 class BenchmarkConfig(_Section):
     """Top-level configuration in the layout of the paper's ``configs/*.yaml``."""
 

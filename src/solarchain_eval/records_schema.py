@@ -124,8 +124,17 @@ AGENTIC_NUMERIC_NAMES = tuple(c.name for c in AGENTIC_COLUMNS if c.numeric)
 #: ``agent_k`` (checked: finite numbers and short text; see agents/validation.py). No other column
 #: starts with it, so an agent can never write a metric, its name or an episode key.
 AGENT_COLUMN_PREFIX = "agent_"
-#: Every column ``metrics.csv`` may hold, by name.
-ALL_COLUMNS = {c.name: c for c in (*EPISODE_KEY_COLUMNS, *EPISODE_METRIC_COLUMNS, *AGENTIC_COLUMNS, *LLM_AGENT_COLUMNS)}
+
+
+def record_columns(metric_columns: tuple[Column, ...] = EPISODE_METRIC_COLUMNS) -> dict[str, Column]:
+    """Every column ``metrics.csv`` may hold, by name, in a run of a task whose episode metrics are
+    ``metric_columns`` (a task's ``MetricSpec.column`` s; default: the solar market's), besides a
+    user agent's ``agent_*`` columns."""
+    return {c.name: c for c in (*EPISODE_KEY_COLUMNS, *metric_columns, *AGENTIC_COLUMNS, *LLM_AGENT_COLUMNS)}
+
+
+#: Every column ``metrics.csv`` may hold, by name (a solar market run).
+ALL_COLUMNS = record_columns()
 
 #: Columns a sweep's tidy ``results.csv`` (docs/stress.md) adds to the ``metrics.csv`` columns of
 #: each episode, besides one column per sweep axis.

@@ -6,7 +6,7 @@ import functools
 import os
 import sys
 import traceback
-from collections.abc import Callable, Iterator
+from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from pathlib import Path
 from typing import TypeVar
@@ -20,6 +20,7 @@ from rich.text import Text
 from ..common.errors import NamesOptions, OptionsError, SolarChainError, flag_of
 from ..common.redaction import redact_text
 from ..config import check_seeds
+from ..tasks.registry import DEFAULT_TASK
 from .help import get_current_context
 
 # Every text printed comes from users, files or servers somewhere (paths, city names, server
@@ -38,6 +39,15 @@ USER_ERRORS: tuple[type[BaseException], ...] = (SolarChainError,)
 EXIT_USAGE = 2
 
 F = TypeVar("F", bound=Callable)
+
+#: ``--task NAME`` of the commands that evaluate a market.
+TASK = typer.Option(
+    DEFAULT_TASK,
+    "--task",
+    metavar="NAME",
+    help="The task (market) to evaluate: solar (the paper's) or one an installed package registers in the "
+    "solarchain_eval.tasks entry-point group. See docs/architecture.md#add-a-task.",
+)
 
 
 class CliError(OptionsError):
@@ -150,22 +160,30 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
-def results_table(summary: list[dict], title: str, access: dict[str, str] | None = None) -> Table:
-    """Mean ± sample std per policy and setting, in the paper's main-table layout; policies in
-    ``access`` marked ``"privileged"`` (they saw the environment) or ``"isolated"`` (they ran in
-    a process of their own) are labelled so."""
+#: The results table's metric columns: (metrics.csv column, header, digits), in the paper's main-table layout.
+RESULT_COLUMNS = (
+    ("cumulative_reward", "cumulative reward", 2),
+    ("episode_volume", "volume", 3),
+    ("physics_violation_rate", "violation rate", 4),
+    ("mean_slippage", "slippage", 4),
+    ("artificial_liquidity_MWh", "artificial liq. (MWh)", 4),
+)
+
+
+def results_table(
+    summary: list[dict],
+    title: str,
+    access: dict[str, str] | None = None,
+    columns: Sequence[tuple[str, str, int]] = RESULT_COLUMNS,
+) -> Table:
+    """Mean ± sample std per policy and setting of ``columns`` (default :data:`RESULT_COLUMNS`; another
+    task's metrics); policies in ``access`` marked ``"privileged"`` (they saw the environment) or
+    ``"isolated"`` (they ran in a process of their own) are labelled so."""
     table = Table(title=title, title_justify="left")
-    for column, justify in (
-        ("policy", "left"),
-        ("setting", "left"),
-        ("episodes", "right"),
-        ("cumulative reward", "right"),
-        ("volume", "right"),
-        ("violation rate", "right"),
-        ("slippage", "right"),
-        ("artificial liq. (MWh)", "right"),
-    ):
+    for column, justify in (("policy", "left"), ("setting", "left"), ("episodes", "right")):
         table.add_column(column, justify=justify)
+    for _, header, _ in columns:
+        table.add_column(header, justify="right")
     for entry in summary:
         m = entry["metrics"]
 
@@ -178,11 +196,7 @@ def results_table(summary: list[dict], title: str, access: dict[str, str] | None
             entry["policy"] + (f" ({label})" if label in ("privileged", "isolated") else ""),
             entry["setting"],
             str(entry["episodes"]),
-            fmt("cumulative_reward", 2),
-            fmt("episode_volume", 3),
-            fmt("physics_violation_rate", 4),
-            fmt("mean_slippage", 4),
-            fmt("artificial_liquidity_MWh", 4),
+            *(fmt(name, digits) for name, _, digits in columns),
         )
     return table
 

@@ -11,17 +11,19 @@ import typer
 from ..agents.adapters import AgentError
 from ..agents.registry import known_policies, parse_agents
 from ..agents.sb3 import parse_models
-from ..agents.specs import LLM_AGENT, parse_agent_args, parse_vecnormalize
+from ..agents.specs import LLM_AGENT, parse_agent_args, parse_agent_list, parse_vecnormalize
 from ..config import BenchmarkConfig, load_config
-from ..data.default import default_dataset_dir
 from ..evaluation.rundir import RunDirError, check_target
 from ..evaluation.runner import EvaluationSpec, check_agents, run_evaluation
 from ..governance.request import GovernanceRequest
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
+from ..tasks.registry import DEFAULT_TASK, get_task
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
 from .common import (
+    RESULT_COLUMNS,
+    TASK,
     CliError,
     cli_error,
     console,
@@ -117,7 +119,10 @@ def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool, step
             step_format=step_format,
         )
     summary = outcome.summary
-    console.print(results_table(summary, title, access=outcome.access))
+    market = get_task(spec.task)
+    # another task's table: its declared metrics, by column name
+    columns = RESULT_COLUMNS if spec.task == DEFAULT_TASK else [(m.name, m.name, 4) for m in market.metrics]
+    console.print(results_table(summary, title, access=outcome.access, columns=columns))
     if spec.agentic is not None:
         console.print(agentic_cli.agentic_table(summary, f"Planner/Auditor ({spec.agentic.label()})"))
     show_files(outcome.files, f"wrote {outcome.episodes} episodes in {outcome.wall_s:.1f} s to {out}")
@@ -159,6 +164,7 @@ def evaluate(
     overwrite: bool = OVERWRITE,
     isolate: bool = ISOLATE,
     step_format: StepFormat = STEP_FORMAT,
+    task: str = TASK,
 ) -> None:
     """Evaluate policies over run seeds × episodes.
 
@@ -170,12 +176,22 @@ def evaluate(
     (rule planner and rule auditor by default; --planner llm / --auditor llm
     call an OpenAI-compatible endpoint, recordable and replayable with --llm-cache),
     and the run also writes agentic_logs.jsonl and governance_diagnostics.csv (see --no-diagnostics).
+
+    With --task NAME another installed market is evaluated: its environment, its metrics (the
+    metrics.csv columns) and its baselines (the default policies); --config is the solar market's.
     """
+    market = get_task(task)  # an unknown name: one line listing the installed tasks
+    if config is not None and task != DEFAULT_TASK:
+        raise CliError(f"--config is the solar market's configuration; task {task!r} takes its own defaults")
     cfg = load_config(config) if config else BenchmarkConfig()
     if out is not None:
         check_target(out, overwrite=overwrite)  # before any work (checked again under the lock)
     try:
-        specs = parse_agents(policies if policies is not None else ",".join(cfg.evaluation.policies))
+        if task == DEFAULT_TASK:
+            specs = parse_agents(policies if policies is not None else ",".join(cfg.evaluation.policies))
+        else:  # the task's baselines are its built-in names (the solar market's are refused by the runner)
+            names = tuple(market.baselines())
+            specs = parse_agent_list(policies if policies is not None else ",".join(names), (*names, *known_policies()))
         named = [s.name for s in specs if s.name is not None]
         agent_args = parse_agent_args(agent_arg or [], named)
     except ValueError as error:
@@ -190,7 +206,7 @@ def evaluate(
         episodes=episodes if episodes is not None else cfg.evaluation.episodes,
         data_dir=data,
         no_physics_penalty=no_physics_penalty,
-        config=cfg,
+        config=cfg if task == DEFAULT_TASK else None,  # None: the task's default configuration
         models=parse_models(models or []),
         agentic=options,
         concurrency=llm_concurrency,
@@ -199,6 +215,7 @@ def evaluate(
         # llm-agent: the model endpoint of the same --llm-* options as an LLM planner's
         llm=agentic_cli.llm_agent_options(governance) if llm_agent else None,
         isolate=isolate,
+        task=task,
     )
     try:
         check_agents(spec)  # unknown names, imports, models, names used twice, action shapes: before any work
@@ -217,6 +234,7 @@ def run(
     episodes: int = typer.Option(PAPER_EPISODES, min=1, help="Episodes per run seed."),
     seeds: str = typer.Option(_SEEDS, help="Comma-separated run seeds."),
     overwrite: bool = OVERWRITE,
+    task: str = TASK,
 ) -> None:
     """The main job: evaluate the baselines on the embedded default dataset.
 
@@ -224,17 +242,25 @@ def run(
     Open-Meteo weather shipped with the package, checked against the published sha256s, into
     the user cache directory and reused afterwards. Evaluates Static, Random and Myopic with
     the paper's protocol and prints the results table, the files written, and the main table
-    beside the paper's published values.
+    beside the paper's published values. With --task NAME, another installed market's baselines
+    on its default data (no paper comparison).
     """
     from ..common.atomic_files import read_csv_exact
     from ..evaluation.records import METRICS_FILE
     from ..report.against_paper.tables import main_table_against_paper
     from .common import paper_results_table
 
+    market = get_task(task)
     cfg = BenchmarkConfig()
     out = out or _default_run_dir(cfg, "baselines")
     check_target(out, overwrite=overwrite)
-    dataset = default_dataset_dir()  # logs a one-line notice when it builds
+    if task != DEFAULT_TASK:
+        other = EvaluationSpec(
+            policies=list(market.baselines()), run_seeds=parse_seeds(seeds), episodes=episodes, task=task
+        )
+        _evaluate(other, out, f"baselines of task {task}", overwrite)
+        return
+    dataset = market.data_dir(None, cfg)  # the default dataset; logs a one-line notice when it builds
     spec = EvaluationSpec(
         policies=["static", "random", "myopic"],
         run_seeds=parse_seeds(seeds),

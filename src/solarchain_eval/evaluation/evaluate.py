@@ -28,9 +28,9 @@ import pandas as pd
 
 from ..agents.names import name_problem
 from ..agents.specs import AgentSpecError
-from ..config import BenchmarkConfig
 from ..governance.factory import AgenticOptions, LLMOptions
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
+from ..tasks.registry import DEFAULT_TASK, get_task
 from .records import metrics_frame, summarize
 from .rollout import EpisodeResult
 from .runner import EvaluationSpec, run_evaluation
@@ -111,13 +111,14 @@ def evaluate(
     agentic: AgenticOptions | bool | None = None,
     out: str | Path | None = None,
     name: str | None = None,
-    config: BenchmarkConfig | None = None,
+    config: Any = None,
     models: dict[str, Path] | None = None,
     agent_args: dict[str | None, dict[str, Any]] | None = None,
     llm: LLMOptions | None = None,
     overwrite: bool = False,
     on_episode: Callable[[EpisodeResult], None] | None = None,
     isolate: bool = False,
+    task: str = DEFAULT_TASK,
 ) -> Evaluation:
     """Evaluate one agent, or several beside built-in ones, over run seeds × episodes.
 
@@ -149,7 +150,8 @@ def evaluate(
         agent's name follows the command line's rule (letters, digits and ``_ . + -``, at most 64
         characters), differs from the others' in more than case, and is none of the built-in
         names (``static``, ``ppo``, ``llm-agent``, the Planner/Auditor kinds, ...).
-    config : BenchmarkConfig, optional
+    config : BenchmarkConfig or the task's configuration, optional
+        The task's configuration (default: the task's own, ``BenchmarkConfig()`` for the solar market).
     models : dict, optional
         Trained models for the built-in learned policies (``{"ppo": path}`` or ``{"*": dir}``).
     agent_args : dict, optional
@@ -164,6 +166,10 @@ def evaluate(
         Run each user agent in a process of its own that receives only the public observation,
         step info and context (:mod:`solarchain_eval.agents.isolated`); an agent object must then
         be picklable. Its rows are labelled ``isolated``.
+    task : str
+        The market to evaluate in, by name (:func:`~solarchain_eval.tasks.registry.get_task`;
+        default ``"solar"``): its environment, dataset, metrics (the ``metrics.csv`` columns) and
+        baselines (spec strings naming them).
 
     Returns
     -------
@@ -202,13 +208,14 @@ def evaluate(
         episodes=int(episodes),
         data_dir=Path(data) if data is not None else None,
         no_physics_penalty=no_physics_penalty,
-        config=config or BenchmarkConfig(),
+        config=config,
         models=dict(models or {}),
         agentic=options,
         setting_label=label,
         agent_args=dict(agent_args or {}),
         llm=llm,
         isolate=isolate,
+        task=task,
     )
     scratch = None if out is not None else Path(tempfile.mkdtemp(prefix="solarchain-evaluate-"))
     target = Path(out) if out is not None else scratch / "run"  # type: ignore[operator]
@@ -219,7 +226,7 @@ def evaluate(
     finally:
         if scratch is not None:
             shutil.rmtree(scratch, ignore_errors=True)
-    metrics = metrics_frame(outcome.results)
+    metrics = metrics_frame(outcome.results, get_task(task))
     return Evaluation(
         metrics=metrics,
         summary=summary_frame(summarize(metrics)),

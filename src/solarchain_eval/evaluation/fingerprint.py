@@ -8,6 +8,11 @@ its canonical JSON. The package version is recorded beside it, not in it: a rele
 change the task keeps the id, and a release that changes the dynamics bumps the environment's
 registered version (``SolarChainEval-v0`` -> ``-v1``), which changes the id.
 
+What the market contributes comes from its :class:`~solarchain_eval.tasks.base.Task`: its
+identity (``env``) and the configuration that decides it (``config_sha256``). A run of a task
+other than the solar market also records the task's name (``task``), so the solar market's
+fingerprints, and the paper's protocol id, are those of the runs before tasks.
+
 Each agent's action mode is recorded in the fingerprint too (``action_modes``) but not hashed:
 the discrete grid is a fixed decoding of the same continuous market (its size is in the task
 configuration), so a discrete and a continuous agent are ranked on one board, as in the paper.
@@ -20,14 +25,13 @@ import json
 from collections.abc import Mapping, Sequence
 from typing import Any
 
-from ..config import BenchmarkConfig
-from ..envs.registration import ENV_ID
+from ..config import TASK_CONFIG_FIELDS as TASK_CONFIG_FIELDS  # re-exported: the solar market's, by config.py
 from ..records_schema import RECORDS_SCHEMA_VERSION
+from ..tasks.base import Task
+from ..tasks.registry import DEFAULT_TASK, get_task
 
 #: Fields of the fingerprint that the id does not hash (see the module docstring).
 UNHASHED_FIELDS = ("action_modes",)
-#: Configuration fields that decide the task; paths, training budgets and evaluation defaults do not.
-TASK_CONFIG_FIELDS = ("episode_steps", "discrete_levels", "no_physics_penalty", "market", "reward")
 
 
 def canonical_json(value: Any) -> str:
@@ -39,9 +43,10 @@ def sha256_text(text: str) -> str:
     return hashlib.sha256(text.encode()).hexdigest()
 
 
-def task_config_sha256(config: BenchmarkConfig) -> str:
-    """sha256 of the configuration fields that decide the task (:data:`TASK_CONFIG_FIELDS`)."""
-    return sha256_text(canonical_json(config.model_dump(include=set(TASK_CONFIG_FIELDS))))
+def task_config_sha256(config: Any, task: Task | None = None) -> str:
+    """sha256 of the configuration fields that decide the task (``task.protocol_config``; default: the
+    solar market's :data:`TASK_CONFIG_FIELDS`)."""
+    return sha256_text(canonical_json((task or get_task()).protocol_config(config)))
 
 
 def protocol_fingerprint(
@@ -51,8 +56,9 @@ def protocol_fingerprint(
     episodes: int,
     episode_seed_rule: str,
     setting: str,
-    config: BenchmarkConfig,
+    config: Any,
     action_modes: Mapping[str, str],
+    task: Task | None = None,
 ) -> dict[str, Any]:
     """The fingerprint ``run_metadata.json`` records under ``protocol``.
 
@@ -62,20 +68,26 @@ def protocol_fingerprint(
         Dataset CSV name -> sha256 (the run metadata's ``dataset.files``).
     run_seeds, episodes, episode_seed_rule, setting
         The evaluation protocol (``episode_seed_rule``: a name in ``protocol.EPISODE_SEED_RULES``).
-    config : BenchmarkConfig
-        The resolved configuration (its reward setting applied).
+    config
+        The task's resolved configuration (its reward setting applied).
     action_modes : mapping
         Policy name -> ``"continuous"`` or ``"discrete"``.
+    task : Task, optional
+        The market evaluated (default: the solar market).
     """
+    task = task or get_task()
+    # the task's name only when it is not the solar market: the solar fingerprints stay those before tasks
+    named = {} if task.name == DEFAULT_TASK else {"task": task.name}
     return {
-        "env": ENV_ID,
+        **named,
+        **task.identity(config),
         "records_schema_version": RECORDS_SCHEMA_VERSION,
         "dataset_sha256": dict(sorted(dataset_sha256.items())),
         "run_seeds": [int(s) for s in run_seeds],
         "episodes": int(episodes),
         "episode_seed_rule": str(episode_seed_rule),
         "setting": str(setting),
-        "config_sha256": task_config_sha256(config),
+        "config_sha256": task_config_sha256(config, task),
         "action_modes": dict(sorted(action_modes.items())),
     }
 

@@ -26,6 +26,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from ..agents.base import Policy
+from ..tasks.base import Task as Market
 from .rollout import EpisodeResult, begin_run, run_episode
 
 
@@ -72,6 +73,7 @@ def run_in_flight(
     workers: int,
     wrap: Callable[[Policy], Policy] | None = None,
     on_episode: Callable[[EpisodeResult], None] | None = None,
+    market: Market | None = None,
 ) -> list[EpisodeResult]:
     """Evaluate like :func:`~.rollout.run_policy` for each policy, ``workers`` tasks at a time.
 
@@ -85,6 +87,8 @@ def run_in_flight(
         Wraps a task's base policy (the Planner/Auditor layer); called once per task.
     on_episode : callable, optional
         Called with each finished episode, under a lock, in completion order (progress bars).
+    market : Task, optional
+        The market the environments are of (:class:`~solarchain_eval.tasks.base.Task`; default: the solar market).
 
     Returns
     -------
@@ -123,7 +127,7 @@ def run_in_flight(
             if stop.is_set():
                 break
             result = run_episode(
-                env, policy, episode_seed=seed, setting=setting, run_seed=task.run_seed, episode=episode
+                env, policy, episode_seed=seed, setting=setting, run_seed=task.run_seed, episode=episode, task=market
             )
             out.append(result)
             if on_episode is not None:

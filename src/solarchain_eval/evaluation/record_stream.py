@@ -21,6 +21,7 @@ from typing import Any
 import pandas as pd
 
 from ..common.atomic_files import AtomicFile, atomic_write_csv, atomic_write_json
+from ..tasks.base import Task
 from .records import (
     ACTIONS_FILE,
     ACTIONS_PARQUET,
@@ -65,17 +66,21 @@ class RecordStream:
     folder : Path
         Where the files go (a run directory's staging folder).
     cities : sequence of str
-        The dataset's cities (the city-hour table's rows per step).
+        The names of the task's step extras (the solar market: the dataset's cities), the city-hour
+        table's rows per step; none: no city-hour table.
     step_format : str
         A key of :data:`STEP_FORMATS`.
+    task : Task, optional
+        The market whose records these are (their columns; default: the solar market).
     """
 
-    def __init__(self, folder: Path, cities: Sequence[str], step_format: str = "csv") -> None:
+    def __init__(self, folder: Path, cities: Sequence[str], step_format: str = "csv", task: Task | None = None) -> None:
         if step_format not in STEP_FORMATS:
             raise ValueError(f"step format must be one of {', '.join(STEP_FORMATS)}, got {step_format!r}")
         self.folder = Path(folder)
         self.cities = tuple(cities)
         self.step_format = step_format
+        self.task = task
         self.episodes = 0
         self.steps = 0
         #: The summary :meth:`finish` wrote (``summary.json``).
@@ -110,10 +115,11 @@ class RecordStream:
         batch, self._pending, self._pending_steps = self._pending, [], 0
         if not batch:
             return
-        self._metrics.append(metrics_frame(batch))
+        self._metrics.append(metrics_frame(batch, self.task))
         actions, city_hour = STEP_FORMATS[self.step_format]
-        self._append_table(actions, actions_frame(batch))
-        self._append_table(city_hour, city_hour_frame(batch, self.cities))
+        self._append_table(actions, actions_frame(batch, self.task))
+        if self.cities:
+            self._append_table(city_hour, city_hour_frame(batch, self.cities, self.task))
         log = agentic_log_text(batch)
         if log is not None:
             self._file(AGENTIC_LOG_FILE).handle.write(log)
@@ -130,9 +136,10 @@ class RecordStream:
         self.flush()
         actions, city_hour = STEP_FORMATS[self.step_format]
         if actions not in self._files:  # no episode: the tables' headers only, as write_records
-            self._append_table(actions, actions_frame([]))
-            self._append_table(city_hour, city_hour_frame([], self.cities))
-        metrics = _concat_metrics(self._metrics)
+            self._append_table(actions, actions_frame([], self.task))
+            if self.cities:
+                self._append_table(city_hour, city_hour_frame([], self.cities, self.task))
+        metrics = _concat_metrics(self._metrics, self.task)
         self._metrics = []
         paths = {METRICS_FILE: atomic_write_csv(self.folder / METRICS_FILE, metrics)}
         for writer in self._parquet.values():
@@ -169,12 +176,12 @@ class RecordStream:
         writer.write_table(table)
 
 
-def _concat_metrics(frames: list[pd.DataFrame]) -> pd.DataFrame:
+def _concat_metrics(frames: list[pd.DataFrame], task: Task | None = None) -> pd.DataFrame:
     """The chunks' metrics rows as :func:`~.records.metrics_frame` gives all of them at once: each
     chunk starts with the fixed columns, and a column first seen in a later chunk comes after
     those already there (pandas fills the rows without it with NaN, as the whole frame does)."""
     if not frames:
-        return metrics_frame([])
+        return metrics_frame([], task)
     return frames[0] if len(frames) == 1 else pd.concat(frames, ignore_index=True, sort=False)
 
 

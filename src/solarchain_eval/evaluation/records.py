@@ -16,8 +16,10 @@ from ..agents.validation import AGENT_EXTRAS_KEY
 from ..common.atomic_files import atomic_write_csv, atomic_write_json, atomic_write_text
 from ..governance.counterfactual import DIAGNOSTIC_COLUMNS
 from ..governance.wrapper import EXTRA_DIAGNOSTICS_KEY, EXTRA_LOG_KEY, EXTRA_METRICS_KEY
-from ..records_schema import EPISODE_KEYS, METRIC_NAMES
-from .rollout import STEP_FIELDS, EpisodeResult
+from ..records_schema import EPISODE_KEYS
+from ..tasks.base import Task, metric_names
+from ..tasks.registry import get_task
+from .rollout import EpisodeResult
 
 METRICS_FILE = "metrics.csv"
 ACTIONS_FILE = "actions.csv"
@@ -36,11 +38,11 @@ DIAGNOSTICS_FILE = "governance_diagnostics.csv"
 REPORT_DIR = "report"
 
 
-def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
-    """One row per episode: identifiers, the episode metrics of docs/metrics.md, then any extra
-    per-episode metrics (the Planner/Auditor layer's, the LLM agent's) and a user agent's own
-    ``agent_*`` columns. The identifiers and metrics are the runner's: written last, so no extra
-    column can replace them."""
+def metrics_frame(results: Sequence[EpisodeResult], task: Task | None = None) -> pd.DataFrame:
+    """One row per episode: identifiers, the task's episode metrics (``task.metrics``, default the
+    solar market's, docs/metrics.md), then any extra per-episode metrics (the Planner/Auditor
+    layer's, the LLM agent's) and a user agent's own ``agent_*`` columns. The identifiers and
+    metrics are the runner's: written last, so no extra column can replace them."""
     rows = []
     for r in results:
         row = {**r.extras.get(EXTRA_METRICS_KEY, {}), **r.extras.get(AGENT_EXTRAS_KEY, {})}
@@ -48,53 +50,58 @@ def metrics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
         row.update(r.metrics)
         rows.append(row)
     frame = pd.DataFrame(rows)
+    # the metric columns in the task's declared order (an episode's metrics come in that order)
+    metrics = metric_names(task) if task is not None else tuple(results[0].metrics) if results else None
+    if metrics is None:
+        metrics = metric_names(get_task())
     if frame.empty:
-        return pd.DataFrame(columns=[*EPISODE_KEYS, *METRIC_NAMES])
-    ordered = [*EPISODE_KEYS, *METRIC_NAMES]
+        return pd.DataFrame(columns=[*EPISODE_KEYS, *metrics])
+    ordered = [*EPISODE_KEYS, *metrics]
     return frame[ordered + [c for c in frame.columns if c not in ordered]]
 
 
-def actions_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame:
-    """One row per step: identifiers and every per-step info field."""
+def actions_frame(results: Sequence[EpisodeResult], task: Task | None = None) -> pd.DataFrame:
+    """One row per step: identifiers and the task's per-step fields (``task.step_fields``, default the
+    solar market's)."""
     columns: dict[str, Any] = {}
     lengths = [r.n_steps for r in results]
     for key in ("policy", "setting", "run_seed", "episode", "episode_seed"):
         columns[key] = np.repeat([getattr(r, key) for r in results], lengths)
     columns["step"] = np.concatenate([np.arange(n) for n in lengths]) if results else np.zeros(0, dtype=int)
-    for name in STEP_FIELDS:
+    for name in (task or get_task()).step_fields:
         columns[name] = [value for r in results for value in r.steps[name]]
     return pd.DataFrame(columns)
 
 
-def city_hour_frame(results: Sequence[EpisodeResult], cities: Sequence[str]) -> pd.DataFrame:
-    """One row per step and city: the city's reward and the executed action."""
+def city_hour_frame(results: Sequence[EpisodeResult], cities: Sequence[str], task: Task | None = None) -> pd.DataFrame:
+    """One row per step and step extra (the solar market: per city): the step's hour columns
+    (``absolute_hour``, ``hour``, those of the task's step fields), the extra's name (``city``) and
+    value (``city_reward``), and the executed action (the task's levers; default the solar market's)."""
+    task = task or get_task()
     n_cities = len(cities)
     keys: dict[str, list] = {k: [] for k in ("policy", "setting", "run_seed", "episode")}
-    step, absolute_hour, hour, alpha, ell, burn, city_reward = [], [], [], [], [], [], []
+    hours = [c for c in ("absolute_hour", "hour") if c in task.step_fields]
+    levers = [lever.name for lever in task.levers]
+    per_step: dict[str, list] = {c: [] for c in (*hours, *levers)}
+    step, city_reward = [], []
     for r in results:
         n = r.n_steps
         for key in keys:
             keys[key].extend([getattr(r, key)] * (n * n_cities))
         for t in range(n):
             step.extend([t] * n_cities)
-            absolute_hour.extend([r.steps["absolute_hour"][t]] * n_cities)
-            hour.extend([r.steps["hour"][t]] * n_cities)
-            alpha.extend([r.steps["reward_ratio"][t]] * n_cities)
-            ell.extend([r.steps["liquidity_ratio"][t]] * n_cities)
-            burn.extend([r.steps["burn_rate"][t]] * n_cities)
+            for column, values in per_step.items():
+                values.extend([r.steps[column][t]] * n_cities)
             city_reward.extend(r.city_rewards[t])
     city = list(cities) * (len(step) // n_cities if n_cities else 0)
     return pd.DataFrame(
         {
             **keys,
             "step": step,
-            "absolute_hour": absolute_hour,
-            "hour": hour,
+            **{c: per_step[c] for c in hours},
             "city": city,
             "city_reward": city_reward,
-            "reward_ratio": alpha,
-            "liquidity_ratio": ell,
-            "burn_rate": burn,
+            **{c: per_step[c] for c in levers},
         }
     )
 
@@ -167,7 +174,7 @@ def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
     static_slippage = {
         setting: float(group["mean_slippage"].mean())
         for (policy, setting), group in metrics.groupby(["policy", "setting"], sort=False)
-        if policy == "static"
+        if policy == "static" and "mean_slippage" in group  # the solar market's slippage column
     }
     for (policy, setting), group in metrics.groupby(["policy", "setting"], sort=False):
         entry: dict[str, Any] = {
@@ -195,15 +202,18 @@ def summarize(metrics: pd.DataFrame) -> list[dict[str, Any]]:
     return summary
 
 
-def write_records(run_dir: Path, results: Sequence[EpisodeResult], cities: Sequence[str]) -> dict[str, Path]:
-    """Write metrics, actions and city-hour CSVs, the agentic log (agentic runs only) and the
-    summary, each file atomically."""
-    metrics = metrics_frame(results)
+def write_records(
+    run_dir: Path, results: Sequence[EpisodeResult], cities: Sequence[str], task: Task | None = None
+) -> dict[str, Path]:
+    """Write metrics, actions and city-hour CSVs (the last only when the task names step extras,
+    ``cities``), the agentic log (agentic runs only) and the summary, each file atomically."""
+    metrics = metrics_frame(results, task)
     paths = {
         METRICS_FILE: atomic_write_csv(run_dir / METRICS_FILE, metrics),
-        ACTIONS_FILE: atomic_write_csv(run_dir / ACTIONS_FILE, actions_frame(results)),
-        CITY_HOUR_FILE: atomic_write_csv(run_dir / CITY_HOUR_FILE, city_hour_frame(results, cities)),
+        ACTIONS_FILE: atomic_write_csv(run_dir / ACTIONS_FILE, actions_frame(results, task)),
     }
+    if cities:
+        paths[CITY_HOUR_FILE] = atomic_write_csv(run_dir / CITY_HOUR_FILE, city_hour_frame(results, cities, task))
     log = agentic_log_text(results)
     if log is not None:
         paths[AGENTIC_LOG_FILE] = atomic_write_text(run_dir / AGENTIC_LOG_FILE, log)

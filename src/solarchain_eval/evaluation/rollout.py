@@ -33,7 +33,7 @@ class EpisodeResult:
 
     @property
     def n_steps(self) -> int:
-        return len(self.steps["reward"])
+        return len(next(iter(self.steps.values()), ()))
 
 
 def run_episode(

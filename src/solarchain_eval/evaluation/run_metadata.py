@@ -20,9 +20,10 @@ from pydantic import BaseModel, ConfigDict, Field, PrivateAttr, ValidationError,
 
 from ..common.atomic_files import atomic_write_json
 from ..common.errors import InputDataError
-from ..config import BenchmarkConfig
 from ..protocol import EPISODE_SEED_RULES
 from ..records_schema import RECORDS_SCHEMA_VERSION
+from ..tasks.base import Task
+from ..tasks.registry import UnknownTaskError, get_task
 from .fingerprint import merge_fingerprints, protocol_fingerprint, protocol_id
 from .records import METADATA_FILE
 
@@ -50,11 +51,11 @@ def rule_name(recorded: str) -> str:
 
 
 class DatasetRecord(BaseModel):
-    """The dataset a run used (:func:`~solarchain_eval.data.provenance.dataset_provenance`)."""
+    """The dataset a run used (its task's ``provenance``; a task without a dataset records ``data_dir`` None)."""
 
     model_config = ConfigDict(extra="allow")
 
-    data_dir: str
+    data_dir: str | None
     #: CSV name -> sha256.
     files: dict[str, str] = Field(default_factory=dict)
     #: Written only when the directory has a manifest.
@@ -103,7 +104,8 @@ class RunMetadata(BaseModel):
     rows: dict[str, int]
     dataset: DatasetRecord
     models: dict[str, str]
-    #: ``BenchmarkConfig.model_dump()`` as recorded (:meth:`task_config` validates it).
+    #: The task's configuration as recorded (``Task.config_record``; the solar market:
+    #: ``BenchmarkConfig.model_dump()``); :meth:`task_config` validates it.
     config: dict[str, Any]
 
     #: Whether ``protocol`` was recorded by the run (False: computed on read, see :meth:`_upgrade`).
@@ -216,20 +218,36 @@ class RunMetadata(BaseModel):
         """Whether the run recorded its protocol (False: computed from the older keys on read, or none)."""
         return self._protocol_recorded
 
-    def task_config(self) -> BenchmarkConfig:
-        """The recorded configuration, validated.
+    def resolve_task(self) -> Task:
+        """The task the run evaluated, from the tasks installed here (never code the record names).
 
         Raises
         ------
         RunMetadataError
-            It is not one this version reads (the message names the field).
+            No installed task has the recorded name (the message lists those there are).
         """
         try:
-            return BenchmarkConfig.model_validate(self.config)
+            return get_task(self.task)
+        except UnknownTaskError as error:
+            raise RunMetadataError(f"{self.where}: field task: {error}; install the package that provides it") from None
+
+    def task_config(self) -> Any:
+        """The recorded configuration, validated by the run's task (the solar market: a ``BenchmarkConfig``).
+
+        Raises
+        ------
+        RunMetadataError
+            It is not one this version reads (the message names the field), or the task is not installed.
+        """
+        task = self.resolve_task()
+        try:
+            return task.config_from_record(self.config)
         except ValidationError as error:
             problem = error.errors()[0]
             field = ".".join(str(p) for p in ("config", *problem["loc"]))
             raise RunMetadataError(f"{self.where}: field {field}: {problem['msg']}") from None
+        except (TypeError, ValueError) as error:
+            raise RunMetadataError(f"{self.where}: field config: {error}") from None
 
     def fingerprint(self) -> dict[str, Any]:
         """The run's protocol fingerprint (recorded, or computed for an older run).

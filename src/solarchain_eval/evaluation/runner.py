@@ -28,11 +28,11 @@ from ..common.atomic_files import sha256_file
 from ..common.redaction import redact_command, redact_spec
 from ..common.versions import git_commit, package_versions
 from ..config import BenchmarkConfig
-from ..data.provenance import dataset_provenance as dataset_provenance  # re-exported
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS, episode_seed_rule_name, paper_episode_seeds
 from ..records_schema import RECORDS_SCHEMA_VERSION
-from ..tasks.registry import get_task
+from ..tasks.base import Task
+from ..tasks.registry import DEFAULT_TASK, get_task
 from .fingerprint import protocol_fingerprint, protocol_id
 from .inflight import run_in_flight
 from .record_stream import RecordStream, check_disk_space
@@ -51,6 +51,9 @@ class EvaluationSpec:
     ``policies`` are agent specs (built-in names such as ``"static"``, ``"pkg.module:attr"``,
     ``"NAME=http://..."``: :mod:`solarchain_eval.agents.specs`) or agents (objects with ``act``,
     functions ``observation -> action``, Stable-Baselines3 models). Their names must be unique.
+    ``task`` names the market (:func:`~solarchain_eval.tasks.registry.get_task`); ``config`` is that
+    task's configuration (None: its default, for the solar market ``BenchmarkConfig()``), and a
+    task other than the solar market offers its own baselines by name (``Task.baselines``).
     With ``agentic`` set, every policy is wrapped by the Planner/Auditor layer and the
     setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``). ``setting_label`` names a
     setting added with :func:`~solarchain_eval.evaluation.settings.register_setting` instead; its
@@ -62,7 +65,8 @@ class EvaluationSpec:
     episodes: int = PAPER_EPISODES
     data_dir: Path | None = None
     no_physics_penalty: bool = False
-    config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    #: The task's configuration (None: ``get_task(task).default_config()``, set on construction).
+    config: Any = None
     models: dict[str, Path] = field(default_factory=dict)
     episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds
     agentic: AgenticOptions | None = None
@@ -79,8 +83,12 @@ class EvaluationSpec:
     #: Run user agents (Python objects, ``module:attr``, ``file.py:attr``, plugins, ``sb3:``) each in a
     #: process of its own (:mod:`~solarchain_eval.agents.isolated`); built-ins stay in this process.
     isolate: bool = False
+    #: The market evaluated, by name (:mod:`solarchain_eval.tasks`).
+    task: str = DEFAULT_TASK
 
     def __post_init__(self) -> None:
+        if self.config is None:  # an unknown task name is refused here, before any work
+            self.config = get_task(self.task).default_config()
         if self.setting_label is None:
             return
         known = KNOWN_SETTINGS.get(self.setting_label)
@@ -117,6 +125,36 @@ class EvaluationOutcome:
     episodes: int = 0
 
 
+def dataset_provenance(data: Any) -> dict[str, Any]:
+    """Where the solar market's dataset ``data`` came from (``Task.provenance`` of the default task)."""
+    return get_task().provenance(data)
+
+
+def resolved_config(spec: EvaluationSpec) -> Any:
+    """The spec's task configuration with its setting's reward switch applied."""
+    return get_task(spec.task).setting_config(spec.config, no_physics_penalty=spec.no_physics_penalty)
+
+
+def _task_baseline(task: Task, text: str, config: Any) -> Policy | None:
+    """The baseline ``text`` names of a task other than the solar market (None: not one of its names).
+
+    Raises
+    ------
+    AgentSpecError
+        ``text`` names one of the solar market's built-in policies, which do not act in this task.
+    """
+    if task.name == DEFAULT_TASK:
+        return None
+    baselines = task.baselines()
+    if text in baselines:
+        return baselines[text](config)
+    if parse_agent_spec(text, known_policies()).kind in ("builtin", "llm"):
+        raise AgentSpecError(
+            f"policy {text!r} is not a baseline of task {task.name!r} (its baselines: {', '.join(baselines) or 'none'})"
+        )
+    return None
+
+
 def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[Policy]:
     """The spec's agents, built: specs through :func:`~solarchain_eval.agents.registry.make_agent`
     with the spec's config (its reward setting applied), models and options, ready agents through
@@ -132,10 +170,15 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
     FileNotFoundError
         A learned policy without a trained model (the message lists where it looked).
     """
-    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    config = resolved_config(spec)
+    task = get_task(spec.task)
     builtins = known_policies()
     built: list[Policy] = []
     for item in spec.policies:
+        baseline = _task_baseline(task, item, config) if isinstance(item, str) else None
+        if baseline is not None:  # a baseline the task supplies (not the solar market's)
+            built.append(baseline)
+            continue
         if is_builtin_policy(item):  # the benchmark's own policy object, as make_agent returns it
             built.append(item)
             continue
@@ -181,8 +224,8 @@ def check_agents(spec: EvaluationSpec) -> list[str]:
     list of str
         The agents' names (the ``policy`` column of their records), in the spec's order.
     """
-    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
-    task = get_task()
+    config = resolved_config(spec)
+    task = get_task(spec.task)
     table = task.load_data(task.data_dir(spec.data_dir, config))
     with ExitStack() as stack:
         agents = make_policies(spec, stack)
@@ -192,13 +235,13 @@ def check_agents(spec: EvaluationSpec) -> list[str]:
         return [agent.name for agent in agents]
 
 
-def _try_first_action(agent: UserAgent, config: BenchmarkConfig, table: Any, spec: EvaluationSpec) -> None:
+def _try_first_action(agent: UserAgent, config: Any, table: Any, spec: EvaluationSpec) -> None:
     try:
         # An isolated agent is a copy already (in its process), which this check then closes.
         trial = agent if isinstance(agent.inner, IsolatedAgent) else copy.deepcopy(agent)
     except Exception:  # an agent holding a socket, a lock, a model server: tried on its first step
         return
-    env = get_task().make_env(config, table, action_mode=trial.action_mode)
+    env = get_task(spec.task).make_env(config, table, action_mode=trial.action_mode)
     run_seed = int(spec.run_seeds[0])
     (episode_seed,) = spec.episode_seeds(run_seed, 1)
     obs, info = env.reset(seed=episode_seed)
@@ -263,19 +306,20 @@ def run_evaluation(
     """
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
-    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
-    task = get_task()
+    config = resolved_config(spec)
+    task = get_task(spec.task)
     table = task.load_data(task.data_dir(spec.data_dir, config))  # validates before anything is written
+    extras = task.step_extra_names(table)
     setting = spec.setting
     episodes = len(spec.policies) * len(spec.run_seeds) * spec.episodes
-    check_disk_space(run_dir, episodes, config.episode_steps, len(table.cities), step_format)
+    check_disk_space(run_dir, episodes, task.episode_steps(config), len(extras), step_format)
 
     with ExitStack() as stack:
         policies = make_policies(spec, stack)
         writer = stack.enter_context(RunDirWriter(run_dir, overwrite=overwrite, keep=keep))
         governance = stack.enter_context(Governance(spec.agentic, config.market)) if spec.agentic is not None else None
         assert writer.staging is not None
-        stream = stack.enter_context(RecordStream(writer.staging, table.cities, step_format))
+        stream = stack.enter_context(RecordStream(writer.staging, extras, step_format, task))
         results: list[EpisodeResult] = []
 
         def record(result: EpisodeResult) -> None:
@@ -294,17 +338,18 @@ def run_evaluation(
                 workers=spec.concurrency,
                 wrap=governance.wrap if governance is not None else None,
                 on_episode=on_episode,
+                market=task,
             )
             for result in finished:  # in protocol order; few episodes (they wait on a model)
                 record(result)
         else:
             wrapped = [governance.wrap(p) for p in policies] if governance is not None else policies
-            _run_sequentially(wrapped, spec, config, table, setting, on_episode, record)
+            _run_sequentially(task, wrapped, spec, config, table, setting, on_episode, record)
         files = stream.finish()
         kill_point("staged")
         wall_s = time.perf_counter() - started
         rows = {"metrics": stream.episodes, "actions": stream.steps}
-        metadata = _metadata(spec, config, table, policies, rows, files, command, started_at, wall_s, setting)
+        metadata = _metadata(task, spec, config, table, policies, rows, files, command, started_at, wall_s, setting)
         metadata.write(writer.staging / METADATA_FILE)
         writer.publish()
     files = {name: Path(run_dir) / name for name in [*files, METADATA_FILE]}
@@ -322,9 +367,10 @@ def run_evaluation(
 
 
 def _run_sequentially(
+    task: Task,
     policies: Sequence[Policy],
     spec: EvaluationSpec,
-    config: BenchmarkConfig,
+    config: Any,
     table: Any,
     setting: str,
     on_episode: Callable[[EpisodeResult], None] | None,
@@ -332,7 +378,6 @@ def _run_sequentially(
 ) -> None:
     """Every policy's runs and episodes in protocol order, one env per action mode, each
     episode handed to ``record`` as it finishes."""
-    task = get_task()
     envs: dict[str, Any] = {}
     for policy in policies:
         env = envs.get(policy.action_mode)
@@ -352,8 +397,9 @@ def _run_sequentially(
 
 
 def _metadata(
+    task: Task,
     spec: EvaluationSpec,
-    config: BenchmarkConfig,
+    config: Any,
     table: Any,
     policies: Sequence[Policy],
     rows: dict[str, int],
@@ -363,7 +409,7 @@ def _metadata(
     wall_s: float,
     setting: str,
 ) -> RunMetadata:
-    dataset = dataset_provenance(table)
+    dataset = task.provenance(table)
     governed = spec.agentic is not None
     protocol = protocol_fingerprint(
         dataset_sha256=dataset["files"],
@@ -373,8 +419,12 @@ def _metadata(
         setting=setting,
         config=config,
         action_modes={p.name: p.action_mode for p in policies},
+        task=task,
     )
+    # ``task`` only when it is not the solar market: a solar run's file is the one before tasks
+    named = {} if task.name == DEFAULT_TASK else {"task": task.name}
     return RunMetadata(
+        **named,
         complete=True,
         run_id=uuid.uuid4().hex,
         # sha256 of every file this metadata vouches for; ``report`` verifies them.
@@ -402,5 +452,5 @@ def _metadata(
         rows=rows,
         dataset=dataset,
         models={k: str(v) for k, v in spec.models.items()},
-        config=config.model_dump(),
+        config=task.config_record(config),
     )

@@ -31,12 +31,12 @@ from ..agents.registry import known_policies
 from ..agents.specs import AgentSpecError, parse_agent_spec
 from ..common.errors import NamesOptions
 from ..common.redaction import redact_text
-from ..config import BenchmarkConfig
 from ..governance.errors import GovernanceConfigError
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..llm.errors import LLMError
 from ..protocol import EPISODE_SEED_RULES
-from ..tasks.registry import get_task
+from ..tasks.base import Task
+from ..tasks.registry import DEFAULT_TASK
 from .inflight import is_stateless
 from .records import METRICS_FILE
 from .rollout import begin_run, run_episode
@@ -52,6 +52,7 @@ from .verify_checks import (
     read_metadata,
     read_rollouts,
     resolve_dataset,
+    run_task,
     written_row,
 )
 from .verify_plan import choose_episodes, default_seed, replay_plan
@@ -167,8 +168,9 @@ class RunVerification:
 class _Rerun:
     """What one policy's re-run needs (the run's protocol, rebuilt)."""
 
-    config: BenchmarkConfig
-    table: Any  # the task's dataset (the solar market: an hourly table)
+    task: Task
+    config: Any  # the task's configuration
+    table: Any  # the task's dataset (the solar market: an hourly table; None for a task without one)
     setting: str
     run_seeds: list[int]
     episodes: int
@@ -200,12 +202,18 @@ def rerun_policy(
         agent = base if stateless or rerun.carry_over or index == 0 else build()
         policy = rerun.governance.wrap(agent) if rerun.governance is not None else agent
         if env is None:
-            env = get_task().make_env(rerun.config, rerun.table, action_mode=policy.action_mode)
+            env = rerun.task.make_env(rerun.config, rerun.table, action_mode=policy.action_mode)
         seeds = rerun.episode_seeds(run_seed, rerun.episodes)
         begin_run(policy, run_seed)
         for episode in episodes:
             result = run_episode(
-                env, policy, episode_seed=seeds[episode], setting=rerun.setting, run_seed=run_seed, episode=episode
+                env,
+                policy,
+                episode_seed=seeds[episode],
+                setting=rerun.setting,
+                run_seed=run_seed,
+                episode=episode,
+                task=rerun.task,
             )
             if (run_seed, episode) not in wanted:
                 replayed += 1
@@ -214,35 +222,47 @@ def rerun_policy(
             if recorded is None:
                 missing = Difference(run_seed, episode, "(row)", f"(none in {METRICS_FILE})", "(an episode)")
                 return PolicyVerification(name, DIFFERS, compared, replayed, missing)
-            difference = first_difference(recorded, written_row(result), run_seed, episode)
+            difference = first_difference(recorded, written_row(result, rerun.task), run_seed, episode)
             if difference is not None:
                 return PolicyVerification(name, DIFFERS, compared, replayed, difference)
             compared += 1
     return PolicyVerification(name, VERIFIED, compared, replayed)
 
 
-def _builder(text: str, config: BenchmarkConfig, models: dict[str, Path], options: VerifyOptions, stack: ExitStack):
-    """A function building the agent of spec ``text`` as the evaluation runner builds it."""
+def _builder(
+    text: str,
+    config: Any,
+    models: dict[str, Path],
+    options: VerifyOptions,
+    stack: ExitStack,
+    task: str = DEFAULT_TASK,
+):
+    """A function building the agent of spec ``text`` in ``task`` as the evaluation runner builds it."""
     spec = EvaluationSpec(
         policies=[text],
         config=config,
-        no_physics_penalty=config.no_physics_penalty,
+        # the recorded config has the setting's reward switch applied (a task without one has none)
+        no_physics_penalty=bool(getattr(config, "no_physics_penalty", False)),
         models=models,
         agent_args=options.agent_args,
         isolate=True,  # a submitted agent is re-run in its own process, where it cannot reach the env
+        task=task,
     )
     return lambda: make_policies(spec, stack)[0]
 
 
 def _recorded_builder(
     text: str,
-    config: BenchmarkConfig,
+    config: Any,
     models: dict[str, Path],
     options: VerifyOptions,
     stack: ExitStack,
     llm_agent: Mapping[str, Any] | None = None,
+    task: Task | None = None,
 ) -> Callable[[], Policy] | str:
     """How to rebuild a policy from its recorded spec, or why it cannot be rebuilt."""
+    if task is not None and task.name != DEFAULT_TASK and text in task.baselines():
+        return _builder(text, config, models, options, stack, task.name)  # the installed task's own baseline
     if text.startswith("<"):
         return f"an agent object {text} passed from Python; pass its spec with --agent NAME=module:attr"
     try:
@@ -268,7 +288,7 @@ def _recorded_builder(
 
 def _given_builders(
     metadata: RunMetadata,
-    config: BenchmarkConfig,
+    config: Any,
     models: dict[str, Path],
     options: VerifyOptions,
     stack: ExitStack,
@@ -277,7 +297,7 @@ def _given_builders(
     names = metadata.policies
     given: dict[str, Callable[[], Policy]] = {}
     for text in options.agents:
-        build = _builder(text, config, models, options, stack)
+        build = _builder(text, config, models, options, stack, metadata.task)
         try:
             name = build().name
         except (ValueError, OSError) as error:  # AgentSpecError, a model that cannot load, a missing file
@@ -320,6 +340,7 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
         raise VerifyError.about("{opt_episodes} must be at least 1, got {n}", n=options.episodes)
     run_dir = Path(run_dir)
     metadata = read_metadata(run_dir)
+    task = run_task(metadata)  # an installed task, by the recorded name (before any check: one clear line)
     checksums = check_checksums(run_dir, metadata, options.grid_files)
     files_checked = len(metadata.files or {})
     names = metadata.policies
@@ -329,9 +350,9 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
         why = f"the recorded config is invalid: {error}"
         cannot = tuple(PolicyVerification(n, CANNOT_REBUILD, reason=why) for n in names)
         return RunVerification(run_dir, tuple(checksums), metadata.protocol_id or "", (why,), cannot, files_checked)
-    protocol = check_protocol(metadata, config)
-    recorded, rollouts = read_rollouts(run_dir, metadata)
-    data_dir, no_data = resolve_dataset(metadata, options.data_dir)
+    protocol = check_protocol(metadata, config, task)
+    recorded, rollouts = read_rollouts(run_dir, metadata, task)
+    data_dir, no_data = resolve_dataset(metadata, options.data_dir, task)
     with ExitStack() as stack:
         models = keeper_models(metadata, options.models, options.models_within)
         given = _given_builders(metadata, config, models, options, stack)
@@ -339,7 +360,9 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
         results = (
             []
             if rollouts
-            else _verify_policies(run_dir, metadata, config, data_dir, no_data, given, models, options, stack, recorded)
+            else _verify_policies(
+                task, run_dir, metadata, config, data_dir, no_data, given, models, options, stack, recorded
+            )
         )
     return RunVerification(
         run_dir,
@@ -353,9 +376,10 @@ def verify_run(run_dir: Path, options: VerifyOptions | None = None) -> RunVerifi
 
 
 def _verify_policies(
+    task: Task,
     run_dir: Path,
     metadata: RunMetadata,
-    config: BenchmarkConfig,
+    config: Any,
     data_dir: Path | None,
     no_data: str,
     given: dict[str, Callable[[], Policy]],
@@ -384,11 +408,12 @@ def _verify_policies(
     )
     if common:
         return [PolicyVerification(n, CANNOT_REBUILD, reason=common) for n in names]
-    assert data_dir is not None and rule is not None and not isinstance(agentic, str)
+    assert rule is not None and not isinstance(agentic, str)
     governance = stack.enter_context(Governance(agentic, config.market)) if agentic is not None else None
     rerun = _Rerun(
+        task=task,
         config=config,
-        table=get_task().load_data(data_dir),
+        table=task.load_data(data_dir),  # None: a task without a dataset (resolve_dataset)
         setting=metadata.setting,
         run_seeds=metadata.run_seeds,
         episodes=metadata.episodes,
@@ -404,7 +429,7 @@ def _verify_policies(
     modes = protocol.get("action_modes") or {}
     results = []
     for name, text in zip(names, specs, strict=True):
-        build = given.get(name) or _recorded_builder(text, config, models, options, stack, metadata.llm_agent)
+        build = given.get(name) or _recorded_builder(text, config, models, options, stack, metadata.llm_agent, task)
         if isinstance(build, str):
             results.append(PolicyVerification(name, CANNOT_REBUILD, reason=build))
             continue

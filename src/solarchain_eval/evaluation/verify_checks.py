@@ -18,11 +18,18 @@ import math
 from collections.abc import Iterable, Mapping, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ..common.errors import InputDataError, NamesOptions
-from ..config import BenchmarkConfig
-from ..data.provenance import dataset_provenance
-from ..data.table import load_table
+from ..records_schema import (
+    AGENT_COLUMN_PREFIX,
+    EPISODE_KEYS,
+    REMOVED_COLUMNS,
+    RENAMED_COLUMNS,
+    record_columns,
+)
+from ..tasks.base import Task, metric_names
+from ..tasks.registry import get_task
 from .fingerprint import protocol_fingerprint, protocol_id
 from .records import METADATA_FILE, METRICS_FILE, REPORT_DIR, metrics_frame
 from .rollout import EpisodeResult
@@ -59,6 +66,15 @@ def read_metadata(run_dir: Path) -> RunMetadata:
         raise VerifyError(str(error)) from None
 
 
+def run_task(metadata: RunMetadata) -> Task:
+    """The run's task, by its recorded name, from the tasks installed here (a :class:`VerifyError`
+    when none has that name: a run never names the code verify loads)."""
+    try:
+        return metadata.resolve_task()
+    except RunMetadataError as error:
+        raise VerifyError(str(error)) from None
+
+
 def check_checksums(run_dir: Path, metadata: RunMetadata, grid_files: Sequence[str] = ()) -> list[str]:
     """Problems of every file in ``run_dir`` against the metadata's sha256 (empty: all match).
 
@@ -80,8 +96,9 @@ def _is_report_dir(path: Path) -> bool:
     return path.name == REPORT_DIR and path.is_dir()
 
 
-def check_protocol(metadata: RunMetadata, config: BenchmarkConfig) -> list[str]:
-    """Where the recorded fingerprint disagrees with its id or with the rest of the metadata."""
+def check_protocol(metadata: RunMetadata, config: Any, task: Task | None = None) -> list[str]:
+    """Where the recorded fingerprint disagrees with its id or with the rest of the metadata
+    (``config``: the run's task configuration; ``task``: default the run's)."""
     recorded = metadata.protocol
     if not metadata.protocol_recorded or recorded is None:  # one computed on read vouches for nothing
         return ["run_metadata.json records no protocol fingerprint (written by an older version?)"]
@@ -96,6 +113,7 @@ def check_protocol(metadata: RunMetadata, config: BenchmarkConfig) -> list[str]:
         setting=metadata.setting,
         config=config,
         action_modes=recorded.get("action_modes") or {},
+        task=task or metadata.resolve_task(),
     )
     for key in sorted(set(expected) | set(recorded)):
         if expected.get(key) != recorded.get(key):
@@ -105,10 +123,12 @@ def check_protocol(metadata: RunMetadata, config: BenchmarkConfig) -> list[str]:
     return problems
 
 
-def dataset_problem(data_dir: Path, recorded: Mapping[str, str]) -> str | None:
-    """Why ``data_dir`` is not the recorded dataset (None: the same CSVs, each with the recorded sha256)."""
+def dataset_problem(data_dir: Path, recorded: Mapping[str, str], task: Task | None = None) -> str | None:
+    """Why ``data_dir`` is not the recorded dataset of ``task`` (default: the solar market; None: the
+    same files, each with the recorded sha256)."""
+    task = task or get_task()
     try:
-        found = dataset_provenance(load_table(data_dir))["files"]
+        found = task.provenance(task.load_data(data_dir))["files"]
     except (ValueError, OSError) as error:  # no dataset there, or a broken one
         return f"{data_dir} is not a readable dataset ({str(error).splitlines()[0]})"
     for name in sorted(set(recorded) | set(found)):
@@ -122,24 +142,32 @@ def dataset_problem(data_dir: Path, recorded: Mapping[str, str]) -> str | None:
     return None
 
 
-def resolve_dataset(metadata: RunMetadata, data_dir: Path | None) -> tuple[Path | None, str]:
+def resolve_dataset(metadata: RunMetadata, data_dir: Path | None, task: Task | None = None) -> tuple[Path | None, str]:
     """The dataset to re-run on and, when there is none, why.
 
     ``data_dir`` (when given) must hold the recorded CSVs (a :class:`VerifyError` otherwise);
-    else the recorded ``data_dir`` is used if its CSVs still have the recorded sha256.
+    else the recorded ``data_dir`` is used if its CSVs still have the recorded sha256. A task
+    without a dataset (``data_dir`` recorded as None, no files) re-runs on none: ``(None, "")``.
     """
+    task = task or metadata.resolve_task()
     recorded = metadata.dataset.files
+    if metadata.dataset.data_dir is None and not recorded:
+        if data_dir is not None:
+            raise VerifyError.about(
+                "{opt_data_dir} {path}: the run's task {task!r} has no dataset", path=data_dir, task=task.name
+            )
+        return None, ""
     if not recorded:
         return None, "the run records no dataset sha256"
     if data_dir is not None:
-        problem = dataset_problem(data_dir, recorded)
+        problem = dataset_problem(data_dir, recorded, task)
         if problem is not None:
             raise VerifyError.about(
                 "{opt_data_dir} {path} is not the run's dataset: {problem}", path=data_dir, problem=problem
             )
         return Path(data_dir), ""
-    recorded_dir = Path(metadata.dataset.data_dir)
-    problem = dataset_problem(recorded_dir, recorded) if recorded_dir.is_dir() else f"{recorded_dir} is missing"
+    recorded_dir = Path(str(metadata.dataset.data_dir))
+    problem = dataset_problem(recorded_dir, recorded, task) if recorded_dir.is_dir() else f"{recorded_dir} is missing"
     if problem is not None:
         return None, f"dataset: {problem}; pass --data DIR with the recorded CSVs"
     return recorded_dir, ""
@@ -220,8 +248,31 @@ def check_rollouts(metadata: RunMetadata, rows: Sequence[Mapping[str, str]]) -> 
     return problems + ([f"{METRICS_FILE}: {problem}"] if problem else [])
 
 
-def read_rollouts(run_dir: Path, metadata: RunMetadata) -> tuple[dict[RolloutKey, dict[str, str]], list[str]]:
-    """``run_dir``'s ``metrics.csv`` rows by rollout and the problems of its rollout set (:func:`check_rollouts`).
+def column_problems(header: Sequence[str], task: Task) -> list[str]:
+    """Where ``metrics.csv``'s ``header`` is not the record schema of ``task``: a missing episode key
+    or declared metric, a column neither the schema (:func:`~solarchain_eval.records_schema.record_columns`
+    of the task's metrics, older names included) nor a user agent's (``agent_*``) defines."""
+    known = record_columns(tuple(m.column for m in task.metrics))
+    missing = [c for c in (*EPISODE_KEYS, *metric_names(task)) if c not in header]
+    unknown = [
+        c
+        for c in header
+        if c not in known
+        and c not in RENAMED_COLUMNS
+        and c not in REMOVED_COLUMNS
+        and not c.startswith(AGENT_COLUMN_PREFIX)
+    ]
+    problems = [f"{METRICS_FILE} lacks column {c!r} of task {task.name!r}" for c in missing[:1]]
+    return problems + [
+        f"{METRICS_FILE} has column {c!r}, which task {task.name!r} does not declare" for c in unknown[:1]
+    ]
+
+
+def read_rollouts(
+    run_dir: Path, metadata: RunMetadata, task: Task | None = None
+) -> tuple[dict[RolloutKey, dict[str, str]], list[str]]:
+    """``run_dir``'s ``metrics.csv`` rows by rollout and the problems of its rollout set (:func:`check_rollouts`)
+    and of its columns (:func:`column_problems`, ``task``: default the run's).
 
     The rows are returned only when there is no problem (a repeated key would hide a row);
     a missing file is no problem here (the checksums name it).
@@ -231,9 +282,11 @@ def read_rollouts(run_dir: Path, metadata: RunMetadata) -> tuple[dict[RolloutKey
         return {}, []
     try:
         rows = read_metrics_rows(path)
+        with open(path, newline="", encoding="utf-8") as handle:
+            header = next(csv.reader(handle), [])
     except (ValueError, OSError) as error:
         return {}, [str(error)]
-    problems = check_rollouts(metadata, rows)
+    problems = column_problems(header, task or metadata.resolve_task()) + check_rollouts(metadata, rows)
     return ({} if problems else {(r["policy"], int(r["run_seed"]), int(r["episode"])): r for r in rows}), problems
 
 
@@ -253,9 +306,9 @@ def keeper_models(metadata: RunMetadata, given: Mapping[str, Path], within: Path
     return models
 
 
-def written_row(result: EpisodeResult) -> dict[str, str]:
+def written_row(result: EpisodeResult, task: Task | None = None) -> dict[str, str]:
     """The re-run episode's ``metrics.csv`` row as the run's CSV writer writes it (cell text)."""
-    text = metrics_frame([result]).to_csv()
+    text = metrics_frame([result], task).to_csv()
     (row,) = list(csv.DictReader(io.StringIO(text)))
     row.pop("", None)  # the index column
     return row

@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import BenchmarkConfig, MarketConfig
+from ..config import TASK_CONFIG_FIELDS, BenchmarkConfig, MarketConfig
 from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance
 from ..data.table import HourlyTable, load_table
@@ -96,6 +96,29 @@ class SolarTask:
 
     def baselines(self) -> Mapping[str, Callable[..., Any]]:
         return {name: (lambda config, _name=name: make_baseline(_name, config.market)) for name in BASELINES}
+
+    # -- evaluation and records (the runner, run_metadata.json, the fingerprint, verify) --
+
+    def default_config(self) -> BenchmarkConfig:
+        return BenchmarkConfig()
+
+    def setting_config(self, config: BenchmarkConfig, *, no_physics_penalty: bool) -> BenchmarkConfig:
+        return config.with_updates(no_physics_penalty=no_physics_penalty)
+
+    def config_record(self, config: BenchmarkConfig) -> dict[str, Any]:
+        return config.model_dump()
+
+    def config_from_record(self, record: Mapping[str, Any]) -> BenchmarkConfig:
+        return BenchmarkConfig.model_validate(record)
+
+    def protocol_config(self, config: BenchmarkConfig) -> dict[str, Any]:
+        return config.model_dump(include=set(TASK_CONFIG_FIELDS))
+
+    def episode_steps(self, config: BenchmarkConfig) -> int:
+        return config.episode_steps
+
+    def step_extra_names(self, data: HourlyTable) -> tuple[str, ...]:
+        return tuple(data.cities)
 
 
 #: The solar market task (registered as ``solar`` in :mod:`solarchain_eval.tasks.registry`).

@@ -135,6 +135,46 @@ class Task(Protocol):
         """The task's reference policies by name, each a factory taking the config."""
         ...
 
+    # -- evaluation and records (the runner, run_metadata.json, the fingerprint, verify) --
+    # A task without a dataset returns None from data_dir and load_data, and provenance
+    # {"data_dir": None, "files": {}}: its episodes depend on the config and the episode seed alone.
+
+    def default_config(self) -> Any:
+        """The configuration of an evaluation that gives none (the solar market: ``BenchmarkConfig()``)."""
+        ...
+
+    def setting_config(self, config: Any, *, no_physics_penalty: bool) -> Any:
+        """``config`` with a setting's reward switch applied (a task without one returns ``config``)."""
+        ...
+
+    def config_record(self, config: Any) -> dict[str, Any]:
+        """``config`` as the JSON object ``run_metadata.json`` records under ``config``."""
+        ...
+
+    def config_from_record(self, record: Mapping[str, Any]) -> Any:
+        """The configuration :meth:`config_record` recorded, validated.
+
+        Raises
+        ------
+        ValueError
+            The record is not one this task reads (pydantic's ``ValidationError`` is one).
+        """
+        ...
+
+    def protocol_config(self, config: Any) -> dict[str, Any]:
+        """The parts of ``config`` that decide the task (hashed into the protocol's ``config_sha256``);
+        paths, training budgets and evaluation defaults stay out."""
+        ...
+
+    def episode_steps(self, config: Any) -> int:
+        """Steps per episode under ``config`` (to estimate a run's record size before any work)."""
+        ...
+
+    def step_extra_names(self, data: Any) -> tuple[str, ...]:
+        """What each of :meth:`step_extras`' values is (the solar market: the dataset's cities); empty
+        when the task records none, and then the run has no ``city_hour_policy`` table."""
+        ...
+
 
 def metric_names(task: Task) -> tuple[str, ...]:
     """The task's episode-metric column names, in order."""
