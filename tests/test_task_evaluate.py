@@ -95,6 +95,14 @@ def test_verify_finds_a_tampered_metric_of_a_task(toy, tmp_path):
     check = verify_run(run, VerifyOptions(episodes=2))
     assert check.rollout_problems == ("metrics.csv lacks column 'shortfall_units' of task 'toy-stock'",)
 
+    metrics.rename(columns={"shortfall_units": "shortfall_MWh"}).to_csv(run / "metrics.csv", index=False)
+    _reseal(run, "metrics.csv")
+    check = verify_run(run, VerifyOptions(episodes=2))
+    assert check.rollout_problems == (
+        "metrics.csv lacks column 'shortfall_units' of task 'toy-stock'",
+        "metrics.csv has column 'shortfall_MWh', which task 'toy-stock' does not declare",
+    )
+
 
 def test_the_command_line_evaluates_and_verifies_a_task(toy, tmp_path):
     run = tmp_path / "cli-run"
