@@ -68,6 +68,9 @@ def verify(
     protocol id. Exit status 0 when every rebuilt policy verifies and the checksums and rollouts
     match, 1 on any difference or failure, 2 for unusable arguments.
 
+    A run of another task (evaluate --task) is re-run with the installed task of the name its
+    run_metadata.json records (never code the run names); a task not installed here is an error.
+
     A paper grid root verifies each finished eval unit (learned policies from the grid's own
     models under the root) and the combined files. See docs/comparing_results.md#verifying-a-run
     and docs/security.md.
