@@ -242,7 +242,7 @@ class SupplyChainEnv(gym.Env):
             if self.inputs.grid is not None
             else spaces.Box(0.0, 1.0, (3,), np.float32)
         )
-        self._rng = np.random.default_rng(cfg.seed if seed is None else seed)
+        self._np_random = np.random.default_rng(cfg.seed if seed is None else seed)
         self._open = False
         self._begin(int(self.inputs.starts[0]), np.zeros(self.episode_steps))
 
@@ -267,11 +267,10 @@ class SupplyChainEnv(gym.Env):
         return self.inputs.observe(day, self._on_hand, self._pipeline, self._backlog, self._price, self._prev)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
-        if seed is not None:
-            self._rng = np.random.default_rng(seed)
+        super().reset(seed=seed)  # gymnasium's generator for a seed is default_rng(seed), as the vector env's
         starts = self.inputs.starts
-        index = int(self._rng.integers(0, len(starts))) if len(starts) > 1 else 0
-        noise = self._rng.standard_normal(self.episode_steps) * PRICE_NOISE_STD
+        index = int(self._np_random.integers(0, len(starts))) if len(starts) > 1 else 0
+        noise = self._np_random.standard_normal(self.episode_steps) * PRICE_NOISE_STD
         start = int(starts[index])
         options = options or {}
         fixed = options.get("start_day", options.get("start_hour"))

@@ -1,0 +1,128 @@
+"""The supply-chain environments: the vector env equals the single env, the dynamics keep their books,
+and the feasibility penalty switch changes the reward only."""
+
+from __future__ import annotations
+
+import dataclasses
+
+import gymnasium as gym
+import numpy as np
+import pytest
+from gymnasium.utils.env_checker import check_env
+
+import solarchain_eval  # noqa: F401  (registers the environments)
+from solarchain_eval.config import BenchmarkConfig
+from solarchain_eval.supply.dynamics import SupplyParams, SupplyRewardWeights, supply_step
+from solarchain_eval.supply.env import STEP_FIELDS, SupplyChainEnv, action_grid
+from solarchain_eval.supply.vector import SupplyChainVectorEnv
+from supply_fixtures import supply_dir, supply_table  # noqa: F401
+
+SEED = 20260511
+
+
+def test_the_vector_env_equals_the_single_env_bit_for_bit_across_autoreset(supply_table):  # noqa: F811
+    n, steps = 3, 24
+    vec = SupplyChainVectorEnv(num_envs=n, table=supply_table)
+    singles = [SupplyChainEnv(table=supply_table) for _ in range(n)]
+    actions = np.random.default_rng(0).random((2 * steps + 1, n, 3), dtype=np.float32)
+    obs, info = vec.reset(seed=SEED)
+    single_obs = [env.reset(seed=SEED + i) for i, env in enumerate(singles)]
+    np.testing.assert_array_equal(obs, np.stack([o for o, _ in single_obs]))
+    np.testing.assert_array_equal(info["episode_start_day"], [i["episode_start_day"] for _, i in single_obs])
+    assert len(set(info["episode_start_day"])) > 1  # the sub-envs' own draws
+    for k, batch in enumerate(actions):
+        obs, reward, _, truncated, info = vec.step(batch)
+        if k == steps:  # NEXT_STEP autoreset: this step starts each sub-env's second episode
+            expected = [env.reset() for env in singles]
+            np.testing.assert_array_equal(obs, np.stack([o for o, _ in expected]))
+            assert not reward.any() and not info["_reward"].any()
+            continue
+        for i, env in enumerate(singles):
+            o, r, _, t, single_info = env.step(batch[i])
+            np.testing.assert_array_equal(obs[i], o)
+            assert reward[i] == r and truncated[i] == t
+            for key in STEP_FIELDS:
+                assert info[key][i] == single_info[key], key
+    assert vec.region_totals.shape == (n, 5, 2)
+    np.testing.assert_array_equal(vec.region_totals[1], np.asarray(list(singles[1].region_totals.values())))
+
+
+def test_gym_make_gives_both_envs_and_the_single_env_passes_the_checker(supply_dir):  # noqa: F811
+    env = gym.make("SupplyChainEval-v0", data_dir=supply_dir)
+    check_env(env.unwrapped, skip_render_check=True)
+    vec = gym.make_vec("SupplyChainEval-v0", num_envs=2, vectorization_mode="vector_entry_point", data_dir=supply_dir)
+    assert isinstance(vec, SupplyChainVectorEnv) and vec.observation_space.shape == (2, 15)
+
+
+def test_the_discrete_mode_is_the_125_point_grid(supply_table):  # noqa: F811
+    env = SupplyChainEnv(table=supply_table, action_mode="discrete")
+    assert env.action_space == gym.spaces.Discrete(125)
+    grid = action_grid(5)
+    assert tuple(grid[0]) == (0, 0, 0) and tuple(grid[1]) == (0, 0, 0.25) and tuple(grid[124]) == (1, 1, 1)
+    continuous = SupplyChainEnv(table=supply_table)
+    env.reset(seed=1)
+    continuous.reset(seed=1)
+    for index in (7, 124, 63):
+        _, r_discrete, *_ = env.step(index)
+        _, r_continuous, *_ = continuous.step(grid[index])
+        assert r_discrete == r_continuous
+    assert tuple(env.decode_action(31)) == (0.25, 0.25, 0.25)
+
+
+def _one_step(table, weights, action, spoofed=None, level=None):
+    params = SupplyParams.from_table(table)
+    lead = table.lead_time_days
+    pipeline = np.where(np.arange(params.lead_slot.shape[1])[None, :] < lead[:, None], 5.0, 0.0)
+    on_hand = np.array([30.0, 2.0, 10.0, 0.0, 50.0])
+    orders = np.array([20.0, 25.0, 12.0, 30.0, 10.0])
+    spoofed = np.zeros(5, bool) if spoofed is None else spoofed
+    level = np.zeros(5) if level is None else level
+    out = supply_step(
+        params, weights, on_hand, pipeline, np.full(5, 3.0), 1.0, 1.0, orders, spoofed, level, action, 0.0, 0.0
+    )
+    return params, on_hand, pipeline, out
+
+
+def test_the_step_keeps_its_books_and_ships_only_what_the_oracle_backs(supply_table):  # noqa: F811
+    weights = SupplyRewardWeights.from_config(BenchmarkConfig())
+    spoofed = np.array([False, True, False, True, False])
+    level = np.array([0.0, 300.0, 0.0, 400.0, 0.0])
+    params, on_hand, pipeline, out = _one_step(supply_table, weights, (0.5, 1.0, 0.0), spoofed, level)
+    # Stock is conserved: before + production = after + spoiled + delivered.
+    before = on_hand.sum() + pipeline.sum()
+    after = out.on_hand_units.sum() + out.pipeline_units.sum()
+    assert before + out.production_units == pytest.approx(after + out.spoiled_units + out.delivered_units, abs=1e-9)
+    assert out.production_units == pytest.approx(0.5 * supply_table.production_capacity_units.sum())
+    # East and south report 300 and 400 units they do not have: their whole demand is filled from reports, and
+    # what stock on hand plus tomorrow's arrivals cannot back is promised on phantom stock.
+    demand = np.array([20.0, 25.0, 12.0, 30.0, 10.0]) + 3.0
+    true_stock = (on_hand + 5.0) * (1.0 - supply_table.spoilage_rate)  # a day's arrival, then spoilage
+    np.testing.assert_allclose(out.region_filled_units, np.minimum(np.where(spoofed, level, true_stock), demand))
+    assert out.region_filled_units[2] == pytest.approx(14.7)  # north: 15 units less 2 % spoilage, short of 15
+    assert out.unsafe_units == pytest.approx(out.filled_units - out.delivered_units) and out.unsafe_units > 20.0
+    assert out.phantom_stock_units == pytest.approx(300 - (2 + 5) * 0.995 + 400 - 5 * 0.99)
+    # South has 4.95 units on hand and 5 arriving tomorrow: 33 promised, 9.95 backed.
+    assert out.unsafe_units == pytest.approx((28 - min(28, 7 * 0.995 + 5)) + (33 - 9.95))
+    assert out.phantom_fill_volume_units == pytest.approx(out.phantom_stock_units)  # ρ = 1
+    # Honest reports and wide lanes: nothing is promised beyond what the oracle backs.
+    honest = dataclasses.replace(supply_table, lane_capacity_units=np.full(5, 1e6))
+    _, _, _, clean = _one_step(honest, weights, (0.5, 1.0, 0.0))
+    assert clean.unsafe_units == 0.0 and clean.violation_rate == 0.0
+
+
+def test_removing_the_feasibility_penalty_changes_the_reward_by_exactly_its_term_and_nothing_else(supply_table):  # noqa: F811
+    cfg = BenchmarkConfig()
+    on, off = (
+        SupplyRewardWeights.from_config(cfg),
+        SupplyRewardWeights.from_config(cfg.with_updates(no_physics_penalty=True)),
+    )
+    assert on.feasibility_penalty and not off.feasibility_penalty
+    spoofed = np.array([False, True, False, True, False])
+    level = np.array([0.0, 300.0, 0.0, 400.0, 0.0])
+    *_, a = _one_step(supply_table, on, (0.5, 1.0, 0.0), spoofed, level)
+    *_, b = _one_step(supply_table, off, (0.5, 1.0, 0.0), spoofed, level)
+    scale = supply_table.demand_mean_units.sum()
+    assert b.reward - a.reward == pytest.approx(2.0 * (a.violation_rate + a.unsafe_units / scale), abs=1e-12)
+    for name in a._fields:
+        if name != "reward":
+            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
