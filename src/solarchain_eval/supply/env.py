@@ -41,6 +41,10 @@ OBSERVATION_NAMES = (
     "prev_demand_damping",
 )
 OBS = {name: i for i, name in enumerate(OBSERVATION_NAMES)}
+_ON_HAND, _REPORTED, _TRANSIT, _BACKLOG, _PRICE = (
+    OBS[n] for n in ("on_hand_days", "reported_stock_days", "in_transit_days", "backlog_days", "price_index")
+)
+_PREV = OBS["prev_supplier_incentive"]
 LEVER_NAMES = ("supplier_incentive", "release_ratio", "demand_damping")
 #: The previous action of an episode's first step (the static baseline's action).
 INITIAL_ACTION = (0.25, 0.75, 0.05)
@@ -82,7 +86,7 @@ def decode_actions(action: Any, action_mode: str, grid: np.ndarray | None) -> np
     u = np.asarray(action, dtype=np.float32)
     if u.shape[-1:] != (3,):
         raise ValueError(f"a continuous action has 3 components, got shape {u.shape}")
-    return np.clip(np.nan_to_num(u, nan=0.0, posinf=1.0, neginf=0.0), 0.0, 1.0).astype(np.float32)
+    return np.fmin(np.fmax(u, np.float32(0.0)), np.float32(1.0))  # fmax takes NaN to 0
 
 
 def action_grid(levels: int) -> np.ndarray:
@@ -108,16 +112,20 @@ class SupplyInputs:
         last = table.days - self.steps
         self.starts = np.arange(offset, last + 1, 7) if offset <= last else np.arange(0, last + 1)
         weekday = (first.weekday() + np.arange(table.days)) % 7
-        self.dow = np.column_stack([np.sin(2 * np.pi * weekday / 7), np.cos(2 * np.pi * weekday / 7)])
         self.check_rate = table.capacity_check_rate
         scale = self.params.scale_units
-        self.static = np.array(
-            [
-                table.warehouse_capacity_units.sum() / scale,
-                table.production_capacity_units.sum() / scale,
-                float(np.average(table.lead_time_days, weights=table.demand_mean_units)) / 7.0,
-            ]
-        )
+        # The day's features that do not depend on the state, one row per day; the rest is filled per step.
+        template = np.zeros((table.days, len(OBSERVATION_NAMES)))
+        template[:, OBS["day_of_week_sin"]] = np.sin(2 * np.pi * weekday / 7)
+        template[:, OBS["day_of_week_cos"]] = np.cos(2 * np.pi * weekday / 7)
+        template[:, OBS["orders_days"]] = table.orders_units.sum(axis=1) / scale
+        template[:, OBS["capacity_check_rate"]] = self.check_rate
+        template[:, OBS["warehouse_capacity_days"]] = table.warehouse_capacity_units.sum() / scale
+        template[:, OBS["production_capacity_days"]] = table.production_capacity_units.sum() / scale
+        lead_weeks = float(np.average(table.lead_time_days, weights=table.demand_mean_units)) / 7.0
+        template[:, OBS["mean_lead_time_weeks"]] = lead_weeks
+        template.setflags(write=False)
+        self.template = template
         lead = table.lead_time_days
         slots = np.arange(self.params.lead_slot.shape[1])
         # In steady flow every pipeline slot before the lead time carries a day of mean demand.
@@ -127,21 +135,16 @@ class SupplyInputs:
     def observe(self, day: Any, on_hand: Any, pipeline: Any, backlog: Any, price: Any, prev: Any) -> np.ndarray:
         """The observation(s) at the start of ``day`` (an int, or an (N,) array with (N, ...) state)."""
         t, scale = self.table, self.params.scale_units
+        obs = self.template[day].copy()
         reported = np.where(t.spoofed[day], t.reported_level_units[day], on_hand)
-        columns = [
-            self.dow[day, 0],
-            self.dow[day, 1],
-            on_hand.sum(axis=-1) / scale,
-            reported.sum(axis=-1) / scale,
-            pipeline.sum(axis=(-2, -1)) / scale,
-            t.orders_units[day].sum(axis=-1) / scale,
-            backlog.sum(axis=-1) / scale,
-            price,
-            self.check_rate[day],
-        ]
-        obs = np.stack(np.broadcast_arrays(*columns, *np.moveaxis(np.broadcast_to(self.static, prev.shape), -1, 0)), -1)
-        obs = np.concatenate([obs, prev], axis=-1)
-        return np.clip(obs, -OBS_LIMIT, OBS_LIMIT).astype(np.float32)
+        stock = np.stack([on_hand, reported, backlog]).sum(axis=-1) / scale
+        obs[..., _ON_HAND] = stock[0]
+        obs[..., _REPORTED] = stock[1]
+        obs[..., _BACKLOG] = stock[2]
+        obs[..., _TRANSIT] = pipeline.sum(axis=(-2, -1)) / scale
+        obs[..., _PRICE] = price
+        obs[..., _PREV:] = prev
+        return np.minimum(np.maximum(obs, -OBS_LIMIT), OBS_LIMIT).astype(np.float32)
 
 
 def step_record(
