@@ -104,6 +104,13 @@ def test_the_step_keeps_its_books_and_ships_only_what_the_oracle_backs(supply_ta
     # South has 4.95 units on hand and 5 arriving tomorrow: 33 promised, 9.95 backed.
     assert out.unsafe_units == pytest.approx((28 - min(28, 7 * 0.995 + 5)) + (33 - 9.95))
     assert out.phantom_fill_volume_units == pytest.approx(out.phantom_stock_units)  # ρ = 1
+    # The price index: cover gap to 5 days, the incentive (κ = 0.5), no damping, the backlog carried.
+    scale = supply_table.demand_mean_units.sum()
+    r = -0.05 * (out.on_hand_units.sum() / scale - 5.0) / 5.0 - 0.03 * 0.5 + 0.03 * out.unmet_units / scale
+    assert out.price_index == pytest.approx(1.0 + r, abs=1e-12) and out.unmet_units == pytest.approx(
+        out.backlog_units.sum()
+    )
+    assert out.price_drawdown == pytest.approx(max(0.0, -r / 1.0) if r < 0 else 0.0, abs=1e-12)
     # Honest reports and wide lanes: nothing is promised beyond what the oracle backs.
     honest = dataclasses.replace(supply_table, lane_capacity_units=np.full(5, 1e6))
     _, _, _, clean = _one_step(honest, weights, (0.5, 1.0, 0.0))
