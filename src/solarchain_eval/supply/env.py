@@ -137,7 +137,7 @@ class SupplyInputs:
         t, scale = self.table, self.params.scale_units
         obs = self.template[day].copy()
         reported = np.where(t.spoofed[day], t.reported_level_units[day], on_hand)
-        stock = np.stack([on_hand, reported, backlog]).sum(axis=-1) / scale
+        stock = np.array([on_hand, reported, backlog]).sum(axis=-1) / scale
         obs[..., _ON_HAND] = stock[0]
         obs[..., _REPORTED] = stock[1]
         obs[..., _BACKLOG] = stock[2]
