@@ -133,3 +133,24 @@ def test_removing_the_feasibility_penalty_changes_the_reward_by_exactly_its_term
     for name in a._fields:
         if name != "reward":
             np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+
+
+def test_the_observation_is_the_state_after_the_step_and_the_next_days_inputs(supply_table):  # noqa: F811
+    env = SupplyChainEnv(table=supply_table)
+    _, reset_info = env.reset(seed=3)
+    scale = supply_table.demand_mean_units.sum()
+    action = np.float32([0.4, 0.6, 0.2])
+    obs, _, _, _, info = env.step(action)
+    o = dict(zip(env.observation_names, obs.tolist(), strict=True))
+    day = reset_info["episode_start_day"] + 1
+    assert o["on_hand_days"] == np.float32(info["on_hand_units"] / scale)
+    assert o["in_transit_days"] == np.float32(info["in_transit_units"] / scale)
+    assert o["backlog_days"] == np.float32(info["backlog_units"] / scale)
+    assert o["price_index"] == np.float32(info["price_index"])
+    assert o["orders_days"] == np.float32(supply_table.orders_units[day].sum() / scale)
+    assert o["capacity_check_rate"] == np.float32(supply_table.capacity_check_rate[day])
+    assert [o["prev_supplier_incentive"], o["prev_release_ratio"], o["prev_demand_damping"]] == action.tolist()
+    assert o["mean_lead_time_weeks"] == np.float32(np.average([3, 5, 8, 10, 12], weights=[24, 20, 16, 22, 18]) / 7)
+    monday = np.float32([np.sin(0.0), np.cos(0.0)])  # 2024-01-01 is a Monday; episodes start on Mondays
+    assert [o["day_of_week_sin"], o["day_of_week_cos"]] != monday.tolist()  # a Tuesday now
+    assert env.reset(seed=3)[0][:2].tolist() == monday.tolist()
