@@ -20,11 +20,17 @@ from supply_fixtures import supply_dir, supply_table  # noqa: F401
 SEED = 20260511
 
 
-def test_the_vector_env_equals_the_single_env_bit_for_bit_across_autoreset(supply_table):  # noqa: F811
+@pytest.mark.parametrize("mode", ["continuous", "discrete"])
+def test_the_vector_env_equals_the_single_env_bit_for_bit_across_autoreset(supply_table, mode):  # noqa: F811
     n, steps = 3, 24
-    vec = SupplyChainVectorEnv(num_envs=n, table=supply_table)
-    singles = [SupplyChainEnv(table=supply_table) for _ in range(n)]
-    actions = np.random.default_rng(0).random((2 * steps + 1, n, 3), dtype=np.float32)
+    vec = SupplyChainVectorEnv(num_envs=n, table=supply_table, action_mode=mode)
+    singles = [SupplyChainEnv(table=supply_table, action_mode=mode) for _ in range(n)]
+    rng = np.random.default_rng(0)
+    if mode == "discrete":
+        actions = rng.integers(0, 125, (2 * steps + 1, n))
+    else:
+        actions = rng.random((2 * steps + 1, n, 3), dtype=np.float32)
+        actions[3, 0] = [np.nan, np.inf, -1.0]  # sanitised alike
     obs, info = vec.reset(seed=SEED)
     single_obs = [env.reset(seed=SEED + i) for i, env in enumerate(singles)]
     np.testing.assert_array_equal(obs, np.stack([o for o, _ in single_obs]))
@@ -154,3 +160,10 @@ def test_the_observation_is_the_state_after_the_step_and_the_next_days_inputs(su
     monday = np.float32([np.sin(0.0), np.cos(0.0)])  # 2024-01-01 is a Monday; episodes start on Mondays
     assert [o["day_of_week_sin"], o["day_of_week_cos"]] != monday.tolist()  # a Tuesday now
     assert env.reset(seed=3)[0][:2].tolist() == monday.tolist()
+
+
+def test_an_episode_longer_than_the_dataset_is_refused(supply_table):  # noqa: F811
+    from solarchain_eval.config import ConfigError
+
+    with pytest.raises(ConfigError, match=r"episode_steps = 85 is longer than .*, which has 84 days"):
+        SupplyChainEnv(table=supply_table, config=BenchmarkConfig(episode_steps=85))

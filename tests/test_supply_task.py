@@ -84,3 +84,14 @@ def test_removing_the_penalty_changes_the_reward_but_not_the_dynamics(supply_dir
 def test_the_bullwhip_ratio_is_the_variance_ratio():
     assert bullwhip_ratio(np.array([0.0, 10.0, 0.0, 10.0]), np.array([4.0, 6.0, 4.0, 6.0])) == pytest.approx(25.0)
     assert bullwhip_ratio(np.ones(4), np.full(4, 3.0)) == 0.0
+
+
+def test_without_a_directory_the_task_uses_the_default_build_made_once_into_the_cache(isolated_cache):
+    import json
+
+    task = get_task("supply-chain")
+    path = task.data_dir(None, BenchmarkConfig())
+    assert path == isolated_cache / "datasets" / "supply-chain-v0-seed20260511"
+    manifest = json.loads((path / "manifest.json").read_text())
+    assert manifest["seed"] == 20260511 and manifest["days"] == 364 and manifest["fdia"]["injected_records"] == 91
+    assert task.data_dir(None, BenchmarkConfig()) == path and task.load_data(path).days == 364
