@@ -11,7 +11,7 @@ from solarchain_eval.common.atomic_files import sha256_file
 from solarchain_eval.data.errors import DatasetError
 from solarchain_eval.data.fdia import FdiaError, FdiaScenario
 from solarchain_eval.supply import files as f
-from solarchain_eval.supply.build import build_supply_dataset
+from solarchain_eval.supply.build import SupplyBuildError, build_supply_dataset
 from solarchain_eval.supply.table import load_supply_table
 from supply_fixtures import SUPPLY_DAYS, supply_dir, supply_table  # noqa: F401
 
@@ -130,3 +130,13 @@ def test_a_damaged_dataset_file_is_named_with_its_column_and_row(tmp_path, suppl
     (damaged / f.DEMAND_FILE).unlink()
     with pytest.raises(DatasetError, match=r"demand.csv: is missing"):
         load_supply_table(damaged)
+
+
+@pytest.mark.parametrize(
+    ("options", "message"),
+    [({"days": 0}, r"days must be 1\.\.36600, got 0"), ({"start": "2024-13-01"}, r"start '2024-13-01' is not a date")],
+)
+def test_bad_build_options_are_one_line_and_write_nothing(tmp_path, options, message):
+    with pytest.raises(SupplyBuildError, match=message):
+        build_supply_dataset(tmp_path / "out", **options)
+    assert not (tmp_path / "out").exists()

@@ -21,13 +21,19 @@ from typing import Any
 import numpy as np
 
 from ..common.atomic_files import atomic_write_text, sha256_file
+from ..common.errors import OptionsError
 from ..data.errors import DatasetError
-from ..data.fdia import FDIA_MULTIPLIERS, FdiaError, FdiaScenario
+from ..data.fdia import FDIA_MULTIPLIERS, FdiaScenario
 from . import files as f
 
 #: The columns of a user's demand file (docs/tasks/supply_chain.md#bring-your-own-demand).
 USER_DEMAND_COLUMNS = ("date", "region", "orders_units")
 MAX_ORDERS_UNITS = 1e9
+MAX_DAYS = 36_600  # a century of days
+
+
+class SupplyBuildError(OptionsError, ValueError):
+    """A build option (days, start date) that is out of range or malformed."""
 
 
 def _season(days: int, start: dt.date) -> np.ndarray:
@@ -190,7 +196,8 @@ def build_supply_dataset(
 
     ``demand_csv`` (a user's demand, :func:`read_user_demand`) replaces the generated orders and
     sets the days and start. Returns the manifest. Raises :class:`~solarchain_eval.data.errors.DatasetError`
-    or :class:`~solarchain_eval.data.fdia.FdiaError` before writing anything.
+    (a bad demand file) or :class:`SupplyBuildError` (bad days or start) before writing anything; the
+    attack scenario checks itself when it is made (:class:`~solarchain_eval.data.fdia.FdiaError`).
     """
     scenario = fdia or FdiaScenario()
     rng = np.random.default_rng(seed)
@@ -201,9 +208,12 @@ def build_supply_dataset(
         mean = orders.mean(axis=0)
         source: dict[str, Any] = {"kind": "user", "file": str(demand_csv), "sha256": sha256_file(demand_csv)}
     else:
-        if days < 1:
-            raise FdiaError(f"days must be at least 1, got {days}")
-        first = dt.date.fromisoformat(start)
+        if not 1 <= days <= MAX_DAYS:
+            raise SupplyBuildError(f"days must be 1..{MAX_DAYS}, got {days}")
+        try:
+            first = dt.date.fromisoformat(start)
+        except (TypeError, ValueError):
+            raise SupplyBuildError(f"start '{start}' is not a date YYYY-MM-DD") from None
         demand = generate_demand(rng, days, first)
         mean = f.ORGYM_DEMAND_MEAN_UNITS * np.asarray(f.DEMAND_SCALE)
         source = {"kind": "generated", "model": "Poisson(20 x regional scale x season x promotion x shock)"}
