@@ -12,7 +12,7 @@ from gymnasium.utils.env_checker import check_env
 
 import solarchain_eval  # noqa: F401  (registers the environments)
 from solarchain_eval.config import BenchmarkConfig
-from solarchain_eval.supply.dynamics import SupplyParams, SupplyRewardWeights, supply_step
+from solarchain_eval.supply.dynamics import SCALAR, SupplyParams, SupplyRewardWeights, supply_step
 from solarchain_eval.supply.env import STEP_FIELDS, SupplyChainEnv, action_grid
 from solarchain_eval.supply.vector import SupplyChainVectorEnv
 from supply_fixtures import supply_dir, supply_table  # noqa: F401
@@ -78,14 +78,15 @@ def test_the_discrete_mode_is_the_125_point_grid(supply_table):  # noqa: F811
 def _one_step(table, weights, action, spoofed=None, level=None):
     params = SupplyParams.from_table(table)
     lead = table.lead_time_days
-    pipeline = np.where(np.arange(params.lead_slot.shape[1])[None, :] < lead[:, None], 5.0, 0.0)
+    pipeline = np.where(np.arange(params.pipeline_slots)[None, :] < lead[:, None], 5.0, 0.0)
     on_hand = np.array([30.0, 2.0, 10.0, 0.0, 50.0])
-    orders = np.array([20.0, 25.0, 12.0, 30.0, 10.0])
-    spoofed = np.zeros(5, bool) if spoofed is None else spoofed
-    level = np.zeros(5) if level is None else level
+    orders = [20.0, 25.0, 12.0, 30.0, 10.0]
+    spoofed = [False] * 5 if spoofed is None else list(spoofed)
+    level = [0.0] * 5 if level is None else list(level)
     out = supply_step(
-        params, weights, on_hand, pipeline, np.full(5, 3.0), 1.0, 1.0, orders, spoofed, level, action, 0.0, 0.0
-    )
+        SCALAR, params, weights, on_hand.tolist(), pipeline.tolist(), [3.0] * 5, 1.0, 1.0, orders, spoofed, level,
+        action, 0.0, 0.0,
+    )  # fmt: skip
     return params, on_hand, pipeline, out
 
 
@@ -96,7 +97,7 @@ def test_the_step_keeps_its_books_and_ships_only_what_the_oracle_backs(supply_ta
     params, on_hand, pipeline, out = _one_step(supply_table, weights, (0.5, 1.0, 0.0), spoofed, level)
     # Stock is conserved: before + production = after + spoiled + delivered.
     before = on_hand.sum() + pipeline.sum()
-    after = out.on_hand_units.sum() + out.pipeline_units.sum()
+    after = sum(out.on_hand_units) + np.sum(out.pipeline_units)
     assert before + out.production_units == pytest.approx(after + out.spoiled_units + out.delivered_units, abs=1e-9)
     assert out.production_units == pytest.approx(0.5 * supply_table.production_capacity_units.sum())
     # East and south report 300 and 400 units they do not have: their whole demand is filled from reports, and
@@ -110,11 +111,16 @@ def test_the_step_keeps_its_books_and_ships_only_what_the_oracle_backs(supply_ta
     # South has 4.95 units on hand and 5 arriving tomorrow: 33 promised, 9.95 backed.
     assert out.unsafe_units == pytest.approx((28 - min(28, 7 * 0.995 + 5)) + (33 - 9.95))
     assert out.phantom_fill_volume_units == pytest.approx(out.phantom_stock_units)  # ρ = 1
+    # East ships its 6.965 units on hand and 5 of tomorrow's arrivals: nothing is left on hand or in slot 0.
+    assert out.on_hand_units[1] == 0.0 and out.pipeline_units[1][0] == pytest.approx(0.0, abs=1e-12)
+    assert min(out.on_hand_units) >= 0.0
+    rates = np.divide(out.region_filled_units, out.region_effective_units)
+    assert out.fairness_variance == pytest.approx(float(np.var(rates)), abs=1e-15) and out.fairness_variance > 0.0
     # The price index: cover gap to 5 days, the incentive (κ = 0.5), no damping, the backlog carried.
     scale = supply_table.demand_mean_units.sum()
-    r = -0.05 * (out.on_hand_units.sum() / scale - 5.0) / 5.0 - 0.03 * 0.5 + 0.03 * out.unmet_units / scale
+    r = -0.05 * (sum(out.on_hand_units) / scale - 5.0) / 5.0 - 0.03 * 0.5 + 0.03 * out.unmet_units / scale
     assert out.price_index == pytest.approx(1.0 + r, abs=1e-12) and out.unmet_units == pytest.approx(
-        out.backlog_units.sum()
+        sum(out.backlog_units)
     )
     assert out.price_drawdown == pytest.approx(max(0.0, -r / 1.0) if r < 0 else 0.0, abs=1e-12)
     # Honest reports and wide lanes: nothing is promised beyond what the oracle backs.
@@ -138,7 +144,7 @@ def test_removing_the_feasibility_penalty_changes_the_reward_by_exactly_its_term
     assert b.reward - a.reward == pytest.approx(2.0 * (a.violation_rate + a.unsafe_units / scale), abs=1e-12)
     for name in a._fields:
         if name != "reward":
-            np.testing.assert_array_equal(getattr(a, name), getattr(b, name), err_msg=name)
+            assert getattr(a, name) == getattr(b, name), name
 
 
 def test_the_observation_is_the_state_after_the_step_and_the_next_days_inputs(supply_table):  # noqa: F811

@@ -2,7 +2,7 @@
 
 One step is one day; an episode is the config's ``episode_steps`` days from a Monday. The pieces
 both envs share (the action decoding, the observation, the per-step record) are here; the
-dynamics are :func:`~.dynamics.supply_step`, called with (R,) arrays here and (N, R) arrays by
+dynamics are :func:`~.dynamics.supply_step`, run on Python floats here and on (N,) arrays by
 :class:`~.vector.SupplyChainVectorEnv`.
 """
 
@@ -18,7 +18,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ..config import BenchmarkConfig, ConfigError, load_config
-from .dynamics import PRICE_NOISE_STD, SupplyOutcome, SupplyParams, SupplyRewardWeights, supply_step
+from .dynamics import PRICE_NOISE_STD, SCALAR, SupplyOutcome, SupplyParams, SupplyRewardWeights, supply_step
 from .table import SupplyTable, default_supply_dir, load_supply_table
 
 ENV_ID = "SupplyChainEval-v0"
@@ -113,6 +113,7 @@ class SupplyInputs:
         self.starts = np.arange(offset, last + 1, 7) if offset <= last else np.arange(0, last + 1)
         weekday = (first.weekday() + np.arange(table.days)) % 7
         self.check_rate = table.capacity_check_rate
+        self.check_rate_list = self.check_rate.tolist()
         scale = self.params.scale_units
         # The day's features that do not depend on the state, one row per day; the rest is filled per step.
         template = np.zeros((table.days, len(OBSERVATION_NAMES)))
@@ -127,28 +128,60 @@ class SupplyInputs:
         template.setflags(write=False)
         self.template = template
         lead = table.lead_time_days
-        slots = np.arange(self.params.lead_slot.shape[1])
+        slots = np.arange(self.params.pipeline_slots)
         # In steady flow every pipeline slot before the lead time carries a day of mean demand.
         self.initial_pipeline = np.where(slots[None, :] < lead[:, None], table.demand_mean_units[:, None], 0.0)
         self.grid = action_grid(config.discrete_levels) if config.action_mode == "discrete" else None
+        # The day's inputs per region: Python lists for the single env, region-major arrays for gathers.
+        self.orders = table.orders_units.tolist()
+        self.spoofed = table.spoofed.tolist()
+        self.levels = table.reported_level_units.tolist()
+        self.orders_by_region = np.ascontiguousarray(table.orders_units.T)
+        self.spoofed_by_region = np.ascontiguousarray(table.spoofed.T)
+        self.levels_by_region = np.ascontiguousarray(table.reported_level_units.T)
 
-    def observe(self, day: Any, on_hand: Any, pipeline: Any, backlog: Any, price: Any, prev: Any) -> np.ndarray:
-        """The observation(s) at the start of ``day`` (an int, or an (N,) array with (N, ...) state)."""
-        t, scale = self.table, self.params.scale_units
+    def observe(
+        self,
+        ops: Any,
+        day: Any,
+        spoofed: list,
+        levels: list,
+        on_hand: list,
+        pipeline: list,
+        backlog: list,
+        price: Any,
+        prev: Any,
+    ) -> np.ndarray:
+        """The observation(s) at the start of ``day`` (an int, or an (N,) array with per-env arrays).
+
+        ``spoofed`` and ``levels`` are the day's reports per region; the totals are summed over
+        regions left to right, the same operations on floats and arrays.
+        """
+        on_hand_t = reported_t = backlog_t = transit_t = 0.0
+        for r, stock in enumerate(on_hand):
+            on_hand_t = on_hand_t + stock
+            reported_t = reported_t + ops.where(spoofed[r], levels[r], stock)
+            backlog_t = backlog_t + backlog[r]
+            for slot in pipeline[r]:
+                transit_t = transit_t + slot
+        scale = self.params.scale_units
         obs = self.template[day].copy()
-        reported = np.where(t.spoofed[day], t.reported_level_units[day], on_hand)
-        stock = np.array([on_hand, reported, backlog]).sum(axis=-1) / scale
-        obs[..., _ON_HAND] = stock[0]
-        obs[..., _REPORTED] = stock[1]
-        obs[..., _BACKLOG] = stock[2]
-        obs[..., _TRANSIT] = pipeline.sum(axis=(-2, -1)) / scale
+        obs[..., _ON_HAND] = on_hand_t / scale
+        obs[..., _REPORTED] = reported_t / scale
+        obs[..., _BACKLOG] = backlog_t / scale
+        obs[..., _TRANSIT] = transit_t / scale
         obs[..., _PRICE] = price
         obs[..., _PREV:] = prev
         return np.minimum(np.maximum(obs, -OBS_LIMIT), OBS_LIMIT).astype(np.float32)
 
 
+def jitter_of(executed: tuple, previous: tuple) -> Any:
+    """|a - a_prev|_1 of float32-valued levers, in float64 (floats or (N,) arrays)."""
+    return abs(executed[0] - previous[0]) + abs(executed[1] - previous[1]) + abs(executed[2] - previous[2])
+
+
 def step_record(
-    out: SupplyOutcome, executed: np.ndarray, day: Any, start: Any, check_rate: Any, jitter: Any, scale: float
+    out: SupplyOutcome, executed: tuple, day: Any, start: Any, check_rate: Any, jitter: Any, scale: float
 ) -> dict:
     """The :data:`STEP_FIELDS` of one step (floats, or (N,) arrays for the vector env); ``cost`` is the
     feasibility term V + A (A in days of mean network demand) for safe-RL algorithms."""
@@ -156,9 +189,9 @@ def step_record(
         "reward": out.reward,
         "day": day,
         "episode_start_day": start,
-        "supplier_incentive": executed[..., 0],
-        "release_ratio": executed[..., 1],
-        "demand_damping": executed[..., 2],
+        "supplier_incentive": executed[0],
+        "release_ratio": executed[1],
+        "demand_damping": executed[2],
         "orders_units": out.orders_units,
         "effective_demand_units": out.effective_demand_units,
         "reported_stock_units": out.reported_stock_units,
@@ -169,9 +202,9 @@ def step_record(
         "unsafe_units": out.unsafe_units,
         "phantom_fill_volume_units": out.phantom_fill_volume_units,
         "unmet_units": out.unmet_units,
-        "backlog_units": out.backlog_units.sum(axis=-1),
-        "on_hand_units": out.on_hand_units.sum(axis=-1),
-        "in_transit_units": out.pipeline_units.sum(axis=(-2, -1)),
+        "backlog_units": out.unmet_units,
+        "on_hand_units": out.on_hand_total_units,
+        "in_transit_units": out.in_transit_units,
         "production_units": out.production_units,
         "spoiled_units": out.spoiled_units,
         "violation_rate": out.violation_rate,
@@ -247,33 +280,37 @@ class SupplyChainEnv(gym.Env):
         )
         self._np_random = np.random.default_rng(cfg.seed if seed is None else seed)
         self._open = False
-        self._begin(int(self.inputs.starts[0]), np.zeros(self.episode_steps))
+        self._begin(int(self.inputs.starts[0]), [0.0] * self.episode_steps)
 
-    def _begin(self, start: int, noise: np.ndarray) -> None:
+    def _begin(self, start: int, noise: list) -> None:
         i = self.inputs
         self._start, self._k, self._noise = start, 0, noise
-        self._on_hand = self.table.initial_stock_units.copy()
-        self._pipeline = i.initial_pipeline.copy()
-        self._backlog = np.zeros(len(self.regions))
+        self._on_hand = self.table.initial_stock_units.tolist()
+        self._pipeline = i.initial_pipeline.tolist()
+        self._backlog = [0.0] * len(self.regions)
         self._price = self._peak = 1.0
-        self._prev = np.array(INITIAL_ACTION, dtype=np.float32)
-        self._filled = np.zeros(len(self.regions))
-        self._effective = np.zeros(len(self.regions))
+        self._prev = tuple(float(x) for x in np.float32(INITIAL_ACTION))
+        self._filled = [0.0] * len(self.regions)
+        self._effective = [0.0] * len(self.regions)
 
     @property
     def region_totals(self) -> dict[str, tuple[float, float]]:
         """Each region's (filled, effective demand) units this episode."""
-        return {r: (float(a), float(b)) for r, a, b in zip(self.regions, self._filled, self._effective, strict=True)}
+        return {r: (a, b) for r, a, b in zip(self.regions, self._filled, self._effective, strict=True)}
 
     def _observation(self) -> np.ndarray:
         day = min(self._start + self._k, self.table.days - 1)
-        return self.inputs.observe(day, self._on_hand, self._pipeline, self._backlog, self._price, self._prev)
+        i = self.inputs
+        return i.observe(
+            SCALAR, day, i.spoofed[day], i.levels[day], self._on_hand, self._pipeline, self._backlog, self._price,
+            self._prev,
+        )  # fmt: skip
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)  # gymnasium's generator for a seed is default_rng(seed), as the vector env's
         starts = self.inputs.starts
         index = int(self._np_random.integers(0, len(starts))) if len(starts) > 1 else 0
-        noise = self._np_random.standard_normal(self.episode_steps) * PRICE_NOISE_STD
+        noise = (self._np_random.standard_normal(self.episode_steps) * PRICE_NOISE_STD).tolist()
         start = int(starts[index])
         options = options or {}
         fixed = options.get("start_day", options.get("start_hour"))
@@ -291,41 +328,36 @@ class SupplyChainEnv(gym.Env):
     def step(self, action: Any):
         if not self._open:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
-        executed = self.decode_action(action)
+        executed = tuple(self.decode_action(action).tolist())
         day = self._start + self._k
-        t = self.table
-        jitter = np.abs(executed.astype(np.float64) - self._prev.astype(np.float64)).sum(axis=-1)
+        i = self.inputs
+        jitter = jitter_of(executed, self._prev)
         out = supply_step(
-            self.inputs.params,
-            self.inputs.weights,
+            SCALAR,
+            i.params,
+            i.weights,
             self._on_hand,
             self._pipeline,
             self._backlog,
             self._price,
             self._peak,
-            t.orders_units[day],
-            t.spoofed[day],
-            t.reported_level_units[day],
-            tuple(executed.astype(np.float64)),
+            i.orders[day],
+            i.spoofed[day],
+            i.levels[day],
+            executed,
             jitter,
             self._noise[self._k],
         )
         self._on_hand, self._pipeline, self._backlog = out.on_hand_units, out.pipeline_units, out.backlog_units
-        self._price, self._peak = float(out.price_index), float(out.peak_price_index)
-        self._filled += out.region_filled_units
-        self._effective += out.region_effective_units
+        self._price, self._peak = out.price_index, out.peak_price_index
+        self._filled = [a + b for a, b in zip(self._filled, out.region_filled_units, strict=True)]
+        self._effective = [a + b for a, b in zip(self._effective, out.region_effective_units, strict=True)]
         self._prev = executed
         self._k += 1
         truncated = self._k >= self.episode_steps
         self._open = not truncated
-        record = step_record(
-            out, executed, day, self._start, self.inputs.check_rate[day], jitter, self.inputs.params.scale_units
-        )
-        info = {
-            key: float(value) if key not in ("day", "episode_start_day") else int(value)
-            for key, value in record.items()
-        }
+        info = step_record(out, executed, day, self._start, i.check_rate_list[day], jitter, i.params.scale_units)
         info["step"] = self._k - 1
-        rates = out.region_filled_units / np.maximum(out.region_effective_units, 1e-9)
-        info["region_fill_rates"] = dict(zip(self.regions, rates.tolist(), strict=True))
-        return self._observation(), info["reward"], False, truncated, info
+        rates = [f / max(e, 1e-9) for f, e in zip(out.region_filled_units, out.region_effective_units, strict=True)]
+        info["region_fill_rates"] = dict(zip(self.regions, rates, strict=True))
+        return self._observation(), out.reward, False, truncated, info

@@ -2,7 +2,7 @@
 
 Sub-env i has its own generator, seeded like the single env (``reset(seed=s)`` seeds sub-env i
 with s + i, unseeded sub-env i starts from the config seed + i), and the step is the same
-:func:`~.dynamics.supply_step` on (N, R) arrays, so sub-env i's trajectory equals
+:func:`~.dynamics.supply_step` on (N,) arrays (its batch back-end), so sub-env i's trajectory equals
 :class:`~.env.SupplyChainEnv` reset with the same seed and fed the same actions (the
 differential test holds them equal). Autoreset is Gymnasium's default ``NEXT_STEP``: the step
 after a sub-env's last one resets it and returns its first observation with reward 0.
@@ -19,8 +19,17 @@ from gymnasium.vector import AutoresetMode, VectorEnv
 from gymnasium.vector.utils import batch_space
 
 from ..config import BenchmarkConfig
-from .dynamics import PRICE_NOISE_STD, supply_step
-from .env import INITIAL_ACTION, OBS_LIMIT, OBSERVATION_NAMES, STEP_FIELDS, SupplyInputs, decode_actions, resolve
+from .dynamics import PRICE_NOISE_STD, BatchOps, supply_step
+from .env import (
+    INITIAL_ACTION,
+    OBS_LIMIT,
+    OBSERVATION_NAMES,
+    STEP_FIELDS,
+    SupplyInputs,
+    decode_actions,
+    jitter_of,
+    resolve,
+)
 from .env import step_record as _step_record
 from .table import SupplyTable
 
@@ -73,14 +82,16 @@ class SupplyChainVectorEnv(VectorEnv):
         self._start = np.full(n, int(self.inputs.starts[0]), dtype=np.int64)
         self._k = np.zeros(n, dtype=np.int64)
         self._noise = np.zeros((n, self.episode_steps))
-        self._on_hand = np.zeros((n, r))
-        self._pipeline = np.zeros((n, *self.inputs.initial_pipeline.shape))
-        self._backlog = np.zeros((n, r))
+        # Region-major state blocks: each row is one region's (N,) values, as supply_step takes them.
+        self._ops = BatchOps(n)
+        self._on_hand = np.zeros((r, n))
+        self._pipeline = np.zeros((r, self.inputs.initial_pipeline.shape[1], n))
+        self._backlog = np.zeros((r, n))
         self._price = np.ones(n)
         self._peak = np.ones(n)
         self._prev = np.zeros((n, 3), dtype=np.float32)
-        self._filled = np.zeros((n, r))
-        self._effective = np.zeros((n, r))
+        self._filled = np.zeros((r, n))
+        self._effective = np.zeros((r, n))
         self._needs_reset = np.zeros(n, dtype=bool)
         self._open = False
         self._arange = np.arange(n)
@@ -98,17 +109,28 @@ class SupplyChainVectorEnv(VectorEnv):
                 start = int(np.clip(int(fixed), 0, self.table.days - self.episode_steps))
             self._start[i] = start
         self._k[rows] = 0
-        self._on_hand[rows] = self.table.initial_stock_units
-        self._pipeline[rows] = self.inputs.initial_pipeline
-        self._backlog[rows] = 0.0
+        self._on_hand[:, rows] = self.table.initial_stock_units[:, None]
+        self._pipeline[:, :, rows] = self.inputs.initial_pipeline[:, :, None]
+        self._backlog[:, rows] = 0.0
         self._price[rows] = self._peak[rows] = 1.0
         self._prev[rows] = np.array(INITIAL_ACTION, dtype=np.float32)
-        self._filled[rows] = self._effective[rows] = 0.0
+        self._filled[:, rows] = self._effective[:, rows] = 0.0
         self._needs_reset[rows] = False
 
     def _observation(self) -> np.ndarray:
         day = np.minimum(self._start + self._k, self.table.days - 1)
-        return self.inputs.observe(day, self._on_hand, self._pipeline, self._backlog, self._price, self._prev)
+        i = self.inputs
+        return i.observe(
+            self._ops,
+            day,
+            list(i.spoofed_by_region[:, day]),
+            list(i.levels_by_region[:, day]),
+            list(self._on_hand),
+            [list(block) for block in self._pipeline],
+            list(self._backlog),
+            self._price,
+            self._prev,
+        )
 
     def reset(self, *, seed: int | list[int] | None = None, options: dict[str, Any] | None = None):
         if seed is not None:
@@ -124,30 +146,34 @@ class SupplyChainVectorEnv(VectorEnv):
         executed = decode_actions(actions, self.action_mode, self.inputs.grid)
         resetting = self._needs_reset.copy()
         day = np.minimum(self._start + self._k, self.table.days - 1)
-        t = self.table
-        jitter = np.abs(executed.astype(np.float64) - self._prev.astype(np.float64)).sum(axis=-1)
+        i = self.inputs
+        levers = tuple(executed.astype(np.float64).T)
+        jitter = jitter_of(levers, tuple(self._prev.astype(np.float64).T))
         out = supply_step(
-            self.inputs.params,
-            self.inputs.weights,
-            self._on_hand,
-            self._pipeline,
-            self._backlog,
+            self._ops,
+            i.params,
+            i.weights,
+            list(self._on_hand),
+            [list(block) for block in self._pipeline],
+            list(self._backlog),
             self._price,
             self._peak,
-            t.orders_units[day],
-            t.spoofed[day],
-            t.reported_level_units[day],
-            tuple(executed.astype(np.float64).T),
+            list(i.orders_by_region[:, day]),
+            list(i.spoofed_by_region[:, day]),
+            list(i.levels_by_region[:, day]),
+            levers,
             jitter,
             self._noise[self._arange, np.minimum(self._k, self.episode_steps - 1)],
         )
-        self._on_hand, self._pipeline, self._backlog = out.on_hand_units, out.pipeline_units, out.backlog_units
+        self._on_hand = np.array(out.on_hand_units)
+        self._pipeline = np.array(out.pipeline_units)
+        self._backlog = np.array(out.backlog_units)
         self._price, self._peak = out.price_index, out.peak_price_index
-        self._filled += out.region_filled_units
-        self._effective += out.region_effective_units
+        self._filled += np.array(out.region_filled_units)
+        self._effective += np.array(out.region_effective_units)
         self._prev = executed
-        scale = self.inputs.params.scale_units
-        record = _step_record(out, executed, day, self._start.copy(), self.inputs.check_rate[day], jitter, scale)
+        scale = i.params.scale_units
+        record = _step_record(out, tuple(executed.T), day, self._start.copy(), i.check_rate[day], jitter, scale)
         self._k += 1
         truncated = self._k >= self.episode_steps
         reward = np.asarray(out.reward, dtype=np.float64).copy()
@@ -167,4 +193,4 @@ class SupplyChainVectorEnv(VectorEnv):
     @property
     def region_totals(self) -> np.ndarray:
         """(N, R, 2): each sub-env's (filled, effective demand) units per region this episode."""
-        return np.stack([self._filled, self._effective], axis=-1)
+        return np.stack([self._filled.T, self._effective.T], axis=-1)
