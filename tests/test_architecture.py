@@ -26,6 +26,7 @@ RANKS = {
     "llm": 3,
     "governance": 4,
     "solar": 4,  # the solar market's task object (its internals: data, market, envs)
+    "supply": 4,  # the supply-chain market: its dataset, dynamics, environments and task object
     "evaluation": 5,
     "training": 6,
     "experiments": 7,
@@ -206,8 +207,9 @@ def test_generic_layers_reach_the_market_only_through_its_interface(wing):
     )
 
 
-#: A task's internals: the solar market's dataset pipeline, dynamics, environments and task object.
-TASK_INTERNALS = ("data", "market", "envs", "solar")
+#: A task's internals: the solar market's dataset pipeline, dynamics, environments and task object, and the
+#: supply-chain market's wing.
+TASK_INTERNALS = ("data", "market", "envs", "solar", "supply")
 #: Wings that are generic over tasks: they reach a market only through ``tasks`` (the interface and registry).
 GENERIC_WINGS = (
     "agents",

@@ -18,8 +18,10 @@ from __future__ import annotations
 __version__ = "0.2.0"
 
 from .envs.registration import register_envs
+from .supply.registration import register_supply_envs
 
 register_envs()
+register_supply_envs()
 
 __all__ = ["Evaluation", "__version__", "evaluate", "register_envs"]
 

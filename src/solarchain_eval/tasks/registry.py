@@ -19,7 +19,10 @@ from .base import Task
 #: The task of every run that does not name one (the paper's solar market).
 DEFAULT_TASK = "solar"
 #: Built-in tasks: name -> "module:attribute" of the task object.
-BUILTIN_TASKS = {"solar": "solarchain_eval.solar.task:SOLAR_TASK"}
+BUILTIN_TASKS = {
+    "solar": "solarchain_eval.solar.task:SOLAR_TASK",
+    "supply-chain": "solarchain_eval.supply.task:SUPPLY_TASK",
+}
 ENTRY_POINT_GROUP = "solarchain_eval.tasks"
 _NAME = re.compile(r"^[a-z][a-z0-9-]{0,39}$")
 

@@ -1,0 +1,76 @@
+"""The supply-chain allocation market as a :class:`~solarchain_eval.tasks.base.Task` (``supply-chain``).
+
+The template's second market (docs/tasks/supply_chain.md): warehouses and suppliers in five
+regions, spoofed inventory reports in place of false generation records, and a feasibility oracle
+(stock on hand and arriving by tomorrow, within lane capacity) in place of the PV physics check.
+Its internals are the modules of this wing; it uses the benchmark's :class:`~solarchain_eval.config.BenchmarkConfig`
+(seed, episode length, action mode, reward weights, and ``no_physics_penalty``, which here removes
+the feasibility term from the reward).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+
+from ..config import BenchmarkConfig
+from ..tasks.base import Lever, MetricSpec
+from .baselines import SUPPLY_BASELINES, make_supply_baseline
+from .env import STEP_FIELDS, SupplyChainEnv
+from .metrics import SUPPLY_METRICS, supply_episode_metrics
+from .registration import SUPPLY_ENV_ID
+from .table import SupplyTable, default_supply_dir, load_supply_table, supply_provenance
+
+SUPPLY_LEVERS = (
+    Lever("supplier_incentive", "–", 0.0, 1.0, "κ: production ordered, as a share of the suppliers' capacity"),
+    Lever("release_ratio", "–", 0.0, 1.0, "ρ: the share of reported stock made allocable to retailer orders"),
+    Lever("demand_damping", "–", 0.0, 1.0, "δ: damping of retailer orders (sheds up to 40 %)"),
+)
+
+
+@dataclass(frozen=True)
+class SupplyChainTask:
+    """The supply-chain market (see the module docstring); use :data:`SUPPLY_TASK`."""
+
+    name: str = "supply-chain"
+    env_id: str = SUPPLY_ENV_ID
+    levers: tuple[Lever, ...] = SUPPLY_LEVERS
+    step_fields: tuple[str, ...] = STEP_FIELDS
+    metrics: tuple[MetricSpec, ...] = SUPPLY_METRICS
+
+    def data_dir(self, data_dir: str | Path | None, config: Any) -> Path:
+        if data_dir:
+            return Path(data_dir)
+        configured = getattr(config, "data_dir", None)
+        return Path(configured) if configured else default_supply_dir()
+
+    def load_data(self, data_dir: Path) -> SupplyTable:
+        return load_supply_table(data_dir)
+
+    def provenance(self, data: SupplyTable) -> dict[str, Any]:
+        return supply_provenance(data)
+
+    def make_env(
+        self, config: BenchmarkConfig | None, data: SupplyTable, *, action_mode: str | None = None
+    ) -> SupplyChainEnv:
+        return SupplyChainEnv(config=config, table=data, action_mode=action_mode)
+
+    def episode_metrics(self, steps: Mapping[str, list], env: SupplyChainEnv) -> dict[str, float]:
+        return supply_episode_metrics(steps, np.asarray(list(env.region_totals.values())))
+
+    def step_extras(self, info: Mapping[str, Any]) -> tuple[float, ...]:
+        return tuple(info["region_fill_rates"].values())
+
+    def identity(self, config: Any) -> dict[str, Any]:
+        return {"env": self.env_id}
+
+    def baselines(self) -> Mapping[str, Callable[..., Any]]:
+        return {name: (lambda config, _name=name: make_supply_baseline(_name)) for name in SUPPLY_BASELINES}
+
+
+#: The supply-chain task (registered as ``supply-chain`` in :mod:`solarchain_eval.tasks.registry`).
+SUPPLY_TASK = SupplyChainTask()
