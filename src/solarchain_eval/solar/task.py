@@ -16,7 +16,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import TASK_CONFIG_FIELDS, BenchmarkConfig, MarketConfig
+from ..config import BenchmarkConfig, MarketConfig
 from ..data.default import resolve_data_dir
 from ..data.provenance import dataset_provenance
 from ..data.table import HourlyTable, load_table
@@ -25,6 +25,7 @@ from ..envs.registration import ENV_ID
 from ..market.baselines import BASELINES, make_baseline
 from ..records_schema import EPISODE_METRIC_COLUMNS
 from ..tasks.base import Lever, MetricSpec
+from ..tasks.benchmark_config import BenchmarkConfigMethods
 from .metrics import episode_metrics_from_steps
 
 _DEFAULT_MARKET = MarketConfig()
@@ -64,7 +65,7 @@ SOLAR_METRICS = tuple(MetricSpec(column, *_DECLARED[column.name]) for column in 
 
 
 @dataclass(frozen=True)
-class SolarTask:
+class SolarTask(BenchmarkConfigMethods):
     """The solar market (see the module docstring); use :data:`SOLAR_TASK`."""
 
     name: str = "solar"
@@ -98,24 +99,6 @@ class SolarTask:
         return {name: (lambda config, _name=name: make_baseline(_name, config.market)) for name in BASELINES}
 
     # -- evaluation and records (the runner, run_metadata.json, the fingerprint, verify) --
-
-    def default_config(self) -> BenchmarkConfig:
-        return BenchmarkConfig()
-
-    def setting_config(self, config: BenchmarkConfig, *, no_physics_penalty: bool) -> BenchmarkConfig:
-        return config.with_updates(no_physics_penalty=no_physics_penalty)
-
-    def config_record(self, config: BenchmarkConfig) -> dict[str, Any]:
-        return config.model_dump()
-
-    def config_from_record(self, record: Mapping[str, Any]) -> BenchmarkConfig:
-        return BenchmarkConfig.model_validate(record)
-
-    def protocol_config(self, config: BenchmarkConfig) -> dict[str, Any]:
-        return config.model_dump(include=set(TASK_CONFIG_FIELDS))
-
-    def episode_steps(self, config: BenchmarkConfig) -> int:
-        return config.episode_steps
 
     def step_extra_names(self, data: HourlyTable) -> tuple[str, ...]:
         return tuple(data.cities)

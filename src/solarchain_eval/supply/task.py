@@ -19,6 +19,7 @@ import numpy as np
 
 from ..config import BenchmarkConfig
 from ..tasks.base import Lever, MetricSpec
+from ..tasks.benchmark_config import BenchmarkConfigMethods
 from .baselines import SUPPLY_BASELINES, make_supply_baseline
 from .env import STEP_FIELDS, SupplyChainEnv
 from .metrics import SUPPLY_METRICS, supply_episode_metrics
@@ -33,7 +34,7 @@ SUPPLY_LEVERS = (
 
 
 @dataclass(frozen=True)
-class SupplyChainTask:
+class SupplyChainTask(BenchmarkConfigMethods):
     """The supply-chain market (see the module docstring); use :data:`SUPPLY_TASK`."""
 
     name: str = "supply-chain"
@@ -67,6 +68,9 @@ class SupplyChainTask:
 
     def identity(self, config: Any) -> dict[str, Any]:
         return {"env": self.env_id}
+
+    def step_extra_names(self, data: SupplyTable) -> tuple[str, ...]:
+        return tuple(data.regions)
 
     def baselines(self) -> Mapping[str, Callable[..., Any]]:
         return {name: (lambda config, _name=name: make_supply_baseline(_name)) for name in SUPPLY_BASELINES}
