@@ -20,6 +20,7 @@ from __future__ import annotations
 
 import datetime as dt
 import hashlib
+import warnings
 from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
@@ -39,17 +40,17 @@ _REQUIRED_RANGES = {"ghi_Wm2": (0.0, 1500.0), "temp_air_C": (-90.0, 65.0)}
 #: Other quantities outside these ranges are the formats' missing-value codes; they become NaN.
 _OPTIONAL_RANGES = {"dni_Wm2": (0.0, 1500.0), "dhi_Wm2": (0.0, 1500.0), "wind_speed_ms": (0.0, 100.0)}
 
-#: Per format: pvlib column and factor to SI of each quantity, hours added to pvlib's labels.
+#: Per format: the file's field (as pvlib names it) and factor to SI of each quantity, hours added to pvlib's labels.
 _MAPPING = {
-    "tmy3": ({"ghi_Wm2": ("ghi", 1.0), "dni_Wm2": ("dni", 1.0), "dhi_Wm2": ("dhi", 1.0),
-              "temp_air_C": ("temp_air", 1.0), "wind_speed_ms": ("wind_speed", 1.0)}, 0),
+    "tmy3": ({"ghi_Wm2": ("GHI (W/m^2)", 1.0), "dni_Wm2": ("DNI (W/m^2)", 1.0), "dhi_Wm2": ("DHI (W/m^2)", 1.0),
+              "temp_air_C": ("Dry-bulb (C)", 1.0), "wind_speed_ms": ("Wspd (m/s)", 1.0)}, 0),
     # TMY2 stores temperature and wind speed in tenths of °C and of m/s.
     "tmy2": ({"ghi_Wm2": ("GHI", 1.0), "dni_Wm2": ("DNI", 1.0), "dhi_Wm2": ("DHI", 1.0),
               "temp_air_C": ("DryBulb", 0.1), "wind_speed_ms": ("Wspd", 0.1)}, 1),
     "epw": ({"ghi_Wm2": ("ghi", 1.0), "dni_Wm2": ("dni", 1.0), "dhi_Wm2": ("dhi", 1.0),
              "temp_air_C": ("temp_air", 1.0), "wind_speed_ms": ("wind_speed", 1.0)}, 1),
-    "pvgis": ({"ghi_Wm2": ("ghi", 1.0), "dni_Wm2": ("dni", 1.0), "dhi_Wm2": ("dhi", 1.0),
-               "temp_air_C": ("temp_air", 1.0), "wind_speed_ms": ("wind_speed", 1.0)}, 0),
+    "pvgis": ({"ghi_Wm2": ("G(h)", 1.0), "dni_Wm2": ("Gb(n)", 1.0), "dhi_Wm2": ("Gd(h)", 1.0),
+               "temp_air_C": ("T2m", 1.0), "wind_speed_ms": ("WS10m", 1.0)}, 0),
 }  # fmt: skip
 
 #: What the manifest says of each format's source fields (hourly irradiation in Wh/m² over the
@@ -240,10 +241,16 @@ def _row_namer(path: Path, fmt: str):
 
 
 def _parse(path: Path, fmt: str) -> tuple[pd.DataFrame, Site]:
+    with warnings.catch_warnings():  # pandas' mixed-type warning on a bad field: the check below names it
+        warnings.simplefilter("ignore", pd.errors.DtypeWarning)
+        return _parse_quietly(path, fmt)
+
+
+def _parse_quietly(path: Path, fmt: str) -> tuple[pd.DataFrame, Site]:
     from pvlib import iotools
 
     if fmt == "tmy3":
-        data, meta = iotools.read_tmy3(str(path), map_variables=True)
+        data, meta = iotools.read_tmy3(str(path), map_variables=False)
         name = str(meta["Name"]).strip('"')
         site = Site(name, meta["latitude"], meta["longitude"], meta["altitude"], meta["TZ"])
     elif fmt == "tmy2":
@@ -253,7 +260,7 @@ def _parse(path: Path, fmt: str) -> tuple[pd.DataFrame, Site]:
         data, meta = iotools.read_epw(str(path))
         site = Site(str(meta["city"]).strip(), meta["latitude"], meta["longitude"], meta["altitude"], meta["TZ"])
     else:
-        data, meta = iotools.read_pvgis_tmy(str(path), map_variables=True)
+        data, meta = iotools.read_pvgis_tmy(str(path), map_variables=False)
         location = meta["inputs"].get("location", meta["inputs"])
         site = Site(path.stem, location["latitude"], location["longitude"], location["elevation"], 0.0)
     return data, site
