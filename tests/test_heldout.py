@@ -52,8 +52,8 @@ def test_the_payload_is_package_data():
     patterns = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
     package = ROOT / "src" / "solarchain_eval"
     shipped = {p for pattern in patterns["solarchain_eval"] for p in package.glob(pattern)}
-    wanted = {package / "data" / "heldout" / f"{name}.xz" for _, name in heldout.TMY_SITES}
-    assert wanted | {package / "data" / "heldout" / "SHA256SUMS"} <= shipped
+    wanted = {package / "data" / "tmy" / f"{name}.xz" for _, name in heldout.TMY_SITES}
+    assert wanted | {package / "data" / "tmy" / "SHA256SUMS"} <= shipped
 
 
 def test_the_family_is_twelve_months_of_2027():

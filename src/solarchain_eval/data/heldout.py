@@ -2,7 +2,7 @@
 
 ``tmy-3sites``: twelve one-month datasets of a market whose cities are the three typical-year
 sites pvlib ships (public NREL data): Greensboro NC (TMY3), Sand Point AK (TMY3) and Miami FL
-(TMY2). The three files ship xz-compressed in ``data/heldout/`` beside ``SHA256SUMS``, which
+(TMY2). The three files ship xz-compressed in ``data/tmy/`` beside ``SHA256SUMS``, which
 holds the sha256 of each file (uncompressed) and of the four CSVs of every month, so a rebuild
 is checked byte for byte. The design (market clock, year, nodes, seeds, attacks) is the
 family's card in docs/dataset.md.
@@ -30,7 +30,7 @@ from .weather import WeatherError
 from .weather_files import FileWeather, WeatherFile, read_weather_file, weather_from_files
 
 TMY_FAMILY = "tmy-3sites"
-#: The family's cities, in build order: (city name, file shipped in data/heldout/).
+#: The family's cities, in build order: (city name, file shipped in data/tmy/).
 TMY_SITES = (("Greensboro", "723170TYA.CSV"), ("Sand Point", "703165TY.csv"), ("Miami", "12839.tm2"))
 #: The market clock: UTC-9 (Sand Point's standard time), so every daylight hour of all three
 #: cities falls inside one calendar day of the clock, all year, and daily episodes never cut a day.
@@ -39,7 +39,7 @@ TMY_TIMEZONE = "Etc/GMT+9"
 TMY_YEAR = 2027
 MONTHS = tuple(range(1, 13))
 
-_RESOURCES = files(__package__).joinpath("heldout")
+_RESOURCES = files(__package__).joinpath("tmy")
 
 
 class HeldoutError(WeatherError):
