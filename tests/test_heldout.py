@@ -17,13 +17,13 @@ from solarchain_eval.data.errors import DatasetError
 from solarchain_eval.data.files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE
 from solarchain_eval.data.heldout import (
     TMY_FAMILY,
-    HeldoutError,
     build_checked,
     build_heldout,
     family_datasets,
     heldout_dataset,
     pinned_sha256,
 )
+from solarchain_eval.data.weather import WeatherError
 
 ROOT = Path(__file__).resolve().parents[1]
 #: April of tmy-3sites, pinned here as well as in the package's SHA256SUMS.
@@ -48,6 +48,18 @@ def test_the_shipped_weather_is_pvlibs_files_byte_for_byte():
     ]
 
 
+def test_a_damaged_payload_is_refused(monkeypatch):
+    from solarchain_eval.data.published import PackagedWeatherError
+
+    monkeypatch.setattr(heldout, "_SUMS", dict(heldout._SUMS, **{"703165TY.csv": "f" * 64}))
+    heldout.read_tmy_files.cache_clear()
+    try:
+        with pytest.raises(PackagedWeatherError, match=r"703165TY.csv.xz is damaged: sha256 f0333a68.*not ffff"):
+            heldout.read_tmy_files()
+    finally:
+        heldout.read_tmy_files.cache_clear()
+
+
 def test_the_payload_is_package_data():
     patterns = tomllib.loads((ROOT / "pyproject.toml").read_text())["tool"]["setuptools"]["package-data"]
     package = ROOT / "src" / "solarchain_eval"
@@ -68,7 +80,7 @@ def test_the_family_is_twelve_months_of_2027():
     assert [d.seed for d in months] == [DEFAULT_SEED + m for m in range(1, 13)]
     assert {(d.timezone, d.nodes_per_city) for d in months} == {("Etc/GMT+9", 10)}
     assert all(len(pinned_sha256(d.name)) == 4 for d in months)
-    with pytest.raises(HeldoutError, match="month must be 1..12"):
+    with pytest.raises(WeatherError, match="month must be 1..12"):
         heldout_dataset(TMY_FAMILY, 13)
 
 

@@ -26,6 +26,7 @@ from .cities import DEFAULT_NODES_PER_CITY, DEFAULT_SEED, City
 from .default import cache_dir
 from .errors import DatasetError
 from .files import DATASET_FILES, MANIFEST_FILE
+from .published import PackagedWeatherError
 from .weather import WeatherError
 from .weather_files import FileWeather, WeatherFile, read_weather_file, weather_from_files
 
@@ -40,10 +41,6 @@ TMY_YEAR = 2027
 MONTHS = tuple(range(1, 13))
 
 _RESOURCES = files(__package__).joinpath("tmy")
-
-
-class HeldoutError(WeatherError):
-    """A held-out family's packaged weather is missing or damaged, or a family/month is unknown."""
 
 
 @dataclass(frozen=True)
@@ -76,9 +73,9 @@ def heldout_dataset(family: str, month: int) -> HeldoutDataset:
     """The dataset of ``month`` (1-12) of ``family``: the month of :data:`TMY_YEAR`, seed
     ``DEFAULT_SEED + month``, the paper's ten nodes per city."""
     if family != TMY_FAMILY:
-        raise HeldoutError(f"unknown held-out family '{family}' (known: {TMY_FAMILY})")
+        raise WeatherError(f"unknown held-out family '{family}' (known: {TMY_FAMILY})")
     if month not in MONTHS:
-        raise HeldoutError(f"{family}: month must be 1..12, got {month}")
+        raise WeatherError(f"{family}: month must be 1..12, got {month}")
     end_year, end_month = (TMY_YEAR + 1, 1) if month == 12 else (TMY_YEAR, month + 1)
     return HeldoutDataset(
         family=family,
@@ -113,13 +110,13 @@ def read_tmy_files() -> tuple[tuple[str, WeatherFile], ...]:
             try:
                 raw = lzma.decompress(resource.read_bytes(), format=lzma.FORMAT_XZ)
             except (OSError, lzma.LZMAError, EOFError) as error:
-                raise HeldoutError(
+                raise PackagedWeatherError(
                     f"the packaged weather file {resource} cannot be read ({error}); reinstall"
                 ) from None
             digest = hashlib.sha256(raw).hexdigest()
             if digest != _SUMS[name]:
-                raise HeldoutError(
-                    f"the packaged weather file {resource} is damaged: sha256 {digest}, not {_SUMS[name]}"
+                raise PackagedWeatherError(
+                    f"the packaged weather file {resource} is damaged: sha256 {digest}, not {_SUMS[name]}; reinstall"
                 )
             path = Path(folder) / name
             path.write_bytes(raw)
