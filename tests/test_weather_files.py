@@ -198,7 +198,7 @@ def test_a_bad_value_names_the_file_line_and_field_and_writes_nothing(tmp_path, 
     result = CliRunner().invoke(app, ["data", "build", "--out", str(out), "--weather-file", f"Here={bad}"])
     assert result.exit_code == 2, result.output
     message = " ".join(result.output.split())
-    assert f"{bad}, line 1000: field 'GHI (W/m^2)' is" in message and "0..1500" in message
+    assert f"{bad}, line 1000: field 'GHI (W/m^2)' is '{value}', not a number in 0..1500 W/m²" in message
     assert len(result.output.strip().splitlines()) == 1 and not out.exists()
 
 

@@ -37,6 +37,7 @@ HOURS_PER_YEAR = 8760
 COLUMNS = ("ghi_Wm2", "dni_Wm2", "dhi_Wm2", "temp_air_C", "wind_speed_ms")
 #: Plausible ranges of the two quantities the build uses; a value outside names its row.
 _REQUIRED_RANGES = {"ghi_Wm2": (0.0, 1500.0), "temp_air_C": (-90.0, 65.0)}
+_UNITS = {"ghi_Wm2": "W/m²", "temp_air_C": "°C"}
 #: Other quantities outside these ranges are the formats' missing-value codes; they become NaN.
 _OPTIONAL_RANGES = {"dni_Wm2": (0.0, 1500.0), "dhi_Wm2": (0.0, 1500.0), "wind_speed_ms": (0.0, 100.0)}
 
@@ -306,8 +307,8 @@ def read_weather_file(path: str | Path, fmt: str | None = None) -> WeatherFile:
         if name in _REQUIRED_RANGES and bad.any():
             i = int(np.argmax(bad))
             raise WeatherError(
-                f"{path}, {where(i)}: field '{column}' is {data[column].iloc[i]!r}, not a number in {low:g}..{high:g} "
-                f"({name.rsplit('_', 1)[1]} after conversion)"
+                f"{path}, {where(i)}: field '{column}' is '{data[column].iloc[i]}', not a number in "
+                f"{low:g}..{high:g} {_UNITS[name]} (after unit conversion)"
             )
         hourly[name] = np.where(bad, np.nan, values)
     hourly.index = _labels(path, fmt, data.index, shift, where)
