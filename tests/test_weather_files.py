@@ -236,3 +236,6 @@ def test_cli_builds_from_weather_files_with_the_sites_in_the_manifest(tmp_path):
     assert manifest["weather_attribution"]["licence_url"] == "https://www.nrel.gov/disclaimer.html"
     mixed = CliRunner().invoke(app, [*args, "--out", str(tmp_path / "x"), "--weather", "synthetic"])
     assert mixed.exit_code == 2 and "drop --city, --weather and --weather-cache" in mixed.output
+    clash = CliRunner().invoke(app, [*args, "--weather-file", f"Greenville={GREENSBORO}", "--out", str(tmp_path / "y")])
+    assert clash.exit_code == 2 and "share the node-id prefix 'GRE'" in clash.output
+    assert not (tmp_path / "x").exists() and not (tmp_path / "y").exists()

@@ -18,6 +18,7 @@ from ..data.cities import (
     DEFAULT_TIMEZONE,
     PAPER_CITIES,
     City,
+    check_unique_prefixes,
     parse_city,
 )
 from ..data.fdia import DEFAULT_FDIA_PATTERN, FDIA_PATTERNS, FdiaError, FdiaScenario, fdia_pattern_help, parse_severity
@@ -58,9 +59,11 @@ def _cities(specs: list[str] | None) -> tuple[City, ...]:
     if not specs:
         return PAPER_CITIES
     try:
-        return tuple(parse_city(spec) for spec in specs)
+        cities = tuple(parse_city(spec) for spec in specs)
+        check_unique_prefixes(cities)
     except ValueError as error:
         raise cli_error(error) from None
+    return cities
 
 
 @data_app.command("build")
@@ -184,10 +187,11 @@ def _from_weather_files(specs: list[str], timezone: str | None, start: str, end:
     zone = timezone or etc_zone(read[0][1].site.utc_offset_h)
     try:
         cities, files = weather_from_files(read, zone, start, end)
+        check_unique_prefixes(cities)
     except (ValueError, KeyError) as error:
         if isinstance(error, WeatherError):
             raise
-        raise CliError(f"--start/--end/--timezone: {error}") from None  # a date or time zone that cannot be read
+        raise CliError(f"--weather-file/--start/--end/--timezone: {error}") from None  # a date, zone or city name
     return cities, Weather(files.payload, files.source, files.sha256), zone, files
 
 
