@@ -45,3 +45,16 @@ def test_split_datasets_resolve_to_directories(tmp_path, monkeypatch):
     assert dataset_dir("tmy-3sites-07", build=False) == tmp_path / "datasets" / "tmy-3sites-07"
     with pytest.raises(KeyError, match="unknown dataset 'paper'"):
         dataset_dir("paper", build=False)
+
+
+def test_the_cli_lists_the_splits_and_the_rule():
+    from typer.testing import CliRunner
+
+    from solarchain_eval.cli import app
+
+    result = CliRunner().invoke(app, ["data", "splits"], terminal_width=200)
+    assert result.exit_code == 0, result.output
+    rows = {line.split("│")[1].strip(): line for line in result.output.splitlines() if line.count("│") >= 5}
+    assert "22-30" in rows["paper-late"] and "1-21" in rows["paper-early"]
+    assert "tmy-3sites-01 ... tmy-3sites-12 (12)" in rows["test"]
+    assert "rule: train and tune on the train split only; report the test split" in result.output

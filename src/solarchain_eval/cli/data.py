@@ -288,6 +288,31 @@ def build_family(
     )
 
 
+@data_app.command("splits")
+@reports_errors
+def splits() -> None:
+    """List the named splits (train, test and the paper's month by start day) and the rule for them.
+
+    The rule for results that claim generality: train and tune on the train split only, report
+    the test split (docs/dataset.md#splits).
+    """
+    from ..data.splits import SPLIT_RULE, SPLITS
+
+    table = Table(title="splits", title_justify="left")
+    for column in ("split", "role", "datasets", "start days", "what"):
+        table.add_column(column)
+    for split in SPLITS.values():
+        names = split.datasets
+        shown = names[0] if len(names) == 1 else f"{names[0]} ... {names[-1]} ({len(names)})"
+        days = {entry.start_days for entry in split.entries}
+        (first,) = days
+        table.add_row(
+            split.name, split.role, shown, "all" if first is None else f"{first[0]}-{first[-1]}", split.description
+        )
+    console.print(table)
+    say(f"rule: {SPLIT_RULE}", err=False)
+
+
 @data_app.command("check")
 @reports_errors
 def check(data_dir: Path = typer.Argument(..., metavar="DATA_DIR", help="Dataset directory to validate.")) -> None:
