@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import json
 from enum import StrEnum
 from pathlib import Path
 
@@ -17,6 +18,7 @@ from ..data.cities import (
     DEFAULT_TIMEZONE,
     PAPER_CITIES,
     City,
+    check_unique_prefixes,
     parse_city,
 )
 from ..data.fdia import DEFAULT_FDIA_PATTERN, FDIA_PATTERNS, FdiaError, FdiaScenario, fdia_pattern_help, parse_severity
@@ -57,9 +59,11 @@ def _cities(specs: list[str] | None) -> tuple[City, ...]:
     if not specs:
         return PAPER_CITIES
     try:
-        return tuple(parse_city(spec) for spec in specs)
+        cities = tuple(parse_city(spec) for spec in specs)
+        check_unique_prefixes(cities)
     except ValueError as error:
         raise cli_error(error) from None
+    return cities
 
 
 @data_app.command("build")
@@ -87,7 +91,20 @@ def build(
     city: list[str] | None = typer.Option(
         None, "--city", metavar="NAME:LAT:LON", help="A city; repeat for several. Default: the paper's five cities."
     ),
-    timezone: str = typer.Option(DEFAULT_TIMEZONE, help="IANA time zone of the dataset's hours."),
+    timezone: str | None = typer.Option(
+        None,
+        help=f"IANA time zone of the dataset's hours. Default: {DEFAULT_TIMEZONE}, or with --weather-file the first "
+        "file's standard time as a fixed-offset zone (Etc/GMT+5 is UTC-5).",
+        show_default=False,
+    ),
+    weather_file: list[str] | None = typer.Option(
+        None,
+        "--weather-file",
+        metavar="[CITY=]FILE",
+        help="A TMY3 (.csv), TMY2 (.tm2), EPW (.epw) or PVGIS typical-year (.csv, .json) file; repeat for several. "
+        "Each file is one city at the file's site, named CITY or after the site; replaces --city, --weather and "
+        "--weather-cache (docs/dataset.md#weather-from-standard-files).",
+    ),
     open_meteo_url: str | None = typer.Option(
         None, help="Archive endpoint for --weather open-meteo (default: $SOLARCHAIN_OPEN_METEO_URL or the public API)."
     ),
@@ -115,10 +132,19 @@ def build(
     the paper's published dataset. The --fdia-* options choose the attack scenario, which the
     manifest records (docs/dataset.md#attack-scenarios).
     """
-    cities = _cities(city)
     scenario = _scenario(fdia_rate, fdia_severity, fdia_pattern.value, fdia_burst_hours)
-    if not force and ((out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES)):
-        raise CliError(f"{out} already holds a dataset; pass --force to overwrite it")
+    _refuse_existing(out, force)
+    if weather_file:
+        if city or weather_cache is not None or weather is not None:
+            raise CliError(
+                "--weather-file gives the cities and their weather: drop --city, --weather and --weather-cache"
+            )
+        cities, chosen, timezone, files = _from_weather_files(weather_file, timezone, start, end)
+        result = _build(chosen, out, cities, seed, start, end, nodes_per_city, timezone, scenario, files)
+        _show_build(result, out, chosen.source, seed, len(cities))
+        return
+    timezone = timezone or DEFAULT_TIMEZONE
+    cities = _cities(city)
     downloads = weather_cache is None and weather is WeatherSource.open_meteo
     with progress_bar("downloading weather", len(cities), enabled=downloads) as advance:
         try:
@@ -144,7 +170,34 @@ def build(
     _show_build(result, out, chosen.source, seed, len(cities))
 
 
-def _build(chosen: Weather, out: Path, cities, seed, start, end, nodes_per_city, timezone, scenario: FdiaScenario):
+def _refuse_existing(out: Path, force: bool) -> None:
+    if not force and ((out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES)):
+        raise CliError(f"{out} already holds a dataset; pass --force to overwrite it")
+
+
+def _from_weather_files(specs: list[str], timezone: str | None, start: str, end: str):
+    """Cities, weather, time zone and file weather of a build from ``--weather-file`` specs (all read
+    and checked before anything is written)."""
+    from ..data.weather_files import etc_zone, parse_weather_file_spec, read_weather_file, weather_from_files
+
+    read = []
+    for spec in specs:
+        name, path = parse_weather_file_spec(spec)
+        read.append((name, read_weather_file(path)))
+    zone = timezone or etc_zone(read[0][1].site.utc_offset_h)
+    try:
+        cities, files = weather_from_files(read, zone, start, end)
+        check_unique_prefixes(cities)
+    except (ValueError, KeyError) as error:
+        if isinstance(error, WeatherError):
+            raise
+        raise CliError(f"--weather-file/--start/--end/--timezone: {error}") from None  # a date, zone or city name
+    return cities, Weather(files.payload, files.source, files.sha256), zone, files
+
+
+def _build(
+    chosen: Weather, out: Path, cities, seed, start, end, nodes_per_city, timezone, scenario: FdiaScenario, files=None
+):
     """Build the dataset with a progress bar over its nodes."""
     from ..data.build import build_dataset
 
@@ -169,6 +222,8 @@ def _build(chosen: Weather, out: Path, cities, seed, start, end, nodes_per_city,
             weather_sha256=chosen.sha256,
             progress=on_progress,
             fdia=scenario,
+            weather_files=files.entries if files is not None else None,
+            attribution=files.attribution if files is not None else None,
         )
 
 
@@ -192,6 +247,70 @@ def _show_build(result, out: Path, source: str, seed: int, n_cities: int) -> Non
         say(f"{attribution['attribution']} ({attribution['licence']}, {attribution['licence_url']})", err=False)
     if matches_published({name: info["sha256"] for name, info in files.items()}):
         say("byte-identical to the paper's published dataset", style="bold green", err=False)
+
+
+@data_app.command("build-family")
+@reports_errors
+def build_family(
+    family: str = typer.Argument(..., metavar="FAMILY", help="The held-out family: tmy-3sites."),
+    out: Path = typer.Option(..., "--out", help="Directory to write one dataset directory per month into."),
+    month: list[int] | None = typer.Option(
+        None, "--month", min=1, max=12, help="A month to build (1-12); repeat for several. Default: all twelve."
+    ),
+    force: bool = typer.Option(False, "--force", help="Overwrite datasets already in --out."),
+) -> None:
+    """Build a held-out dataset family offline from the weather shipped with the package.
+
+    Writes OUT/FAMILY-MM/ (four CSVs and manifest.json) per month and checks each against the
+    sha256s shipped with the package; a month that differs is not written (exit 2). The family's
+    design and licence are in docs/dataset.md#held-out-family-tmy-3sites.
+    """
+    import time
+
+    from ..data.heldout import build_checked, heldout_dataset
+
+    datasets = [heldout_dataset(family, m) for m in (sorted(set(month)) if month else range(1, 13))]
+    for dataset in datasets:
+        _refuse_existing(out / dataset.name, force)
+    began = time.perf_counter()
+    table = Table(title=f"{family} written to {out}", title_justify="left")
+    for column in ("dataset", "dates", "hours", "sha256 (4 CSVs)"):
+        table.add_column(column)
+    with progress_bar(f"building {family}", len(datasets)) as advance:
+        for dataset in datasets:
+            target = build_checked(dataset, out / dataset.name, replace=force)
+            hours = json.loads((target / MANIFEST_FILE).read_text(encoding="utf-8"))["hours"]
+            table.add_row(dataset.name, f"{dataset.start} to {dataset.end}", str(hours), "match the shipped ones")
+            advance(1)
+    console.print(table)
+    say(
+        f"{len(datasets)} datasets in {time.perf_counter() - began:.1f} s; weather: public NREL data (NSRDB)", err=False
+    )
+
+
+@data_app.command("splits")
+@reports_errors
+def splits() -> None:
+    """List the named splits (train, test and the paper's month by start day) and the rule for them.
+
+    The rule for results that claim generality: train and tune on the train split only, report
+    the test split (docs/dataset.md#splits).
+    """
+    from ..data.splits import SPLIT_RULE, SPLITS
+
+    table = Table(title="splits", title_justify="left")
+    for column in ("split", "role", "datasets", "start days", "what"):
+        table.add_column(column)
+    for split in SPLITS.values():
+        names = split.datasets
+        shown = names[0] if len(names) == 1 else f"{names[0]} ... {names[-1]} ({len(names)})"
+        days = {entry.start_days for entry in split.entries}
+        (first,) = days
+        table.add_row(
+            split.name, split.role, shown, "all" if first is None else f"{first[0]}-{first[-1]}", split.description
+        )
+    console.print(table)
+    say(f"rule: {SPLIT_RULE}", err=False)
 
 
 @data_app.command("check")

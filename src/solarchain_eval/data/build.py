@@ -230,6 +230,8 @@ def build_dataset(
     weather_sha256: str | None = None,
     progress: Progress = _noop,
     fdia: FdiaScenario | None = None,
+    weather_files: Sequence[Mapping] | None = None,
+    attribution: Mapping[str, str] | None = None,
 ) -> BuildResult:
     """Build the four dataset CSVs and ``manifest.json`` into ``out_dir``.
 
@@ -237,6 +239,8 @@ def build_dataset(
     is a complete build. ``fdia`` is the false-data injection scenario (default: the paper's,
     5 % of the records, uniform, the paper's multipliers); the manifest records it, and the
     weather's licence attribution when it is third-party data (Open-Meteo, CC BY 4.0).
+    A build from standard weather files passes their ``weather_files`` entries (file, format,
+    sha256, site, licence) and their ``attribution``, which the manifest records.
     """
     if nodes_per_city < 1:
         raise ValueError("nodes_per_city must be at least 1")
@@ -276,10 +280,14 @@ def build_dataset(
         "cities": [{"name": c.name, "latitude": c.latitude, "longitude": c.longitude} for c in cities],
         "weather_source": weather_source,
         "weather_sha256": weather_sha256,
-        "weather_attribution": weather_attribution(weather[c.name] for c in cities),
+        "weather_attribution": (
+            dict(attribution) if attribution is not None else weather_attribution(weather[c.name] for c in cities)
+        ),
         "hours": int(len(market)),
         "fdia": fdia_entry,
         "package_versions": package_versions(),
     }
+    if weather_files is not None:
+        manifest["weather_files"] = [dict(entry) for entry in weather_files]
     atomic_write_json(out / MANIFEST_FILE, manifest)
     return BuildResult(out_dir=out, manifest=manifest)
