@@ -27,7 +27,9 @@ from pathlib import Path
 from typing import Any
 
 from ..agents.base import Policy
+from ..agents.build import build_agents
 from ..agents.registry import known_policies
+from ..agents.request import AgentContext, agent_requests
 from ..agents.specs import AgentSpecError, parse_agent_spec
 from ..common.errors import NamesOptions
 from ..common.redaction import redact_text
@@ -39,9 +41,9 @@ from ..protocol import EPISODE_SEED_RULES
 from ..tasks.registry import get_task
 from .inflight import is_stateless
 from .records import METRICS_FILE
+from .reserved import check_reserved
 from .rollout import begin_run, run_episode
 from .run_metadata import RunMetadata, RunMetadataError
-from .runner import EvaluationSpec, make_policies
 from .verify_checks import (
     Difference,
     VerifyError,
@@ -223,15 +225,14 @@ def rerun_policy(
 
 def _builder(text: str, config: BenchmarkConfig, models: dict[str, Path], options: VerifyOptions, stack: ExitStack):
     """A function building the agent of spec ``text`` as the evaluation runner builds it."""
-    spec = EvaluationSpec(
-        policies=[text],
-        config=config,
-        no_physics_penalty=config.no_physics_penalty,
-        models=models,
-        agent_args=options.agent_args,
-        isolate=True,  # a submitted agent is re-run in its own process, where it cannot reach the env
-    )
-    return lambda: make_policies(spec, stack)[0]
+    # a submitted agent is re-run in its own process, where it cannot reach the env
+    return _build_one(text, config, stack, models=models, agent_args=options.agent_args, isolate=True)
+
+
+def _build_one(text: str, config: BenchmarkConfig, stack: ExitStack, **options: Any) -> Callable[[], Policy]:
+    """A function building the agent of spec ``text`` with the request ``options``, closed by ``stack``."""
+    context = AgentContext(config)
+    return lambda: build_agents(agent_requests([text], **options), context, stack=stack, check_name=check_reserved)[0]
 
 
 def _recorded_builder(
@@ -256,13 +257,7 @@ def _recorded_builder(
             return "the llm-agent's endpoint is not recorded in the run"
         if options.llm_cache is None:
             return "LLM calls; pass --llm-cache"
-        spec = EvaluationSpec(
-            policies=[text],
-            config=config,
-            no_physics_penalty=config.no_physics_penalty,
-            llm=LLMOptions.replaying(llm_agent, options.llm_cache),
-        )
-        return lambda: make_policies(spec, stack)[0]
+        return _build_one(text, config, stack, llm=LLMOptions.replaying(llm_agent, options.llm_cache))
     return f"a user agent ({text}); pass its spec with --agent to rebuild it"
 
 
