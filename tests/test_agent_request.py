@@ -55,8 +55,8 @@ AGENT_MODULE = textwrap.dedent(
 
         def act(self, observation):
             self.steps += 1
-            base = float(np.tanh(observation[0])) * self.scale
-            return np.array([0.2 + base, 0.5 - base, (0.01 * self.steps) % 0.2], dtype=np.float32)
+            base = 0.3 * float(np.tanh(observation[0])) * self.scale  # scale <= 1 keeps it in [0, 1]
+            return np.array([0.4 + base, 0.5 - base, (0.01 * self.steps) % 0.2], dtype=np.float32)
 
 
     def make(scale=0.2):
@@ -72,9 +72,10 @@ def _episode(agent, data: Path) -> np.ndarray:
     return np.column_stack([np.asarray(result.steps[c]) for c in LEVERS])
 
 
-def _three_ways(reference, item: str, data: Path, **options) -> list:
+def _three_ways(reference, item: str, data: Path, *, varies: bool = True, **options) -> list:
     """``reference`` and the agents ``item`` builds through a request and through the runner, each
-    driven through the same episode; returns the three agents after asserting they act alike."""
+    driven through the same episode; returns the three agents after asserting they act alike
+    (``varies``: the reference's actions change within the episode, so they tell agents apart)."""
     with ExitStack() as stack:
         by_request = build_agents(agent_requests([item], **options), AgentContext(CONFIG), stack=stack)[0]
         spec = EvaluationSpec(policies=[item], config=CONFIG, **options)
@@ -82,7 +83,7 @@ def _three_ways(reference, item: str, data: Path, **options) -> list:
         agents = [reference, by_request, by_runner]
         assert len({(a.name, a.action_mode, access_label(a)) for a in agents}) == 1, agents
         expected = _episode(reference, data)
-        assert np.ptp(expected, axis=0).any() or item.endswith("static"), "the episode does not tell agents apart"
+        assert np.ptp(expected, axis=0).any() == varies
         for agent in agents[1:]:
             np.testing.assert_array_equal(_episode(agent, data), expected)
     return agents
@@ -100,7 +101,7 @@ def agent_dir(tmp_path: Path, monkeypatch) -> Path:
 
 @pytest.mark.parametrize("name", ["static", "random", "myopic"])
 def test_a_baseline_comes_from_the_task_and_acts_as_the_markets_own(tiny_dataset: Path, name: str) -> None:
-    agents = _three_ways(make_baseline(name, CONFIG.market), name, tiny_dataset)
+    agents = _three_ways(make_baseline(name, CONFIG.market), name, tiny_dataset, varies=name != "static")
     assert all(type(a) is type(agents[0]) for a in agents)  # no shell around the benchmark's own policy
 
 
@@ -115,7 +116,9 @@ def test_a_registered_policy_gets_the_config_and_the_requests_models(tiny_datase
 
     def factory(config, models):
         seen.append(dict(models))
-        return make_baseline("myopic", config.market)
+        policy = make_baseline("myopic", config.market)
+        policy.name = "mine-learned"  # a learned policy is named as registered
+        return policy
 
     monkeypatch.setitem(EXTRA_POLICIES, "mine-learned", factory)
     models = {"mine-learned": tiny_dataset / "model.zip"}
@@ -161,7 +164,9 @@ def test_an_http_agent_is_the_client_the_spec_names(tiny_dataset: Path) -> None:
     server = ScriptedAgentServer(action=[0.3, 0.6, 0.05])
     try:
         with HttpAgent("remote", server.url("/ok")) as client:
-            agents = _three_ways(as_agent(client, name="remote"), f"remote={server.url('/ok')}", tiny_dataset)
+            agents = _three_ways(
+                as_agent(client, name="remote"), f"remote={server.url('/ok')}", tiny_dataset, varies=False
+            )
     finally:
         server.server.shutdown()
     assert {type(a.inner).__name__ for a in agents} == {"HttpAgent"}
@@ -176,10 +181,11 @@ def test_the_llm_agent_is_registered_like_the_rest_and_needs_its_endpoint(tiny_d
             api="chat", model="fake-model", base_url=server.base_url, environ={"SOLARCHAIN_LLM_API_KEY": "none"}
         )
         with open_llm_agent(LLMOptions(settings), CONFIG.market, name="judge") as reference:
-            agents = _three_ways(reference, "judge=llm-agent", tiny_dataset, llm=LLMOptions(settings))
+            agents = _three_ways(reference, "judge=llm-agent", tiny_dataset, varies=False, llm=LLMOptions(settings))
     assert {type(a).__name__ for a in agents} == {"LLMAgent"}
-    with pytest.raises(AgentSpecError, match=r"^the llm-agent needs a model endpoint: --llm-backend local"):
+    with pytest.raises(AgentSpecError, match=r"^the llm-agent needs a model endpoint") as error:
         build_agents(agent_requests(["llm-agent"]), AgentContext(CONFIG))
+    assert error.value.message_for().startswith("the llm-agent needs a model endpoint: --llm-backend local")
 
 
 def test_an_isolated_request_acts_as_the_in_process_one(tiny_dataset: Path, agent_dir: Path) -> None:
@@ -220,3 +226,17 @@ def test_two_agents_with_one_name_and_a_request_of_nothing_are_refused() -> None
         build_agents(agent_requests(["static", "static"]), AgentContext(CONFIG))
     with pytest.raises(ValueError, match="either a spec or an agent object"):
         AgentRequest()
+
+
+def test_the_built_in_names_are_the_requested_tasks_baselines() -> None:
+    from solarchain_eval.tasks.registry import register_task, unregister_task
+    from toy_task import TOY_TASK, SteadyPolicy
+
+    register_task(TOY_TASK)
+    try:
+        (steady,) = build_agents(agent_requests(["steady"], task="toy-stock"), AgentContext(None, task="toy-stock"))
+        assert isinstance(steady, SteadyPolicy)
+        with pytest.raises(AgentSpecError, match="^unknown policy 'static': choose from steady, ppo"):
+            agent_requests(["static"], task="toy-stock")  # the solar market's baselines are not the toy's
+    finally:
+        unregister_task("toy-stock")
