@@ -2,7 +2,7 @@
 
 The baselines are the task's (:func:`~.named.baselines`). The solar market's baseline classes stay
 importable from here as before (``from solarchain_eval.agents import make_baseline``), resolved from
-the market on first use, so that importing this wing loads no market.
+the market on first use, so that ``import solarchain_eval.agents`` loads no market module.
 """
 
 import importlib

@@ -40,7 +40,7 @@ def discrete_actions(config: Any, task: str | None = None) -> int:
 
 def __getattr__(name: str) -> Any:
     # DEFAULT_DISCRETE_ACTIONS, the grid's size under the default configuration, is worked out from
-    # the default task on first use, so importing this module loads no market.
+    # the default task on first use (through the task registry, not an import of the market).
     if name == "DEFAULT_DISCRETE_ACTIONS":
         return _default_grid()
     raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
