@@ -260,7 +260,7 @@ def test_the_benchmarks_own_policies_renamed_keep_the_environments_decoding(tiny
         def act(self, observation):
             return np.array([1.5, -0.25, 0.5], dtype=np.float32)
 
-    monkeypatch.setattr("solarchain_eval.agents.registry.make_baseline", lambda name, market: Overshoots())
+    monkeypatch.setattr("solarchain_eval.solar.task.make_baseline", lambda name, market: Overshoots())
     result = _evaluate(["mine=static"], tiny_dataset)
     steps = result.episodes[0].steps
     executed = [steps[c][0] for c in ("reward_ratio", "liquidity_ratio", "burn_rate")]

@@ -229,11 +229,8 @@ GENERIC_WINGS = (
 #: only the task interface.
 KNOWN_TASK_DEBT = {
     "",
-    "agents",
-    "agents.adapters",
     "agents.http_agent",
     "agents.jax_network",
-    "agents.registry",
     "agents.sb3",
     "cli.bench",
     "cli.bench_agent",

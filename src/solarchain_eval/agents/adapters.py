@@ -14,6 +14,7 @@ episode and step.
 from __future__ import annotations
 
 import copy
+import functools
 import inspect
 from collections.abc import Callable
 from typing import Any
@@ -22,7 +23,7 @@ import numpy as np
 
 from ..common.errors import UserAgentError
 from ..config import BenchmarkConfig
-from ..market.spaces import n_discrete_actions
+from ..tasks.registry import get_task
 from .names import name_problem
 from .validation import AGENT_EXTRAS_KEY, agent_columns, continuous_problem, discrete_problem
 
@@ -31,8 +32,18 @@ HOOKS = ("begin_run", "begin_episode", "observe", "end_episode", "close")
 ACTION_MODES = ("continuous", "discrete")
 
 
-#: The discrete grid's size under the default configuration (5 levels per component: 125).
-DEFAULT_DISCRETE_ACTIONS = n_discrete_actions(BenchmarkConfig().discrete_levels)
+def discrete_actions(config: Any, task: str | None = None) -> int:
+    """Size of the discrete action grid: ``config.discrete_levels`` values for each of the task's levers
+    (the solar market's three levers at 5 levels: 125)."""
+    return int(config.discrete_levels) ** len(get_task(task).levers)
+
+
+def __getattr__(name: str) -> Any:
+    # DEFAULT_DISCRETE_ACTIONS, the grid's size under the default configuration, is worked out from
+    # the default task on first use (through the task registry, not an import of the market).
+    if name == "DEFAULT_DISCRETE_ACTIONS":
+        return _default_grid()
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
 #: The benchmark's own policy classes (module.qualname). An object of one of these, passed to an
@@ -48,6 +59,11 @@ BUILTIN_POLICY_CLASSES = frozenset(
         "solarchain_eval.governance.llm_agent.LLMAgent",
     }
 )
+
+
+@functools.cache
+def _default_grid() -> int:
+    return discrete_actions(BenchmarkConfig())
 
 
 def is_builtin_policy(agent: Any) -> bool:
@@ -211,13 +227,12 @@ class UserAgent:
     builtin : bool
         The benchmark's own policy under another name (``mine=static``): its actions' shape is
         checked, their values go to the environment as they are.
-    discrete_actions : int
-        Size of the discrete grid (a discrete agent's index must be below it).
+    discrete_actions : int, optional
+        Size of the discrete grid (a discrete agent's index must be below it); default: the
+        default configuration's.
     """
 
-    def __init__(
-        self, inner: Any, name: str, *, builtin: bool = False, discrete_actions: int = DEFAULT_DISCRETE_ACTIONS
-    ) -> None:
+    def __init__(self, inner: Any, name: str, *, builtin: bool = False, discrete_actions: int | None = None) -> None:
         problem = name_problem(name)
         if problem is not None:
             raise AgentError(f"{problem}; name the agent with NAME=spec, or name= in Python")
@@ -230,7 +245,8 @@ class UserAgent:
         self.name = name
         self.action_mode = mode
         self.builtin = builtin
-        self.discrete_actions = int(discrete_actions)
+        # None: the grid of the default configuration and task
+        self.discrete_actions = int(discrete_actions if discrete_actions is not None else _default_grid())
         self.stateless = bool(getattr(inner, "stateless", False))
         self._act = inner.act
         for hook in HOOKS:  # only the hooks the agent has, so the runner's getattr sees the same
@@ -302,7 +318,7 @@ def as_agent(
     *,
     name: str | None = None,
     builtin: bool = False,
-    discrete_actions: int = DEFAULT_DISCRETE_ACTIONS,
+    discrete_actions: int | None = None,
 ) -> UserAgent:
     """The runner's view of a user's agent (see the module docstring).
 
@@ -313,8 +329,9 @@ def as_agent(
         Overrides the agent's own ``name`` (default: its ``name``, else its class or function name).
     builtin : bool
         ``agent`` is one of the benchmark's own policies (see :class:`UserAgent`).
-    discrete_actions : int
-        Size of the discrete grid of the evaluation's configuration.
+    discrete_actions : int, optional
+        Size of the discrete grid of the evaluation's configuration (:func:`discrete_actions`;
+        default: the default configuration's).
 
     Raises
     ------
@@ -322,6 +339,8 @@ def as_agent(
         The object is none of the accepted kinds, its name breaks the naming rule
         (:mod:`.names`), or it declares an unknown action mode.
     """
+    if discrete_actions is None:
+        discrete_actions = _default_grid()
     options = {"builtin": builtin, "discrete_actions": discrete_actions}
     if isinstance(agent, UserAgent):
         same = name in (None, agent.name) and (agent.builtin, agent.discrete_actions) == (builtin, discrete_actions)

@@ -31,11 +31,12 @@ import pickle
 import signal
 import threading
 import weakref
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from ..records_schema import AGENT_COLUMN_PREFIX
 from .adapters import AgentError, AgentFailure, UserAgent, as_agent
+from .request import AgentContext, AgentRequest, agent_request
 from .specs import AgentSpec, AgentSpecError
 from .validation import AGENT_EXTRAS_KEY
 from .wire import WireError, decode, encode, frameable, is_frame, pack_array, unpack_array
@@ -141,11 +142,11 @@ def _pack_request(op: str, args: tuple, kwargs: dict) -> bytes:
 
 def _build(payload: tuple) -> UserAgent:
     kind = payload[0]
-    if kind == "spec":
-        from .registry import make_agent
+    if kind == "request":
+        from .kinds import build_in_process
 
-        _, spec, config, agent_args, vecnormalize = payload
-        return as_agent(make_agent(spec, config, agent_args=agent_args, vecnormalize=vecnormalize))
+        _, request, context = payload
+        return as_agent(build_in_process(request, context))
     _, data, name = payload
     # Runs only in the agent's own process, on bytes the evaluator pickled from an object its
     # caller passed in Python (or this agent's own snapshot): never on a file a run names, and the
@@ -180,7 +181,7 @@ def _shutdown(conn: Any, process: Any) -> None:
 class IsolatedAgent:
     """A user's agent running in a process of its own (see the module docstring).
 
-    Build one with :meth:`from_spec` or :meth:`from_object`. ``name``, ``action_mode`` and
+    Build one with :meth:`from_request` (:meth:`from_spec`) or :meth:`from_object`. ``name``, ``action_mode`` and
     ``stateless`` are the agent's own; ``observe`` and ``end_episode`` exist when the agent has
     them. ``isolated = True`` labels its rows ``isolated``
     (:func:`~solarchain_eval.agents.base.access_label`).
@@ -227,10 +228,21 @@ class IsolatedAgent:
         agent_args: dict[str | None, dict[str, Any]] | None = None,
         vecnormalize: dict | None = None,
     ) -> UserAgent:
-        """The agent of a ``python``, ``file``, ``plugin`` or ``sb3`` spec, built in its own process."""
+        """The agent of a ``python``, ``file``, ``plugin`` or ``sb3`` spec, built in its own process
+        (:meth:`from_request` with the ``--agent-arg`` and ``--vecnormalize`` mappings by agent name)."""
+        request = agent_request(spec, builtins=(), agent_args=agent_args, vecnormalize=vecnormalize)
+        return cls.from_request(request, AgentContext(config))
+
+    @classmethod
+    def from_request(cls, request: AgentRequest, context: AgentContext) -> UserAgent:
+        """The agent of a ``python``, ``file``, ``plugin`` or ``sb3`` spec request, built in its own process
+        as :func:`~.kinds.build_in_process` builds it in this one."""
+        spec = request.spec
+        if spec is None:
+            raise ValueError("from_request builds an agent from its spec; isolate an agent object with from_object")
         if spec.kind not in ISOLATED_KINDS:
             raise AgentSpecError(f"agent {spec.label!r} ({spec.text}): a {spec.kind} agent is not run isolated")
-        agent = cls(("spec", spec, config, dict(agent_args or {}), dict(vecnormalize or {})), spec.label)
+        agent = cls(("request", replace(request, isolate=False), context), spec.label)
         return as_agent(agent, name=agent.name)
 
     @classmethod

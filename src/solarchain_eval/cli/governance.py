@@ -11,6 +11,7 @@ import typer
 from rich.table import Table
 
 from ..agents.registry import known_policies, parse_agents
+from ..agents.request import AgentContext, agent_requests
 from ..agents.sb3 import parse_models
 from ..agents.specs import parse_agent_args, parse_vecnormalize
 from ..config import BenchmarkConfig, load_config
@@ -285,20 +286,18 @@ def governance(
 def _check_agents(spec: GovernanceSpec) -> list[str]:
     """The policies' names; unknown policies, missing models, imports, names used twice and
     actions of the wrong shape fail before any work."""
-    from ..evaluation.runner import EvaluationSpec, check_agents
+    from ..evaluation.runner import check_agent_requests
 
-    evaluation = EvaluationSpec(
-        policies=list(spec.policies),
-        run_seeds=spec.run_seeds,
-        episodes=spec.episodes,
-        data_dir=spec.data_dir,
-        config=spec.config,
-        models=spec.models,
-        agent_args=spec.agent_args,
-        vecnormalize=spec.vecnormalize,
-        isolate=spec.isolate,
-    )
     try:
-        return check_agents(evaluation)
+        requests = agent_requests(
+            spec.policies,
+            models=spec.models,
+            agent_args=spec.agent_args,
+            vecnormalize=spec.vecnormalize,
+            isolate=spec.isolate,
+        )
+        return check_agent_requests(
+            requests, AgentContext(spec.config), data_dir=spec.data_dir, run_seed=spec.run_seeds[0]
+        )
     except (ValueError, FileNotFoundError) as error:
         raise cli_error(error) from None

@@ -19,15 +19,14 @@ from datetime import UTC, datetime
 from pathlib import Path
 from typing import Any
 
-from ..agents.adapters import AgentFailure, UserAgent, is_builtin_policy
+from ..agents.adapters import AgentFailure, UserAgent
 from ..agents.base import Policy, access_label
-from ..agents.isolated import IsolatedAgent, is_isolatable
-from ..agents.registry import known_policies, make_agent, user_agent
-from ..agents.specs import AgentSpecError, check_unique, parse_agent_spec
+from ..agents.build import build_agents
+from ..agents.isolated import IsolatedAgent
+from ..agents.request import AgentContext, AgentRequest, agent_requests
 from ..common.atomic_files import sha256_file
 from ..common.redaction import redact_command, redact_spec
 from ..common.versions import git_commit, package_versions
-from ..config import BenchmarkConfig
 from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS, episode_seed_rule_name, paper_episode_seeds
 from ..records_schema import RECORDS_SCHEMA_VERSION
@@ -135,30 +134,9 @@ def resolved_config(spec: EvaluationSpec) -> Any:
     return get_task(spec.task).setting_config(spec.config, no_physics_penalty=spec.no_physics_penalty)
 
 
-def _task_baseline(task: Task, text: str, config: Any) -> Policy | None:
-    """The baseline ``text`` names of a task other than the solar market (None: not one of its names).
-
-    Raises
-    ------
-    AgentSpecError
-        ``text`` names one of the solar market's built-in policies, which do not act in this task.
-    """
-    if task.name == DEFAULT_TASK:
-        return None
-    baselines = task.baselines()
-    if text in baselines:
-        return baselines[text](config)
-    if parse_agent_spec(text, known_policies()).kind in ("builtin", "llm"):
-        raise AgentSpecError(
-            f"policy {text!r} is not a baseline of task {task.name!r} (its baselines: {', '.join(baselines) or 'none'})"
-        )
-    return None
-
-
 def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[Policy]:
-    """The spec's agents, built: specs through :func:`~solarchain_eval.agents.registry.make_agent`
-    with the spec's config (its reward setting applied), models and options, ready agents through
-    :func:`~solarchain_eval.agents.adapters.as_agent`.
+    """The spec's agents, built by :func:`~solarchain_eval.agents.build.build_agents` from one
+    request each (:func:`agent_requests_of`), with the spec's config (its reward setting applied).
 
     Agents built here are closed by ``stack`` when given (their ``close`` hook); agents the caller
     passed in are the caller's to close.
@@ -170,45 +148,24 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
     FileNotFoundError
         A learned policy without a trained model (the message lists where it looked).
     """
-    config = resolved_config(spec)
-    task = get_task(spec.task)
-    builtins = known_policies()
-    built: list[Policy] = []
-    for item in spec.policies:
-        baseline = _task_baseline(task, item, config) if isinstance(item, str) else None
-        if baseline is not None:  # a baseline the task supplies (not the solar market's)
-            built.append(baseline)
-            continue
-        if is_builtin_policy(item):  # the benchmark's own policy object, as make_agent returns it
-            built.append(item)
-            continue
-        if not isinstance(item, str):
-            if spec.isolate:
-                agent = IsolatedAgent.from_object(item)  # a copy in its own process, which the evaluation closes
-                if stack is not None:
-                    stack.callback(agent.close)
-            else:
-                agent = user_agent(item, config)
-            check_reserved(agent.name)
-            built.append(agent)
-            continue
-        parsed = parse_agent_spec(item, builtins)
-        if parsed.kind == "llm":
-            agent = _llm_agent(spec, config, parsed.name)
-        elif spec.isolate and is_isolatable(parsed):
-            agent = IsolatedAgent.from_spec(parsed, config, spec.agent_args, spec.vecnormalize)
-        else:
-            agent = make_agent(
-                parsed, config, models=spec.models, agent_args=spec.agent_args, vecnormalize=spec.vecnormalize
-            )
-        close = getattr(agent, "close", None)
-        if stack is not None and close is not None:
-            stack.callback(close)
-        # a reserved name only for the built-in it names (``static``, not ``static=file.py:A``)
-        check_reserved(agent.name, parsed.target if parsed.kind in ("builtin", "llm") else None)
-        built.append(agent)
-    check_unique([p.name for p in built])
-    return built
+    return build_agents(agent_requests_of(spec), _agent_context(spec), stack=stack, check_name=check_reserved)
+
+
+def agent_requests_of(spec: EvaluationSpec) -> list[AgentRequest]:
+    """One :class:`~solarchain_eval.agents.request.AgentRequest` per policy of ``spec``, with its options."""
+    return agent_requests(
+        spec.policies,
+        models=spec.models,
+        agent_args=spec.agent_args,
+        vecnormalize=spec.vecnormalize,
+        llm=spec.llm,
+        isolate=spec.isolate,
+        task=spec.task,
+    )
+
+
+def _agent_context(spec: EvaluationSpec) -> AgentContext:
+    return AgentContext(resolved_config(spec), spec.task)
 
 
 def check_agents(spec: EvaluationSpec) -> list[str]:
@@ -224,26 +181,55 @@ def check_agents(spec: EvaluationSpec) -> list[str]:
     list of str
         The agents' names (the ``policy`` column of their records), in the spec's order.
     """
-    config = resolved_config(spec)
-    task = get_task(spec.task)
-    table = task.load_data(task.data_dir(spec.data_dir, config))
+    return check_agent_requests(
+        agent_requests_of(spec),
+        _agent_context(spec),
+        data_dir=spec.data_dir,
+        run_seed=int(spec.run_seeds[0]),
+        episode_seeds=spec.episode_seeds,
+    )
+
+
+def check_agent_requests(
+    requests: Sequence[AgentRequest],
+    context: AgentContext,
+    *,
+    data_dir: Path | None = None,
+    run_seed: int = PAPER_SEEDS[0],
+    episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds,
+) -> list[str]:
+    """:func:`check_agents` for agent requests: build them, try each user agent's first action on
+    ``data_dir`` (None: the config's dataset) in the first episode of ``run_seed``, release them.
+
+    Returns
+    -------
+    list of str
+        The agents' names, in the requests' order.
+    """
+    task = get_task(context.task)
+    table = task.load_data(task.data_dir(data_dir, context.config))
     with ExitStack() as stack:
-        agents = make_policies(spec, stack)
+        agents = build_agents(requests, context, stack=stack, check_name=check_reserved)
         for agent in agents:
             if isinstance(agent, UserAgent):
-                _try_first_action(agent, config, table, spec)
+                _try_first_action(agent, context, table, int(run_seed), episode_seeds)
         return [agent.name for agent in agents]
 
 
-def _try_first_action(agent: UserAgent, config: Any, table: Any, spec: EvaluationSpec) -> None:
+def _try_first_action(
+    agent: UserAgent,
+    context: AgentContext,
+    table: Any,
+    run_seed: int,
+    episode_seeds: Callable[[int, int], list[int]],
+) -> None:
     try:
         # An isolated agent is a copy already (in its process), which this check then closes.
         trial = agent if isinstance(agent.inner, IsolatedAgent) else copy.deepcopy(agent)
     except Exception:  # an agent holding a socket, a lock, a model server: tried on its first step
         return
-    env = get_task(spec.task).make_env(config, table, action_mode=trial.action_mode)
-    run_seed = int(spec.run_seeds[0])
-    (episode_seed,) = spec.episode_seeds(run_seed, 1)
+    env = get_task(context.task).make_env(context.config, table, action_mode=trial.action_mode)
+    (episode_seed,) = episode_seeds(run_seed, 1)
     obs, info = env.reset(seed=episode_seed)
     try:
         begin_run(trial, run_seed)
@@ -253,16 +239,6 @@ def _try_first_action(agent: UserAgent, config: Any, table: Any, spec: Evaluatio
         env.step(trial.act(obs))  # the shell checks the action as returned
     except AgentFailure as failure:
         raise failure.at(run_seed=run_seed, episode=0, step=0) from failure.user_error
-
-
-def _llm_agent(spec: EvaluationSpec, config: BenchmarkConfig, name: str | None) -> Policy:
-    from ..governance.llm_agent import open_llm_agent
-
-    if spec.llm is None:
-        raise AgentSpecError.about(
-            "the llm-agent needs a model endpoint: {opt_llm_backend} local, or {opt_llm_api} URL with {opt_llm_model}"
-        )
-    return open_llm_agent(spec.llm, config.market, name=name or "llm-agent")
 
 
 def run_evaluation(

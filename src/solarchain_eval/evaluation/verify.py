@@ -27,7 +27,9 @@ from pathlib import Path
 from typing import Any
 
 from ..agents.base import Policy
+from ..agents.build import build_agents
 from ..agents.registry import known_policies
+from ..agents.request import AgentContext, agent_requests
 from ..agents.specs import AgentSpecError, parse_agent_spec
 from ..common.errors import NamesOptions
 from ..common.redaction import redact_text
@@ -39,9 +41,9 @@ from ..tasks.base import Task
 from ..tasks.registry import DEFAULT_TASK
 from .inflight import is_stateless
 from .records import METRICS_FILE
+from .reserved import check_reserved
 from .rollout import begin_run, run_episode
 from .run_metadata import RunMetadata, RunMetadataError
-from .runner import EvaluationSpec, make_policies
 from .verify_checks import (
     Difference,
     VerifyError,
@@ -238,17 +240,18 @@ def _builder(
     task: str = DEFAULT_TASK,
 ):
     """A function building the agent of spec ``text`` in ``task`` as the evaluation runner builds it."""
-    spec = EvaluationSpec(
-        policies=[text],
-        config=config,
-        # the recorded config has the setting's reward switch applied (a task without one has none)
-        no_physics_penalty=bool(getattr(config, "no_physics_penalty", False)),
-        models=models,
-        agent_args=options.agent_args,
-        isolate=True,  # a submitted agent is re-run in its own process, where it cannot reach the env
-        task=task,
-    )
-    return lambda: make_policies(spec, stack)[0]
+    # a submitted agent is re-run in its own process, where it cannot reach the env
+    return _build_one(text, config, stack, task=task, models=models, agent_args=options.agent_args, isolate=True)
+
+
+def _build_one(
+    text: str, config: Any, stack: ExitStack, *, task: str = DEFAULT_TASK, **options: Any
+) -> Callable[[], Policy]:
+    """A function building the agent of spec ``text`` in ``task`` with the request ``options``, closed by ``stack``."""
+    context = AgentContext(config, task)
+    return lambda: build_agents(
+        agent_requests([text], task=task, **options), context, stack=stack, check_name=check_reserved
+    )[0]
 
 
 def _recorded_builder(
@@ -276,13 +279,7 @@ def _recorded_builder(
             return "the llm-agent's endpoint is not recorded in the run"
         if options.llm_cache is None:
             return "LLM calls; pass --llm-cache"
-        spec = EvaluationSpec(
-            policies=[text],
-            config=config,
-            no_physics_penalty=config.no_physics_penalty,
-            llm=LLMOptions.replaying(llm_agent, options.llm_cache),
-        )
-        return lambda: make_policies(spec, stack)[0]
+        return _build_one(text, config, stack, llm=LLMOptions.replaying(llm_agent, options.llm_cache))
     return f"a user agent ({text}); pass its spec with --agent to rebuild it"
 
 

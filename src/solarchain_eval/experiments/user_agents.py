@@ -19,12 +19,14 @@ import importlib.util
 import json
 from collections.abc import Mapping, Sequence
 from contextlib import ExitStack
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
+from ..agents.build import build_agents
 from ..agents.checkpoints import TRAINABLE_ALGOS
 from ..agents.registry import known_policies
+from ..agents.request import AgentContext, agent_requests
 from ..agents.specs import (
     AgentSpec,
     AgentSpecError,
@@ -38,7 +40,7 @@ from ..common.atomic_files import sha256_file
 from ..common.redaction import redact_options, redact_spec
 from ..config import BenchmarkConfig
 from ..evaluation.reserved import check_reserved, reserved_names
-from ..evaluation.runner import EvaluationSpec, check_agents, make_policies
+from ..evaluation.runner import check_agent_requests
 from ..protocol import PAPER_SEED
 
 #: A grid's user agents: (name, spec text) in the order given.
@@ -134,7 +136,7 @@ def resolve_agents(
         ``--agent-arg`` / ``--vecnormalize`` options by agent name (None: every agent).
     data_dirs : sequence, optional
         Datasets to try every agent's first action on
-        (:func:`~solarchain_eval.evaluation.runner.check_agents`; None in the sequence: the
+        (:func:`~solarchain_eval.evaluation.runner.check_agent_requests`; None in the sequence: the
         config's dataset). None: only build the agents (no dataset needed).
     run_seed : int
         The run seed of the first action tried.
@@ -157,21 +159,14 @@ def resolve_agents(
     """
     if not specs:
         return ()
-    evaluation = EvaluationSpec(
-        policies=[s.text for s in specs],
-        run_seeds=(int(run_seed),),
-        episodes=1,
-        config=config,
-        agent_args=dict(agent_args or {}),
-        vecnormalize=dict(vecnormalize or {}),
-        isolate=isolate,
-    )
+    requests = agent_requests(specs, agent_args=agent_args, vecnormalize=vecnormalize, isolate=isolate)
+    context = AgentContext(config)
     if data_dirs is None:
         with ExitStack() as stack:
-            names = [agent.name for agent in make_policies(evaluation, stack)]
+            names = [agent.name for agent in build_agents(requests, context, stack=stack, check_name=check_reserved)]
     else:
         for data_dir in data_dirs:
-            names = check_agents(replace(evaluation, data_dir=data_dir))
+            names = check_agent_requests(requests, context, data_dir=data_dir, run_seed=run_seed)
     agents = tuple((name, spec.text) for name, spec in zip(names, specs, strict=True))
     check_agent_names(agents, builtins)
     return agents
@@ -191,18 +186,13 @@ def check_resolved(
     process of its own with ``isolate``."""
     if not agents:
         return
-    check_agents(
-        EvaluationSpec(
-            policies=[worker_spec(name, text) for name, text in agents],
-            run_seeds=(int(run_seed),),
-            episodes=1,
-            data_dir=data_dir,
-            config=config,
-            agent_args=dict(agent_args or {}),
-            vecnormalize=absolute_paths(vecnormalize or {}),
-            isolate=isolate,
-        )
+    requests = agent_requests(
+        [worker_spec(name, text) for name, text in agents],
+        agent_args=agent_args,
+        vecnormalize=absolute_paths(vecnormalize or {}),
+        isolate=isolate,
     )
+    check_agent_requests(requests, AgentContext(config), data_dir=data_dir, run_seed=run_seed)
 
 
 @dataclass(frozen=True)
