@@ -162,6 +162,10 @@ def test_a_declared_metric_shows_in_the_report_with_its_unit_and_direction(toy_r
     assert "fill_per_hour (units/h) ↑" in page
     report_md = (outcome.out_dir / "report.md").read_text(encoding="utf-8")
     assert "Task: `toy-stock`." in report_md and "no paper reference" in report_md
+    result = CliRunner().invoke(
+        app, ["report", str(toy_run), "--resamples", "200", "--no-figures", "--against", "paper"]
+    )
+    assert result.exit_code == 2 and "no paper reference" in result.output
     with pytest.raises(ReportDataError, match="task 'toy-stock' has no paper reference"):
         build_report(toy_run, formats=("md",), options=REPORT_OPTIONS, figures=False, against="paper")
 
@@ -189,6 +193,9 @@ def test_a_declared_metric_shows_on_the_board_and_ranking_follows_the_declaratio
     assert "Mean total_reward (–) ↑ [95% CI]" in md and "- Task: `toy-stock`" in md
     assert "ranked per setting by mean total reward" in md and "best baseline (steady, by mean total reward)" in md
     assert "total_reward vs shortfall_units" in md  # the figure plots the ranked metric against a safety cost
+    shown = CliRunner().invoke(app, ["leaderboard", str(toy_run), "--out", str(tmp_path / "cli"), "--resamples", "200"])
+    assert shown.exit_code == 0, shown.output
+    assert "mean total_reward" in shown.output and (tmp_path / "cli" / "leaderboard.md").is_file()
     html = outcome.files["leaderboard.html"].read_text(encoding="utf-8")
     assert 'data-best="descending">fill_per_hour (units/h) ↑</th>' in html
     assert 'data-best="ascending">stock_swing (units) ↓</th>' in html
