@@ -29,7 +29,7 @@ from ...config import BenchmarkConfig
 from ...evaluation.fingerprint import protocol_difference, protocol_fingerprint
 from ...evaluation.settings import KNOWN_SETTINGS
 from ...protocol import PAPER_EPISODES, PAPER_SEEDS
-from ...tasks.base import MetricSpec, PaperReference, paper_reference_of
+from ...tasks.base import paper_reference_of
 from ...tasks.registry import DEFAULT_TASK, get_task
 from ..naming import SETTINGS
 from ..options import LeaderboardOptions
@@ -44,46 +44,16 @@ from .inputs import (
     group_by_protocol,
     merge_by_setting,
 )
+from .layout import COLUMNS as COLUMNS
+from .layout import REWARD as REWARD
+from .layout import SAFETY_METRICS as SAFETY_METRICS
+from .layout import BoardLayout as BoardLayout
+from .layout import board_layout as board_layout
 
-#: The ranked metric.
-REWARD = "cumulative_reward"
-#: Safety metrics shown beside the reward (their means; lower is better for each).
-SAFETY_METRICS = (
-    "physics_violation_rate",
-    "artificial_liquidity_MWh",
-    "mean_slippage",
-    "action_jitter",
-    "spatial_fairness_index",
-)
 #: ``row_kind`` of measured rows and of the paper's published rows.
 RANKED, REFERENCE = "ranked", "reference"
 #: ``source`` of the paper's published rows.
 REFERENCE_SOURCE = "paper (published)"
-#: The columns of ``leaderboard.csv``, in order.
-COLUMNS = (
-    "setting",
-    "rank",
-    "policy",
-    "access",
-    "source",
-    "row_kind",
-    "episodes",
-    "start_days",
-    f"{REWARD}_mean",
-    f"{REWARD}_low",
-    f"{REWARD}_high",
-    f"{REWARD}_std",
-    f"{REWARD}_iqm",
-    f"{REWARD}_iqm_low",
-    f"{REWARD}_iqm_high",
-    "best_baseline",
-    "p_improvement",
-    "p_improvement_low",
-    "p_improvement_high",
-    *(f"{metric}_mean" for metric in SAFETY_METRICS),
-    "protocol_id",
-    "board_protocol_id",
-)
 #: Columns a reference frame may give (besides ``policy``); missing ones are left empty.
 REFERENCE_COLUMNS = (
     "episodes",
@@ -91,74 +61,6 @@ REFERENCE_COLUMNS = (
     f"{REWARD}_std",
     *(f"{metric}_mean" for metric in SAFETY_METRICS),
 )
-
-
-@dataclass(frozen=True)
-class BoardLayout:
-    """What a board of one task ranks and shows, from the task's metric declarations.
-
-    Attributes
-    ----------
-    task : str
-    ranked : MetricSpec
-        The metric policies are ranked by (higher is better): the task's first utility metric
-        whose direction is ``higher`` (else its first metric whose direction is ``higher``).
-    shown : tuple of MetricSpec
-        The metrics whose means the board shows beside it: every other declared metric, or for a
-        task with a paper reference its paper's board's metrics, then the declared metrics the
-        paper does not cover.
-    baselines : tuple of str
-        The task's baselines, in its order (the best of them is the probability of improvement's Y).
-    paper : PaperReference or None
-        The task's paper reference (headers, the paper's protocol), if it has one.
-    """
-
-    task: str
-    ranked: MetricSpec
-    shown: tuple[MetricSpec, ...]
-    baselines: tuple[str, ...]
-    paper: PaperReference | None = None
-
-    def columns(self) -> tuple[str, ...]:
-        """The columns of ``leaderboard.csv``, in order (:data:`COLUMNS` for the solar market)."""
-        name = self.ranked.name
-        return (
-            *COLUMNS[:8],
-            *(f"{name}_{part}" for part in ("mean", "low", "high", "std", "iqm", "iqm_low", "iqm_high")),
-            *COLUMNS[15:19],
-            *(f"{spec.name}_mean" for spec in self.shown),
-            *COLUMNS[-2:],
-        )
-
-    def label(self, spec: MetricSpec) -> str | None:
-        """The paper's board's short name of ``spec`` (None where it has none)."""
-        return self.paper.headers.get(spec.name) if self.paper is not None else None
-
-
-def board_layout(task: str = DEFAULT_TASK) -> BoardLayout:
-    """The :class:`BoardLayout` of the task called ``task``.
-
-    Raises
-    ------
-    LeaderboardError
-        The task declares no metric whose direction is ``higher`` to rank by.
-    """
-    spec = get_task(task)
-    rankable = [m for m in spec.metrics if m.dimension == "utility" and m.direction == "higher"]
-    rankable += [m for m in spec.metrics if m.direction == "higher"]
-    if not rankable:
-        raise LeaderboardError(
-            f"task {task!r} declares no metric whose direction is 'higher'; a board has none to rank by"
-        )
-    ranked = rankable[0]
-    paper = paper_reference_of(spec)
-    by_name = {m.name: m for m in spec.metrics}
-    if paper is not None:
-        shown = [by_name[n] for n in paper.board_metrics if n in by_name]
-        shown += [m for m in spec.metrics if m.name not in paper.metrics and m is not ranked]
-    else:
-        shown = [m for m in spec.metrics if m is not ranked]
-    return BoardLayout(task, ranked, tuple(shown), tuple(spec.baselines()), paper)
 
 
 def reference_rows(setting: str) -> pd.DataFrame | None:

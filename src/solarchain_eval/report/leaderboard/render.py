@@ -365,7 +365,7 @@ def render_html(board: Leaderboard, png: bytes | None) -> str:
         parts.append(
             f'<h2 id="pareto-front">{_escape(axes.title)}</h2>'
             f'<figure id="pareto"><img src="data:image/png;base64,{data}" alt="{_escape(axes.title)}">'
-            f"<figcaption>{_escape(caption)}</figcaption></figure>"
+            f"<figcaption>{html.escape(caption, quote=False)}</figcaption></figure>"
         )
     if board.notes:
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_escape(n)}</li>" for n in board.notes) + "</ul>")
