@@ -5,6 +5,7 @@ boards never mix tasks; the solar market's board and report keep the paper's lay
 from __future__ import annotations
 
 import hashlib
+import json
 import statistics
 from pathlib import Path
 
@@ -252,3 +253,43 @@ def test_a_metric_declared_for_the_solar_market_joins_its_board_after_the_papers
         assert [c.header for c in display_columns(0.95, layout)][-1] == "peak_shortage (MWh) ↓"
     finally:
         register_task(solar)
+
+
+def _grid_root(root: Path, units: dict[str, Path]) -> Path:
+    """A grid root laid out as ``paper`` lays one out: finished eval units, their rows combined per
+    setting, and ``paper_metadata.json`` vouching for the combined files."""
+    for name, run in units.items():
+        unit = root / "units" / "eval" / name
+        unit.parent.mkdir(parents=True, exist_ok=True)
+        run.rename(unit)
+        (unit / "DONE").write_text("done\n", encoding="utf-8")
+    frames = [pd.read_csv(root / "units" / "eval" / name / "metrics.csv") for name in units]
+    combined = root / "combined" / "main"
+    combined.mkdir(parents=True)
+    pd.concat(frames, ignore_index=True).to_csv(combined / "metrics.csv", index=False)
+    digest = hashlib.sha256((combined / "metrics.csv").read_bytes()).hexdigest()
+    (root / "paper_metadata.json").write_text(json.dumps({"combined_sha256": {"main": {"metrics.csv": digest}}}))
+    return root
+
+
+def test_a_grid_root_of_a_task_is_reported_and_ranked_by_its_declarations(toy_task, tmp_path):
+    unit = write_toy_run(tmp_path / "u", toy_task, ("steady", "eager"))
+    root = _grid_root(tmp_path / "root", {"main-s7": unit})
+    outcome = build_report(root, formats=("md",), options=REPORT_OPTIONS, figures=False)
+    assert outcome.data.kind == "paper" and outcome.data.task == "toy-stock"
+    assert "fill_per_hour (units/h) ↑" in (outcome.out_dir / "tables" / "task_utility.md").read_text(encoding="utf-8")
+    board = make_leaderboards([root], tmp_path / "board", OPTIONS)
+    assert board.boards[0].layout.task == "toy-stock"
+    assert "| fill_per_hour (units/h) ↑ |" in board.files["leaderboard.md"].read_text(encoding="utf-8")
+
+
+def test_a_grid_root_whose_units_ran_different_tasks_is_refused(toy_task, tmp_path):
+    toy = write_toy_run(tmp_path / "a", toy_task, ("steady",))
+    solar_like = write_toy_run(tmp_path / "b", toy_task, ("steady",))
+    record = RunMetadata.read(solar_like / "run_metadata.json")
+    record.model_copy(update={"task": "solar"}).write(solar_like / "run_metadata.json")
+    root = _grid_root(tmp_path / "root", {"main-s7": toy, "main-s8": solar_like})
+    with pytest.raises(
+        ReportDataError, match=r"records task 'solar' but .* records task 'toy-stock'; a report covers one"
+    ):
+        build_report(root, formats=("md",), options=REPORT_OPTIONS, figures=False)
