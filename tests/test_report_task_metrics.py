@@ -7,6 +7,7 @@ from __future__ import annotations
 import hashlib
 import json
 import statistics
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,7 @@ from solarchain_eval.report.leaderboard.inputs import LeaderboardError, open_inp
 from solarchain_eval.report.leaderboard.ranking import COLUMNS, board_layout, build_leaderboard, build_leaderboards
 from solarchain_eval.report.leaderboard.render import display_columns
 from solarchain_eval.report.options import LeaderboardOptions, ReportDataError, ReportOptions
+from solarchain_eval.report.task_summary import summary_metrics
 from solarchain_eval.tasks.base import MetricSpec
 from solarchain_eval.tasks.registry import UnknownTaskError, get_task, register_task, unregister_task
 from toy_task import STEPS, ToyTask
@@ -225,6 +227,7 @@ def test_a_board_never_mixes_tasks(toy_task, tmp_path):
 
 
 def test_the_solar_board_keeps_the_papers_layout():
+    assert summary_metrics(get_task("solar")) == {}  # the paper's tables cover every solar metric
     layout = board_layout("solar")
     assert layout.columns() == COLUMNS
     assert layout.baselines == ("static", "random", "myopic")
@@ -241,15 +244,15 @@ def test_the_solar_board_keeps_the_papers_layout():
     ]
 
 
-def test_a_metric_declared_for_the_solar_market_joins_its_board_after_the_papers_columns(monkeypatch):
-    from dataclasses import replace
-
+def test_a_metric_declared_for_the_solar_market_joins_its_board_after_the_papers_columns():
     solar = get_task("solar")
     extra = MetricSpec(Column("peak_shortage", "MWh", "largest hourly shortage"), "safety", "lower")
     register_task(replace(solar, metrics=(*solar.metrics, extra)))
     try:
         layout = board_layout("solar")
         assert layout.columns() == (*COLUMNS[:-2], "peak_shortage_mean", *COLUMNS[-2:])
+        # and the report gives it its dimension's table beside the paper's (which cover the other eleven)
+        assert summary_metrics(get_task("solar")) == {"safety": (extra,)}
         assert [c.header for c in display_columns(0.95, layout)][-1] == "peak_shortage (MWh) ↓"
     finally:
         register_task(solar)
