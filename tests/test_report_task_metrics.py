@@ -196,6 +196,9 @@ def test_a_declared_metric_shows_on_the_board_and_ranking_follows_the_declaratio
     assert "Mean total_reward (–) ↑ [95% CI]" in md and "- Task: `toy-stock`" in md
     assert "ranked per setting by mean total reward" in md and "best baseline (steady, by mean total reward)" in md
     assert "total_reward vs shortfall_units" in md  # the figure plots the ranked metric against a safety cost
+    assert (
+        "| 1 | steady | in-process |" in md and "| eager (user agent) |" in md
+    )  # the task's baseline is no user agent
     shown = CliRunner().invoke(app, ["leaderboard", str(toy_run), "--out", str(tmp_path / "cli"), "--resamples", "200"])
     assert shown.exit_code == 0, shown.output
     assert "mean total_reward" in shown.output and (tmp_path / "cli" / "leaderboard.md").is_file()

@@ -86,8 +86,12 @@ def _rank(row: dict[str, Any]) -> str:
     return "paper" if row["row_kind"] == REFERENCE else str(int(row["rank"]))
 
 
-def _policy(row: dict[str, Any]) -> str:
-    return policy_label(str(row["policy"]))
+def shown_policy(layout: BoardLayout, policy: str) -> str:
+    """A policy's name on the board: the report's label, except that a task's own baseline is not
+    marked as a user agent (the report's labels know the solar market's baselines only)."""
+    if layout.paper is None and policy in layout.baselines:
+        return policy
+    return policy_label(policy)
 
 
 #: The order a first click on a metric's header sorts in (best first), by its declared direction.
@@ -108,7 +112,7 @@ def display_columns(confidence: float, layout: BoardLayout | None = None) -> lis
     ranked = layout.label(layout.ranked) or metric_header(layout.ranked)
     return [
         DisplayColumn("Rank", "rank", True, "ascending", _rank),
-        DisplayColumn("Policy", "policy", False, "ascending", _policy),
+        DisplayColumn("Policy", "policy", False, "ascending", lambda r: shown_policy(layout, str(r["policy"]))),
         DisplayColumn("Access", "access", False, "ascending", lambda r: str(r["access"]) or "–"),
         DisplayColumn("Source", "source", False, "ascending", lambda r: str(r["source"])),
         DisplayColumn("Episodes", "episodes", True, "descending", _number("episodes", 0)),
@@ -162,10 +166,9 @@ def _reading(board: Leaderboard) -> list[str]:
     if layout.paper is not None:  # the paper's board: its five safety metrics
         others = "Safety metrics are means over rollouts; lower is better for each."
     else:
-        arrows = ", ".join(f"{ARROWS[d]} {d}" for d in ("higher", "lower"))
         others = (
-            f"The other metrics are means over rollouts, headed by their name, unit and direction ({arrows} is "
-            f"better, {ARROWS['none']} neither)."
+            "The other metrics are means over rollouts, headed by their name, unit and direction "
+            f"({ARROWS['higher']} higher is better, {ARROWS['lower']} lower is better, {ARROWS['none']} neither)."
         )
     return [
         f"Policies are ranked per setting by mean {words}. Intervals are {level} percentile intervals of "
@@ -190,7 +193,7 @@ def _section_notes(section: BoardSection, layout: BoardLayout) -> list[str]:
             f"No baseline ({', '.join(layout.baselines)}) was evaluated in this setting: no probability of improvement."
         )
     else:
-        notes.append(f"Best baseline: {policy_label(section.best_baseline)}.")
+        notes.append(f"Best baseline: {shown_policy(layout, section.best_baseline)}.")
     if section.reference is not None:
         notes.append(
             "Rows ranked 'paper' are the paper's published values for this protocol (mean ± sample std), "
