@@ -1,4 +1,4 @@
-"""``solarchain-eval leaderboard``: rank runs and paper roots of one protocol, per setting."""
+"""``solarchain-eval leaderboard``: rank runs and paper roots of one task and protocol, per setting."""
 
 from __future__ import annotations
 
@@ -32,7 +32,9 @@ def leaderboard(
     ),
     out: Path = typer.Option(..., "--out", help="The board's folder (leaderboard.csv, .md, .html, pareto.png)."),
     split: bool = typer.Option(
-        False, "--split", help="Write one board per protocol into OUT/<protocol id>/ instead of refusing a mix."
+        False,
+        "--split",
+        help="Write one board per task and protocol into OUT/<protocol id>/ instead of refusing a mix.",
     ),
     formats: str = typer.Option(
         ",".join(LEADERBOARD_FORMATS), "--formats", help="Comma-separated: csv, md, html (md and html add pareto.png)."
@@ -56,7 +58,9 @@ def leaderboard(
 
     Per policy and setting: mean cumulative reward and IQM with 95 % intervals, the probability
     of improvement over the best baseline on paired episodes, the safety metrics, the access label
-    (isolated, in-process or privileged) and the source. All inputs must share one protocol apart from the
+    (isolated, in-process or privileged) and the source. A task other than the solar market is
+    ranked by its first utility metric whose direction is higher, with every other metric it
+    declares beside it. All inputs must be of one task and share one protocol apart from the
     setting (dataset, run seeds, episodes, episode-seed rule, task configuration); otherwise the
     command names the first differing field and two inputs, and writes nothing. A tarball is
     refused before anything is unpacked when it passes --max-unpacked-mb or --max-members, holds
@@ -84,21 +88,24 @@ def leaderboard(
     except LeaderboardError as error:
         raise cli_error(error) from None
     for board in outcome.boards:
+        ranked = board.layout.ranked.name
+        label = board.layout.label(board.layout.ranked) or ranked
         for section in board.sections:
             shown = Table(
                 title=f"{section.setting} (board {board.board_id}, protocol {section.protocol_id})",
                 title_justify="left",
             )
-            for column in ("rank", "policy", "access", "mean reward [95 % CI]", "P(> best baseline)", "source"):
+            for column in ("rank", "policy", "access", f"mean {label} [95 % CI]", "P(> best baseline)", "source"):
                 shown.add_column(column, justify="right" if column in ("rank",) else "left")
-            for row in section.ranked.itertuples(index=False):
+            for row in section.ranked.to_dict("records"):
+                p = row["p_improvement"]
                 shown.add_row(
-                    str(row.rank),
-                    str(row.policy),
-                    str(row.access),
-                    f"{row.cumulative_reward_mean:.2f} [{row.cumulative_reward_low:.2f}, {row.cumulative_reward_high:.2f}]",
-                    "n/a" if row.p_improvement != row.p_improvement else f"{row.p_improvement:.2f}",
-                    str(row.source),
+                    str(row["rank"]),
+                    str(row["policy"]),
+                    str(row["access"]),
+                    f"{row[f'{ranked}_mean']:.2f} [{row[f'{ranked}_low']:.2f}, {row[f'{ranked}_high']:.2f}]",
+                    "n/a" if p != p else f"{p:.2f}",
+                    str(row["source"]),
                 )
             console.print(shown)
     if not outcome.files:

@@ -106,7 +106,9 @@ def report(
     run, with cluster-bootstrap statistics, and write a self-contained ROOT/report/index.html.
 
     Tables and figures the run cannot support (e.g. no learned policies, no agentic setting)
-    are listed with the reason. Same inputs and options give byte-identical files."""
+    are listed with the reason. A run of a task other than the solar market gets one table per
+    template dimension of the metrics its task declares instead of the paper's. Same inputs and
+    options give byte-identical files."""
     refuse_file_out(out)
     try:
         chosen = parse_formats(formats)

@@ -32,7 +32,9 @@ from ..experiments.layout import (
     is_paper_root,
     run_table_paths,
 )
-from ..records_schema import EPISODE_KEYS, METRIC_NAMES, upgrade_columns
+from ..records_schema import EPISODE_KEYS, upgrade_columns
+from ..tasks.base import Task, metric_names
+from ..tasks.registry import DEFAULT_TASK, UnknownTaskError, get_task
 from .naming import SETTINGS
 from .options import ReportDataError as ReportDataError
 
@@ -119,6 +121,13 @@ class ReportData:
     unverified: list[str] = field(default_factory=list)
     #: ``governance_diagnostics.csv`` rows (counterfactual step records; empty without them).
     diagnostics: pd.DataFrame = field(default_factory=pd.DataFrame)
+    #: The task the run evaluated (its ``run_metadata.json``'s, or its units'; ``solar`` when unrecorded).
+    task: str = DEFAULT_TASK
+
+    @property
+    def task_spec(self) -> Task:
+        """The :class:`~solarchain_eval.tasks.base.Task` called :attr:`task` (its metric declarations)."""
+        return get_task(self.task)
 
     @property
     def settings(self) -> list[str]:
@@ -316,6 +325,31 @@ def verify_combined(root: Path) -> list[str]:
     return problems
 
 
+def _task_of(root: Path, records: dict[Path, RunMetadata]) -> str:
+    """The one task the records name (``solar`` without records), checked to be available.
+
+    Raises
+    ------
+    ReportDataError
+        Two records name different tasks, or the task is not available in this process.
+    """
+    tasks = {path: record.task for path, record in records.items()}
+    names = sorted(set(tasks.values()))
+    if len(names) > 1:
+        first = next(p for p, t in tasks.items() if t == names[0])
+        other = next(p for p, t in tasks.items() if t == names[1])
+        raise ReportDataError(
+            f"{first} records task {names[0]!r} but {other} records task {names[1]!r}; a report covers one task"
+        )
+    name = names[0] if names else DEFAULT_TASK
+    try:
+        get_task(name)
+    except UnknownTaskError as error:
+        where = next(iter(records), root)
+        raise ReportDataError(f"{where}: {error}") from None
+    return name
+
+
 def _check_unique_rollouts(metrics: pd.DataFrame, paths: list[Path]) -> None:
     duplicated = metrics.duplicated(ROLLOUT_KEY, keep=False)
     if duplicated.any():
@@ -347,7 +381,13 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     if not root.is_dir():
         raise ReportDataError(f"{root}: no such directory (expected a run directory or a paper root)")
     kind: Literal["paper", "run"] = "paper" if is_paper_root(root) else "run"
-    metrics, metric_paths = _read_table(root, METRICS_FILE, (*EPISODE_KEYS, *METRIC_NAMES), kind, METRIC_NAMES)
+    run_metadata = _run_metadata(root) if kind == "run" else None
+    units = {unit.name: _run_metadata(unit) for unit in eval_unit_dirs(root)} if kind == "paper" else {}
+    records = {Path(r.where): r for r in [run_metadata, *units.values()] if r is not None}
+    task = _task_of(root, records)
+    # The metric columns are the task's declared ones (the solar market's for every run before tasks).
+    names = metric_names(get_task(task))
+    metrics, metric_paths = _read_table(root, METRICS_FILE, (*EPISODE_KEYS, *names), kind, names)
     if not metric_paths:
         where = f"{root}/{COMBINED_DIR}/<setting>/{METRICS_FILE}" if kind == "paper" else f"{root}/{METRICS_FILE}"
         raise ReportDataError(f"{root}: no {METRICS_FILE} found (looked for {where})")
@@ -371,8 +411,6 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
             problem=unverified[0],
             more=more,
         )
-    run_metadata = _run_metadata(root) if kind == "run" else None
-    units = {unit.name: _run_metadata(unit) for unit in eval_unit_dirs(root)} if kind == "paper" else {}
     return ReportData(
         root=root,
         kind=kind,
@@ -393,4 +431,5 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
         },
         unverified=unverified,
         diagnostics=diagnostics,
+        task=task,
     )

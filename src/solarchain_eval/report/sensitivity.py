@@ -27,7 +27,7 @@ import numpy as np
 import pandas as pd
 
 from ..common.atomic_files import atomic_write_text, atomic_write_with
-from ..market.baselines import BASELINES
+from ..tasks.registry import DEFAULT_TASK, get_task
 from .naming import is_trained
 from .statistics import Interval, bootstrap_mean, bootstrap_mean_difference
 
@@ -115,7 +115,8 @@ def _point_findings(frame: pd.DataFrame, resamples: int) -> list[dict]:
 
     main = frame[frame["setting"] == "main"]
     learned = sorted(p for p in main["policy"].unique() if is_trained(p))  # user agents are not "RL"
-    heuristics = sorted(p for p in main["policy"].unique() if p in BASELINES)
+    baselines = get_task(DEFAULT_TASK).baselines()  # the paper findings compare the solar market's baselines
+    heuristics = sorted(p for p in main["policy"].unique() if p in baselines)
     if learned and heuristics:
         rl, heuristic = _best(main, learned), _best(main, heuristics)
         iv = _difference(main[main["policy"] == rl], main[main["policy"] == heuristic], "cumulative_reward", resamples)

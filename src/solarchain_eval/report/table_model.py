@@ -203,6 +203,9 @@ _LATEX_SYMBOLS = {
     "α": r"$\alpha$",
     "ν": r"$\nu$",
     "∝": r"$\propto$",
+    "↑": r"$\uparrow$",  # a declared metric's direction (report/task_summary.py)
+    "↓": r"$\downarrow$",
+    "·": r"$\cdot$",
 }
 
 

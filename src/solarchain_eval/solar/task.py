@@ -18,13 +18,15 @@ import numpy as np
 
 from ..config import BenchmarkConfig, MarketConfig
 from ..data.default import resolve_data_dir
+from ..data.files import MANIFEST_FILE
 from ..data.provenance import dataset_provenance
+from ..data.published import PAPER_DATASET_SHA256
 from ..data.table import HourlyTable, load_table
 from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
 from ..envs.registration import ENV_ID
 from ..market.baselines import BASELINES, make_baseline
 from ..records_schema import EPISODE_METRIC_COLUMNS
-from ..tasks.base import Lever, MetricSpec
+from ..tasks.base import Lever, MetricSpec, PaperReference
 from ..tasks.benchmark_config import BenchmarkConfigMethods
 from .metrics import episode_metrics_from_steps
 
@@ -63,6 +65,28 @@ _DECLARED = {
 }
 SOLAR_METRICS = tuple(MetricSpec(column, *_DECLARED[column.name]) for column in EPISODE_METRIC_COLUMNS)
 
+# --- the report's and the leaderboard's concern: the paper's reference ---
+#: What the paper published: its dataset, the metrics its tables cover and its board's columns.
+SOLAR_PAPER_REFERENCE = PaperReference(
+    dataset_sha256=PAPER_DATASET_SHA256,
+    metrics=tuple(column.name for column in EPISODE_METRIC_COLUMNS),
+    board_metrics=(
+        "physics_violation_rate",
+        "artificial_liquidity_MWh",
+        "mean_slippage",
+        "action_jitter",
+        "spatial_fairness_index",
+    ),
+    headers={
+        "cumulative_reward": "reward",
+        "physics_violation_rate": "Violation rate",
+        "artificial_liquidity_MWh": "Artificial liquidity (MWh)",
+        "mean_slippage": "Slippage",
+        "action_jitter": "Action jitter",
+        "spatial_fairness_index": "Fairness index",
+    },
+)
+
 
 @dataclass(frozen=True)
 class SolarTask(BenchmarkConfigMethods):
@@ -73,6 +97,9 @@ class SolarTask(BenchmarkConfigMethods):
     levers: tuple[Lever, ...] = SOLAR_LEVERS
     step_fields: tuple[str, ...] = STEP_INFO_KEYS
     metrics: tuple[MetricSpec, ...] = SOLAR_METRICS
+    # --- the report's and the leaderboard's concern (optional Task attributes, tasks/base.py) ---
+    paper_reference: PaperReference | None = SOLAR_PAPER_REFERENCE
+    dataset_manifest: str | None = MANIFEST_FILE
 
     def data_dir(self, data_dir: str | Path | None, config: Any) -> Path:
         return resolve_data_dir(data_dir, getattr(config, "data_dir", None))

@@ -186,3 +186,47 @@ def metrics_of(task: Task, dimension: str) -> tuple[MetricSpec, ...]:
     if dimension not in DIMENSIONS:
         raise ValueError(f"unknown dimension {dimension!r} (one of {', '.join(DIMENSIONS)})")
     return tuple(m for m in task.metrics if m.dimension == dimension)
+
+
+# --- the report's and the leaderboard's concern: a task's paper reference (optional attributes) ---
+# These attributes are optional: a task without them has none (read them with the helpers below),
+# so they are not members of the Task protocol that ``register_task`` checks.
+
+
+@dataclass(frozen=True)
+class PaperReference:
+    """What a task's paper published, as the report and the leaderboard use it.
+
+    A task that has one (the solar market) gets the paper's own tables in its report and the
+    paper's rows on boards of the paper's protocol; a task without one gets the generic tables
+    (one per template dimension) and a board laid out from its metric declarations alone.
+
+    Attributes
+    ----------
+    dataset_sha256 : mapping of str to str
+        The published dataset's files and their sha256 (part of the paper's protocol).
+    metrics : tuple of str
+        The metrics the paper's tables and board cover. A declared metric not among them is
+        shown in its dimension's generic table and on the board after the paper's columns.
+    board_metrics : tuple of str
+        The metrics the paper's board shows beside the ranked one, in order.
+    headers : mapping of str to str
+        A metric's short name on the board (``cumulative_reward`` -> ``reward``), where the paper's
+        board has one; other metrics are shown by their column name, unit and direction.
+    """
+
+    dataset_sha256: Mapping[str, str]
+    metrics: tuple[str, ...]
+    board_metrics: tuple[str, ...]
+    headers: Mapping[str, str]
+
+
+def paper_reference_of(task: Task) -> PaperReference | None:
+    """The task's :class:`PaperReference` (its optional ``paper_reference`` attribute), or None."""
+    return getattr(task, "paper_reference", None)
+
+
+def dataset_manifest_of(task: Task) -> str | None:
+    """The file in a dataset directory of the task that records how it was built (its optional
+    ``dataset_manifest`` attribute, the solar market's ``manifest.json``), or None."""
+    return getattr(task, "dataset_manifest", None)

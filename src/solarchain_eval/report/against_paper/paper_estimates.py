@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 
 from ...evaluation.settings import setting_is_agentic
-from ...market.baselines import BASELINES
+from ...tasks.registry import DEFAULT_TASK, get_task
 from ..loading import ReportData
 from ..naming import llm_record
 from ..options import ReportOptions
@@ -198,7 +198,8 @@ def is_agentic(ref: Ref) -> bool:
 
 def is_deterministic(ref: Ref) -> bool:
     """Rule baselines without the layer: the same data and protocol give the same digits."""
-    return all(p in BASELINES for p in ref.policies) and not is_agentic(ref)
+    baselines = get_task(DEFAULT_TASK).baselines()  # the paper's market's
+    return all(p in baselines for p in ref.policies) and not is_agentic(ref)
 
 
 __all__ = [

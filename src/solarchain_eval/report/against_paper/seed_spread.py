@@ -23,7 +23,7 @@ import numpy as np
 import pandas as pd
 
 from ...evaluation.settings import SETTING_MAIN
-from ...market.baselines import BASELINES
+from ...tasks.registry import DEFAULT_TASK, get_task
 from ..loading import ReportData
 from ..naming import paper_order, policy_label
 from ..options import ReportOptions
@@ -74,7 +74,7 @@ def draw_seeds(metrics: pd.DataFrame, *, n_resamples: int, seed: int) -> SeedDra
     """Draw ``n_resamples`` resamples of every learned policy's run seeds (policies in name order)."""
     rng = np.random.default_rng(seed)
     seeds, counts = {}, {}
-    for policy in sorted(set(metrics["policy"]) - set(BASELINES)):
+    for policy in sorted(set(metrics["policy"]) - set(get_task(DEFAULT_TASK).baselines())):
         own = np.array(sorted(set(metrics.loc[metrics["policy"] == policy, "run_seed"])))
         seeds[policy] = own
         counts[policy] = rng.multinomial(len(own), np.full(len(own), 1.0 / len(own)), size=n_resamples).astype(float)
@@ -144,7 +144,7 @@ def seed_spread(metrics: pd.DataFrame, setting: str, columns: list[str]) -> pd.D
     """
     rows = []
     in_setting = metrics[metrics["setting"] == setting]
-    for policy in sorted(set(in_setting["policy"]) - set(BASELINES)):
+    for policy in sorted(set(in_setting["policy"]) - set(get_task(DEFAULT_TASK).baselines())):
         group = in_setting[in_setting["policy"] == policy]
         for column in columns:
             by_seed = group.groupby("run_seed")[column]

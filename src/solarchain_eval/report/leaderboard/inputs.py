@@ -11,8 +11,8 @@ the rollouts its protocol promises (run seeds × episodes, each once:
 :func:`~solarchain_eval.evaluation.verify_checks.rollout_set_problem`, verify's rule), so that
 rows of different inputs pair up episode by episode.
 
-The rule of one board (docs/comparing_results.md): all sections must share the
-protocol *without its setting* (:func:`board_fingerprint`: the setting and the reward switch it
+The rule of one board (docs/comparing_results.md): all sections must be of one task and share
+the protocol *without its setting* (:func:`board_fingerprint`: the setting and the reward switch it
 implies are left out); rows are ranked per setting.
 """
 
@@ -41,6 +41,7 @@ from ...evaluation.run_metadata import ProtocolMismatch, RunMetadata, RunMetadat
 from ...evaluation.run_metadata import rule_name as rule_name
 from ...evaluation.verify_checks import rollout_set_problem
 from ...experiments.layout import METADATA_FILE, UNITS_DIR, is_done
+from ...tasks.registry import DEFAULT_TASK, get_task
 from ..loading import load_report_data
 from .tarballs import TarballLimits, TarballRefused, unpack_tarball
 
@@ -71,6 +72,8 @@ class Section:
         The setting's ``metrics.csv`` rows.
     access : dict
         Policy -> ``"isolated"``, ``"in-process"``, ``"privileged"`` or ``"unknown"`` (not recorded).
+    task : str
+        The task the rows were evaluated on (``solar`` for every run before tasks).
     """
 
     source: str
@@ -80,6 +83,7 @@ class Section:
     board_protocol: dict[str, Any]
     metrics: pd.DataFrame
     access: dict[str, str] = field(default_factory=dict)
+    task: str = DEFAULT_TASK
 
     @property
     def protocol_id(self) -> str:
@@ -92,14 +96,19 @@ class Section:
         return protocol_id(self.board_protocol)
 
 
-def board_fingerprint(fingerprint: Mapping[str, Any], config: BenchmarkConfig) -> dict[str, Any]:
+def board_fingerprint(fingerprint: Mapping[str, Any], config: Any, task: str = DEFAULT_TASK) -> dict[str, Any]:
     """``fingerprint`` without its setting: the comparison key of one board.
 
     The setting decides the reward's physics switch (``no_physics_penalty``), so the task
-    configuration is hashed with that switch off; every other field is kept as it is.
+    configuration is hashed with that switch off; every other field is kept as it is. A task
+    other than ``solar`` is part of the key (``task``), so boards of two tasks never share an id;
+    a solar board's key is what it was before tasks.
     """
     board = {key: value for key, value in fingerprint.items() if key != "setting"}
-    board["config_sha256"] = task_config_sha256(config.with_updates(no_physics_penalty=False))
+    market = get_task(task)
+    board["config_sha256"] = task_config_sha256(market.setting_config(config, no_physics_penalty=False), market)
+    if task != DEFAULT_TASK:
+        board.setdefault("task", task)
     return board
 
 
@@ -126,9 +135,9 @@ def run_protocol(metadata: RunMetadata) -> tuple[dict[str, Any], dict[str, Any]]
     if metadata.protocol_recorded:
         if protocol_id(fingerprint) != metadata.protocol_id:
             raise LeaderboardError(f"{path}: its protocol does not hash to its protocol_id (edited by hand?)")
-        if fingerprint.get("config_sha256") != task_config_sha256(config):
+        if fingerprint.get("config_sha256") != task_config_sha256(config, metadata.resolve_task()):
             raise LeaderboardError(f"{path}: its protocol's config_sha256 does not match its config (edited by hand?)")
-    return fingerprint, board_fingerprint(fingerprint, config)
+    return fingerprint, board_fingerprint(fingerprint, config, metadata.task)
 
 
 def _check_rollouts(section: Section) -> None:
@@ -154,9 +163,8 @@ def _run_sections(source: str, root: Path, metrics: pd.DataFrame, metadata: RunM
     other = sorted(set(metrics["setting"].astype(str)) - {setting})
     if other:
         raise LeaderboardError(f"{root}: metrics.csv holds setting {other[0]!r} but its protocol is of {setting!r}")
-    return [
-        Section(source, f"{source} [{setting}]", setting, fingerprint, board, metrics, dict(metadata.policy_access))
-    ]
+    where = f"{source} [{setting}]"
+    return [Section(source, where, setting, fingerprint, board, metrics, dict(metadata.policy_access), metadata.task)]
 
 
 def _paper_sections(source: str, root: Path, data) -> list[Section]:
@@ -192,8 +200,8 @@ def _paper_sections(source: str, root: Path, data) -> list[Section]:
             raise LeaderboardError(
                 f"{source} [{setting}]: no evaluation unit records policy {unrecorded[0]!r} of combined/{setting}"
             )
-        board = board_fingerprint(merged, configs[setting])
-        sections.append(Section(source, f"{source} [{setting}]", setting, merged, board, metrics, access))
+        board = board_fingerprint(merged, configs[setting], data.task)
+        sections.append(Section(source, f"{source} [{setting}]", setting, merged, board, metrics, access, data.task))
     return sections
 
 
@@ -287,6 +295,27 @@ def describe_difference(field_name: str, first: Mapping[str, Any], second: Mappi
     return f"{field_name} ({_short(a)} vs {_short(b)})"
 
 
+def check_one_task(sections: Sequence[Section]) -> None:
+    """Refuse sections of different tasks: a board ranks the policies of one task.
+
+    Raises
+    ------
+    LeaderboardError
+        One line naming two inputs and their tasks.
+    """
+    first = sections[0]
+    other = next((s for s in sections if s.task != first.task), None)
+    if other is not None:
+        raise LeaderboardError.about(
+            "{a} was evaluated on task {task_a!r} and {b} on task {task_b!r}; a board ranks one task "
+            "({opt_split} writes one board per task and protocol)",
+            a=first.where,
+            task_a=first.task,
+            b=other.where,
+            task_b=other.task,
+        )
+
+
 def check_one_protocol(sections: Sequence[Section]) -> None:
     """Refuse sections that do not share one protocol apart from their setting.
 
@@ -318,7 +347,8 @@ def check_one_protocol(sections: Sequence[Section]) -> None:
 
 
 def group_by_protocol(sections: Sequence[Section]) -> dict[str, list[Section]]:
-    """Sections by board id (the protocol without its setting), in the order the inputs were given."""
+    """Sections by board id (the protocol without its setting; a task other than solar is part of
+    it), in the order the inputs were given."""
     groups: dict[str, list[Section]] = {}
     for section in sections:
         groups.setdefault(section.board_id, []).append(section)
@@ -382,6 +412,7 @@ def merge_by_setting(sections: Sequence[Section]) -> tuple[dict[str, list[Sectio
                     section.board_protocol,
                     kept,
                     section.access,
+                    section.task,
                 )
             )
     return by_setting, notes

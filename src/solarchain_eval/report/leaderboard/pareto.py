@@ -3,12 +3,15 @@
 Each policy is one point per setting: mean artificial liquidity (x, lower is safer) against mean
 cumulative reward (y, higher is better), with the reward's bootstrap interval as a vertical bar.
 A policy is on the Pareto front when no other policy of the setting has at most its artificial
-liquidity and at least its reward, and is strictly better in one of the two.
+liquidity and at least its reward, and is strictly better in one of the two. A task without the
+paper's board plots its ranked metric against one of its declared costs the same way
+(:class:`ParetoAxes`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Sequence
+from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
@@ -23,6 +26,28 @@ from ..naming import setting_label
 #: Columns of the points frame (one row per policy and setting; leaderboard.csv has them).
 X_COLUMN = "artificial_liquidity_MWh_mean"
 Y_COLUMN = "cumulative_reward_mean"
+
+
+@dataclass(frozen=True)
+class ParetoAxes:
+    """What the board's Pareto figure plots: a cost (x, lower is better) against the ranked metric (y)."""
+
+    x_column: str
+    y_column: str
+    x_label: str
+    y_label: str
+    title: str
+
+
+#: The solar market's figure: artificial liquidity against cumulative reward.
+SOLAR_PARETO = ParetoAxes(
+    X_COLUMN,
+    Y_COLUMN,
+    "Artificial liquidity (MWh, lower is safer)",
+    "Mean cumulative reward",
+    "Reward vs artificial liquidity",
+)
+
 #: Where a point's label may sit, tried in this order: offset (points) and alignment.
 LABEL_SPOTS = (
     (5, 4, "left", "bottom"),
@@ -47,9 +72,11 @@ def pareto_front(liquidity_mwh: Sequence[float], reward: Sequence[float]) -> np.
     return finite & ~dominated
 
 
-def pareto_figure(points: pd.DataFrame) -> dict[str, bytes]:
-    """One panel per setting of ``points`` (columns ``setting``, ``policy``, the two means and
-    ``cumulative_reward_low``/``_high``); returns ``{"png": ..., "svg": ...}``."""
+def pareto_figure(points: pd.DataFrame, axes_of: ParetoAxes = SOLAR_PARETO) -> dict[str, bytes]:
+    """One panel per setting of ``points`` (columns ``setting``, ``policy``, the two means of
+    ``axes_of`` and the y metric's ``_low``/``_high``); returns ``{"png": ..., "svg": ...}``."""
+    x_column, y_column = axes_of.x_column, axes_of.y_column
+    y_name = y_column.removesuffix("_mean")
     settings = list(dict.fromkeys(points["setting"]))
     policies = sorted(set(points["policy"]))
     ncols = min(len(settings), 2)
@@ -59,11 +86,11 @@ def pareto_figure(points: pd.DataFrame) -> dict[str, bytes]:
             ax.set_visible(False)
         for ax, setting in zip(axes.ravel(), settings, strict=False):
             group = points[points["setting"] == setting].reset_index(drop=True)
-            x, y = group[X_COLUMN].to_numpy(float), group[Y_COLUMN].to_numpy(float)
+            x, y = group[x_column].to_numpy(float), group[y_column].to_numpy(float)
             front = pareto_front(x, y)
             for i, row in group.iterrows():
                 colour = policy_colour(row["policy"], policies)
-                low, high = float(row["cumulative_reward_low"]), float(row["cumulative_reward_high"])
+                low, high = float(row[f"{y_name}_low"]), float(row[f"{y_name}_high"])
                 if np.isfinite(low) and np.isfinite(high):
                     ax.vlines(x[i], low, high, color=colour, alpha=0.5, linewidth=1.2)
                 ax.scatter(
@@ -78,17 +105,17 @@ def pareto_figure(points: pd.DataFrame) -> dict[str, bytes]:
             order = np.argsort(x[front], kind="stable")
             ax.plot(x[front][order], y[front][order], color="black", linewidth=1.0, linestyle="--", zorder=2)
             ax.set_title(setting_label(setting))
-            ax.set_xlabel("Artificial liquidity (MWh, lower is safer)")
-            ax.set_ylabel("Mean cumulative reward")
+            ax.set_xlabel(axes_of.x_label)
+            ax.set_ylabel(axes_of.y_label)
             ax.margins(x=0.15, y=0.1)  # room for the labels of the outermost points
-        figure.suptitle("Reward vs artificial liquidity (Pareto front: outlined points, dashed line)", fontsize=9)
+        figure.suptitle(f"{axes_of.title} (Pareto front: outlined points, dashed line)", fontsize=9)
         # Lay the figure out once, then fix it, so the labels are placed where they will be drawn.
         FigureCanvasAgg(figure)
         figure.draw_without_rendering()
         figure.set_layout_engine("none")
         for ax, setting in zip(axes.ravel(), settings, strict=False):
             group = points[points["setting"] == setting].reset_index(drop=True)
-            x, y = group[X_COLUMN].to_numpy(float), group[Y_COLUMN].to_numpy(float)
+            x, y = group[x_column].to_numpy(float), group[y_column].to_numpy(float)
             place_labels(ax, x, y, [str(p) for p in group["policy"]], first=pareto_front(x, y))
         return figure_bytes(figure)
 

@@ -16,10 +16,13 @@ from typing import Any
 
 import pandas as pd
 
+from ...tasks.base import MetricSpec
+from ...tasks.registry import DEFAULT_TASK
 from ..naming import policy_label, setting_label
 from ..table_model import fixed, pm, with_interval
-from .pareto import pareto_figure
-from .ranking import RANKED, REFERENCE, REWARD, BoardSection, Leaderboard
+from ..task_summary import ARROWS, metric_header
+from .pareto import SOLAR_PARETO, ParetoAxes, pareto_figure
+from .ranking import RANKED, REFERENCE, REWARD, BoardLayout, BoardSection, Leaderboard, board_layout
 
 #: The Pareto figure's file stem.
 FIGURE = "pareto"
@@ -53,15 +56,15 @@ def _missing(value: Any) -> bool:
     return value is None or (isinstance(value, float) and math.isnan(value))
 
 
-def _reward(digits: int) -> Callable[[dict[str, Any]], str]:
+def _reward(digits: int, name: str = REWARD) -> Callable[[dict[str, Any]], str]:
     def render(row: dict[str, Any]) -> str:
-        mean = row.get(f"{REWARD}_mean")
+        mean = row.get(f"{name}_mean")
         if row["row_kind"] == REFERENCE:  # published rows: mean ± std as the paper prints them
-            std = row.get(f"{REWARD}_std")
+            std = row.get(f"{name}_std")
             if _missing(mean):
                 return "–"
             return pm(mean, std, digits) if not _missing(std) else fixed(mean, digits)
-        return with_interval(mean, row[f"{REWARD}_low"], row[f"{REWARD}_high"], digits)
+        return with_interval(mean, row[f"{name}_low"], row[f"{name}_high"], digits)
 
     return render
 
@@ -83,22 +86,39 @@ def _rank(row: dict[str, Any]) -> str:
     return "paper" if row["row_kind"] == REFERENCE else str(int(row["rank"]))
 
 
-def _policy(row: dict[str, Any]) -> str:
-    return policy_label(str(row["policy"]))
+def shown_policy(layout: BoardLayout, policy: str) -> str:
+    """A policy's name on the board: the report's label, except that a task's own baseline is not
+    marked as a user agent (the report's labels know the solar market's baselines only)."""
+    if layout.paper is None and policy in layout.baselines:
+        return policy
+    return policy_label(policy)
 
 
-def display_columns(confidence: float) -> list[DisplayColumn]:
-    """The printed columns of every board table (Markdown and HTML)."""
+#: The order a first click on a metric's header sorts in (best first), by its declared direction.
+_BEST = {"higher": "descending", "lower": "ascending", "none": "ascending"}
+
+
+def _metric_column(layout: BoardLayout, spec: MetricSpec) -> DisplayColumn:
+    """A shown metric's column: the paper's header where it has one, else ``name (unit) arrow``."""
+    key = f"{spec.name}_mean"
+    return DisplayColumn(layout.label(spec) or metric_header(spec), key, True, _BEST[spec.direction], _number(key, 4))
+
+
+def display_columns(confidence: float, layout: BoardLayout | None = None) -> list[DisplayColumn]:
+    """The printed columns of every board table (Markdown and HTML) of ``layout``'s task (default: solar)."""
+    layout = layout or board_layout()
     level = f"{confidence:.0%}"
+    name = layout.ranked.name
+    ranked = layout.label(layout.ranked) or metric_header(layout.ranked)
     return [
         DisplayColumn("Rank", "rank", True, "ascending", _rank),
-        DisplayColumn("Policy", "policy", False, "ascending", _policy),
+        DisplayColumn("Policy", "policy", False, "ascending", lambda r: shown_policy(layout, str(r["policy"]))),
         DisplayColumn("Access", "access", False, "ascending", lambda r: str(r["access"]) or "–"),
         DisplayColumn("Source", "source", False, "ascending", lambda r: str(r["source"])),
         DisplayColumn("Episodes", "episodes", True, "descending", _number("episodes", 0)),
-        DisplayColumn(f"Mean reward [{level} CI]", f"{REWARD}_mean", True, "descending", _reward(2)),
+        DisplayColumn(f"Mean {ranked} [{level} CI]", f"{name}_mean", True, "descending", _reward(2, name)),
         DisplayColumn(
-            f"IQM reward [{level} CI]", f"{REWARD}_iqm", True, "descending", _reference_interval(f"{REWARD}_iqm", 2)
+            f"IQM {ranked} [{level} CI]", f"{name}_iqm", True, "descending", _reference_interval(f"{name}_iqm", 2)
         ),
         DisplayColumn(
             f"P(> best baseline) [{level} CI]",
@@ -107,29 +127,7 @@ def display_columns(confidence: float) -> list[DisplayColumn]:
             "descending",
             _reference_interval("p_improvement", 2),
         ),
-        DisplayColumn(
-            "Violation rate",
-            "physics_violation_rate_mean",
-            True,
-            "ascending",
-            _number("physics_violation_rate_mean", 4),
-        ),
-        DisplayColumn(
-            "Artificial liquidity (MWh)",
-            "artificial_liquidity_MWh_mean",
-            True,
-            "ascending",
-            _number("artificial_liquidity_MWh_mean", 4),
-        ),
-        DisplayColumn("Slippage", "mean_slippage_mean", True, "ascending", _number("mean_slippage_mean", 4)),
-        DisplayColumn("Action jitter", "action_jitter_mean", True, "ascending", _number("action_jitter_mean", 4)),
-        DisplayColumn(
-            "Fairness index",
-            "spatial_fairness_index_mean",
-            True,
-            "ascending",
-            _number("spatial_fairness_index_mean", 4),
-        ),
+        *(_metric_column(layout, spec) for spec in layout.shown),
     ]
 
 
@@ -141,7 +139,9 @@ def _cells(section: BoardSection, columns: Sequence[DisplayColumn]) -> list[tupl
 def _protocol_lines(board: Leaderboard) -> list[tuple[str, str]]:
     protocol = board.protocol
     dataset = ", ".join(f"{name} {digest[:12]}" for name, digest in protocol.get("dataset_sha256", {}).items())
+    task = [("Task", board.layout.task)] if board.layout.task != DEFAULT_TASK else []  # solar boards as before
     return [
+        *task,
         ("Board protocol id", board.board_id),
         ("Environment", str(protocol.get("env"))),
         ("Dataset (sha256)", dataset or "not recorded"),
@@ -153,17 +153,32 @@ def _protocol_lines(board: Leaderboard) -> list[tuple[str, str]]:
     ]
 
 
+def _either(names: Sequence[str]) -> str:
+    """``a, b or c``."""
+    return " or ".join([", ".join(names[:-1]), names[-1]]) if len(names) > 1 else "".join(names)
+
+
 def _reading(board: Leaderboard) -> list[str]:
+    layout = board.layout
     level = f"{board.options.confidence:.0%}"
+    words = layout.ranked.name.replace("_", " ")
+    short = layout.label(layout.ranked) or words
+    if layout.paper is not None:  # the paper's board: its five safety metrics
+        others = "Safety metrics are means over rollouts; lower is better for each."
+    else:
+        others = (
+            "The other metrics are means over rollouts, headed by their name, unit and direction "
+            f"({ARROWS['higher']} higher is better, {ARROWS['lower']} lower is better, {ARROWS['none']} neither)."
+        )
     return [
-        f"Policies are ranked per setting by mean cumulative reward. Intervals are {level} percentile intervals of "
+        f"Policies are ranked per setting by mean {words}. Intervals are {level} percentile intervals of "
         f"a bootstrap that resamples whole start days ({board.options.n_resamples} resamples, seed "
         f"{board.options.seed}): rollouts that start on the same day are not independent.",
         "IQM is the interquartile mean (the mean of the middle 50 % of rollouts).",
         "P(> best baseline) is P(X > Y) + ½ P(X = Y) over paired episodes (same run seed and episode, so the "
-        "same episode seed and start day), where Y is the setting's best baseline (static, random or myopic, "
-        "by mean reward); 0.5 means no better than it.",
-        "Safety metrics are means over rollouts; lower is better for each. Access: isolated agents ran in a "
+        f"same episode seed and start day), where Y is the setting's best baseline ({_either(layout.baselines)}, "
+        f"by mean {short}); 0.5 means no better than it.",
+        f"{others} Access: isolated agents ran in a "
         "process of their own and received only observations, step info and the public episode context; "
         "in-process ones received the same but ran in the evaluating process, where their code could reach "
         "the environment; privileged ones (and every agent behind the Planner/Auditor layer) were handed "
@@ -171,14 +186,14 @@ def _reading(board: Leaderboard) -> list[str]:
     ]
 
 
-def _section_notes(section: BoardSection) -> list[str]:
+def _section_notes(section: BoardSection, layout: BoardLayout) -> list[str]:
     notes = []
     if section.best_baseline is None:
         notes.append(
-            "No baseline (static, random, myopic) was evaluated in this setting: no probability of improvement."
+            f"No baseline ({', '.join(layout.baselines)}) was evaluated in this setting: no probability of improvement."
         )
     else:
-        notes.append(f"Best baseline: {policy_label(section.best_baseline)}.")
+        notes.append(f"Best baseline: {shown_policy(layout, section.best_baseline)}.")
     if section.reference is not None:
         notes.append(
             "Rows ranked 'paper' are the paper's published values for this protocol (mean ± sample std), "
@@ -187,22 +202,42 @@ def _section_notes(section: BoardSection) -> list[str]:
     return notes
 
 
+def pareto_axes(layout: BoardLayout) -> ParetoAxes | None:
+    """The figure's axes: the paper's for a task with a paper reference; else the ranked metric against
+    the first shown safety metric whose direction is ``lower`` (else any such metric; None: no figure)."""
+    if layout.paper is not None:
+        return SOLAR_PARETO
+    lower = [m for m in layout.shown if m.direction == "lower"]
+    costs = [m for m in lower if m.dimension == "safety"] + lower
+    if not costs:
+        return None
+    x, y = costs[0], layout.ranked
+    return ParetoAxes(
+        f"{x.name}_mean",
+        f"{y.name}_mean",
+        f"{x.name} ({x.unit}, lower is better)",
+        f"Mean {y.name} ({y.unit})",
+        f"{y.name} vs {x.name}",
+    )
+
+
 def render_markdown(board: Leaderboard, figure: bool = True) -> str:
     """``leaderboard.md``: the protocol, the inputs, one table per setting and the figure's link."""
-    columns = display_columns(board.options.confidence)
+    columns = display_columns(board.options.confidence, board.layout)
+    axes = pareto_axes(board.layout)
     lines = ["# SolarChain-Eval leaderboard", ""]
     lines += [f"- {name}: `{value}`" for name, value in _protocol_lines(board)]
     lines += ["", "Inputs:", ""] + [f"- `{source}`" for source in board.sources] + [""]
     lines += [" ".join(_reading(board)), ""]
-    if figure:
-        lines += [f"![Reward vs artificial liquidity, Pareto front highlighted]({FIGURE}.png)", ""]
+    if figure and axes is not None:
+        lines += [f"![{axes.title}, Pareto front highlighted]({FIGURE}.png)", ""]
     for section in board.sections:
         lines += [f"## {setting_label(section.setting)} (protocol id `{section.protocol_id}`)", ""]
         lines.append("| " + " | ".join(c.header for c in columns) + " |")
         lines.append("|" + "|".join("--:" if c.numeric else ":--" for c in columns) + "|")
         for _, cells in _cells(section, columns):
             lines.append("| " + " | ".join(cell.replace("|", "\\|") for cell in cells) + " |")
-        lines += ["", f"*{section.basis}*", ""] + [f"- {note}" for note in _section_notes(section)] + [""]
+        lines += ["", f"*{section.basis}*", ""] + [f"- {note}" for note in _section_notes(section, board.layout)] + [""]
     if board.notes:
         lines += ["## Notes", ""] + [f"- {note}" for note in board.notes] + [""]
     return "\n".join(lines)
@@ -299,7 +334,7 @@ def _table(section: BoardSection, columns: Sequence[DisplayColumn]) -> str:
 
 def render_html(board: Leaderboard, png: bytes | None) -> str:
     """``leaderboard.html`` as one string: no external resources, so it opens offline from any folder."""
-    columns = display_columns(board.options.confidence)
+    columns = display_columns(board.options.confidence, board.layout)
     protocol = "".join(f"<dt>{_escape(k)}</dt><dd>{_escape(v)}</dd>" for k, v in _protocol_lines(board))
     parts = [
         "<h1>SolarChain-Eval leaderboard</h1>",
@@ -309,21 +344,31 @@ def render_html(board: Leaderboard, png: bytes | None) -> str:
         '<p class="meta">Click a column header to sort by it (best first); click again to reverse.</p>',
     ]
     for section in board.sections:
-        notes = "".join(f"<li>{_escape(n)}</li>" for n in _section_notes(section))
+        notes = "".join(f"<li>{_escape(n)}</li>" for n in _section_notes(section, board.layout))
         parts += [
             f'<h2 id="{_escape(section.setting)}">{_escape(setting_label(section.setting))} '
             f'<span class="meta">(protocol id <code>{_escape(section.protocol_id)}</code>)</span></h2>',
             _table(section, columns),
             f'<p class="basis">{_escape(section.basis)}</p><ul class="notes">{notes}</ul>',
         ]
-    if png is not None:
+    axes = pareto_axes(board.layout)
+    if png is not None and axes is not None:
         data = base64.b64encode(png).decode("ascii")
+        if axes is SOLAR_PARETO:
+            caption = (
+                "Mean cumulative reward against mean artificial liquidity per policy and setting, with "
+                "the reward's interval; outlined points joined by the dashed line form the Pareto front (no other "
+                "policy has both more reward and less artificial liquidity)."
+            )
+        else:
+            caption = (
+                f"{axes.y_label} against {axes.x_label} per policy and setting, with the ranked metric's interval; "
+                "outlined points joined by the dashed line form the Pareto front."
+            )
         parts.append(
-            '<h2 id="pareto-front">Reward vs artificial liquidity</h2>'
-            f'<figure id="pareto"><img src="data:image/png;base64,{data}" alt="Reward vs artificial liquidity">'
-            "<figcaption>Mean cumulative reward against mean artificial liquidity per policy and setting, with "
-            "the reward's interval; outlined points joined by the dashed line form the Pareto front (no other "
-            "policy has both more reward and less artificial liquidity).</figcaption></figure>"
+            f'<h2 id="pareto-front">{_escape(axes.title)}</h2>'
+            f'<figure id="pareto"><img src="data:image/png;base64,{data}" alt="{_escape(axes.title)}">'
+            f"<figcaption>{html.escape(caption, quote=False)}</figcaption></figure>"
         )
     if board.notes:
         parts.append("<h2>Notes</h2><ul>" + "".join(f"<li>{_escape(n)}</li>" for n in board.notes) + "</ul>")
@@ -340,14 +385,15 @@ def render_files(board: Leaderboard, formats: Sequence[str]) -> dict[str, bytes]
     figure (``pareto.png``, ``pareto.svg``) with ``md`` or ``html``."""
     files: dict[str, bytes] = {}
     figure = None
-    if {"md", "html"} & set(formats):
+    axes = pareto_axes(board.layout)
+    if {"md", "html"} & set(formats) and axes is not None:
         points = pd.concat([s.ranked for s in board.sections], ignore_index=True)
-        figure = pareto_figure(points)
+        figure = pareto_figure(points, axes)
         files[f"{FIGURE}.png"], files[f"{FIGURE}.svg"] = figure["png"], figure["svg"]
     if "csv" in formats:
         files["leaderboard.csv"] = board.frame().to_csv(index=False, lineterminator="\n").encode()
     if "md" in formats:
-        files["leaderboard.md"] = render_markdown(board).encode()
+        files["leaderboard.md"] = render_markdown(board, figure is not None).encode()
     if "html" in formats:
         files["leaderboard.html"] = render_html(board, figure["png"] if figure else None).encode()
     return files

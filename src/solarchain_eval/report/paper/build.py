@@ -8,11 +8,14 @@ from pathlib import Path
 
 from ...common.atomic_files import atomic_write_text
 from ...experiments.layout import REPORT_DIR
+from ...tasks.base import paper_reference_of
+from ...tasks.registry import DEFAULT_TASK
 from ..against_paper.tables import AGAINST_CHOICES, AGAINST_KEYS, against_paper_tables
 from ..loading import ReportData, load_report_data
 from ..options import FORMATS as FORMATS
-from ..options import ReportOptions
+from ..options import ReportDataError, ReportOptions
 from ..options import parse_formats as parse_formats
+from ..task_summary import NO_PAPER, task_summary_tables
 from .figures import FigureFile, build_figures
 from .html import render_html
 from .tables import ReportTable, Skipped, build_tables, overlap_warning, to_csv, to_latex, to_markdown
@@ -71,6 +74,8 @@ def _against_section(outcome: ReportOutcome) -> list[str]:
 
 def _markdown_report(outcome: ReportOutcome) -> str:
     lines = [f"# SolarChain-Eval report: {outcome.data.root}", ""]
+    if outcome.data.task != DEFAULT_TASK:
+        lines += [f"Task: `{outcome.data.task}`.", ""]
     lines += [f"> **Warning.** {w}\n" for w in outcome.warnings]
     lines += ["## Tables", ""]
     for table in outcome.tables:
@@ -132,8 +137,16 @@ def build_report(
         raise ValueError(f"against must be one of {', '.join(AGAINST_CHOICES)}, got {against!r}")
     data = load_report_data(Path(root), allow_unverified=allow_unverified)
     out = Path(out_dir) if out_dir is not None else Path(root) / REPORT_DIR
-    tables = build_tables(data, options)
-    drawn = build_figures(data, options, out / "figures") if figures else []
+    paper = paper_reference_of(data.task_spec) is not None
+    if against == "paper" and not paper:
+        raise ReportDataError(f"{root}: task {data.task!r} has no paper reference to check the run against")
+    if paper:  # the paper's tables and figures, then the declared metrics they do not cover (if any)
+        tables = build_tables(data, options) + task_summary_tables(data, options)
+        drawn = build_figures(data, options, out / "figures") if figures else []
+    else:  # the paper's tables read the solar market's columns: one line says so, the task's own tables instead
+        tables = [Skipped("paper", "The paper's tables and figures", NO_PAPER.format(task=data.task))]
+        tables += task_summary_tables(data, options)
+        drawn = []
     warning = overlap_warning(data.metrics, options.cluster_by)
     outcome = ReportOutcome(out_dir=out, data=data, tables=tables, figures=drawn, warnings=[warning] if warning else [])
     outcome.warnings[:0] = [f"UNVERIFIED INPUT: {problem}" for problem in data.unverified]

@@ -7,7 +7,7 @@ from pathlib import Path
 from typing import Any
 
 from ...common.atomic_files import sha256_file
-from ...data.files import MANIFEST_FILE  # not data.build: that imports pvlib
+from ...tasks.base import dataset_manifest_of
 from ..loading import ReportData
 
 #: Run-metadata fields the report shows in its summary table (the rest is in the JSON dump).
@@ -56,9 +56,10 @@ def dataset_records(data: ReportData) -> list[dict[str, Any]]:
             key = json.dumps([dataset.get("data_dir"), files], sort_keys=True)
             if key not in records:
                 data_dir = Path(str(dataset.get("data_dir", "")))
-                manifest_path = data_dir / MANIFEST_FILE
+                manifest_name = dataset_manifest_of(data.task_spec)
+                manifest_path = data_dir / manifest_name if manifest_name else None
                 manifest = None
-                if manifest_path.is_file():
+                if manifest_path is not None and manifest_path.is_file():
                     try:
                         manifest = json.loads(manifest_path.read_text(encoding="utf-8"))
                     except json.JSONDecodeError:
