@@ -41,7 +41,8 @@ from .reserved import check_reserved
 from .rollout import EpisodeResult, begin_run, run_policy
 from .run_metadata import RunMetadata
 from .rundir import RunDirWriter, kill_point
-from .settings import KNOWN_SETTINGS, setting_name
+from .setting_resolution import resolve_setting
+from .settings import Setting
 
 
 @dataclass
@@ -51,17 +52,22 @@ class EvaluationSpec:
     ``policies`` are agent specs (built-in names such as ``"static"``, ``"pkg.module:attr"``,
     ``"NAME=http://..."``: :mod:`solarchain_eval.agents.specs`) or agents (objects with ``act``,
     functions ``observation -> action``, Stable-Baselines3 models). Their names must be unique.
-    With ``agentic`` set, every policy is wrapped by the Planner/Auditor layer and the
-    setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``). ``setting_label`` names a
-    setting added with :func:`~solarchain_eval.evaluation.settings.register_setting` instead; its
-    reward and governance must agree with ``no_physics_penalty`` and ``agentic``.
+
+    ``setting`` (a :class:`~solarchain_eval.evaluation.settings.Setting` or a registered name)
+    fixes the reward, the governance and the config overrides; once built, ``setting`` is its
+    name, and ``no_physics_penalty`` and ``agentic`` are what it runs with. Without it, as
+    before: with ``agentic`` set, every policy is wrapped by the Planner/Auditor layer and the
+    setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``); ``setting_label`` names a
+    registered setting whose reward and governance must agree with those two.
+    (:func:`~solarchain_eval.evaluation.setting_resolution.resolve_setting` reconciles them.)
     """
 
     policies: Sequence[str | Policy]
     run_seeds: Sequence[int] = PAPER_SEEDS
     episodes: int = PAPER_EPISODES
     data_dir: Path | None = None
-    no_physics_penalty: bool = False
+    #: The reward switch (None: the setting's; False without a setting).
+    no_physics_penalty: bool | None = None
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     models: dict[str, Path] = field(default_factory=dict)
     episode_seeds: Callable[[int, int], list[int]] = paper_episode_seeds
@@ -79,24 +85,25 @@ class EvaluationSpec:
     #: Run user agents (Python objects, ``module:attr``, ``file.py:attr``, plugins, ``sb3:``) each in a
     #: process of its own (:mod:`~solarchain_eval.agents.isolated`); built-ins stay in this process.
     isolate: bool = False
+    #: The setting (a Setting or a registered name); its name once the spec is built.
+    setting: Setting | str | None = None
+    _setting: Setting = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
-        if self.setting_label is None:
-            return
-        known = KNOWN_SETTINGS.get(self.setting_label)
-        if known is None:
-            raise ValueError(f"unknown setting {self.setting_label!r} (registered: {', '.join(KNOWN_SETTINGS)})")
-        if (known.no_physics_penalty, known.agentic) != (self.no_physics_penalty, self.agentic is not None):
-            raise ValueError(
-                f"setting {self.setting_label!r} has no_physics_penalty={known.no_physics_penalty} and "
-                f"agentic={known.agentic}; the evaluation asks for {self.no_physics_penalty} and {self.agentic is not None}"
-            )
+        self._setting, self.agentic = resolve_setting(
+            self.setting, label=self.setting_label, no_physics_penalty=self.no_physics_penalty, agentic=self.agentic
+        )
+        self.setting = self._setting.name
+        self.no_physics_penalty = self._setting.no_physics_penalty
 
     @property
-    def setting(self) -> str:
-        if self.setting_label is not None:
-            return self.setting_label
-        return setting_name(agentic=self.agentic is not None, no_physics_penalty=self.no_physics_penalty)
+    def setting_spec(self) -> Setting:
+        """The resolved :class:`~solarchain_eval.evaluation.settings.Setting`."""
+        return self._setting
+
+    def run_config(self) -> BenchmarkConfig:
+        """The config the evaluation runs: ``config`` with the setting's reward switch and overrides."""
+        return self._setting.apply(self.config)
 
 
 @dataclass
@@ -132,7 +139,7 @@ def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[
     FileNotFoundError
         A learned policy without a trained model (the message lists where it looked).
     """
-    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    config = spec.run_config()
     builtins = known_policies()
     built: list[Policy] = []
     for item in spec.policies:
@@ -181,7 +188,7 @@ def check_agents(spec: EvaluationSpec) -> list[str]:
     list of str
         The agents' names (the ``policy`` column of their records), in the spec's order.
     """
-    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    config = spec.run_config()
     task = get_task()
     table = task.load_data(task.data_dir(spec.data_dir, config))
     with ExitStack() as stack:
@@ -263,7 +270,7 @@ def run_evaluation(
     """
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
-    config = spec.config.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    config = spec.run_config()
     task = get_task()
     table = task.load_data(task.data_dir(spec.data_dir, config))  # validates before anything is written
     setting = spec.setting
