@@ -1,4 +1,6 @@
-"""Settings declared in a YAML file (the command line's ``--settings-file``)::
+"""Settings declared in a YAML file (the command line's ``--settings-file``; docs/settings.md).
+
+For example::
 
     settings:
       heavy_physics:
