@@ -250,3 +250,16 @@ def test_the_grid_hands_workers_the_setting_and_its_governance(tiny_dataset, tmp
     model.write_bytes(b"")
     task = unit_task(spec, tmp_path, tiny_dataset, {}, unit, ["paper"])
     assert task.setting is PLUGIN_SETTING and task.agentic is PLUGIN_SETTING.governance
+
+
+def test_the_command_lines_setting_and_reward_flag_must_agree(tiny_dataset, tmp_path):
+    out = tmp_path / "run"
+    result = CliRunner().invoke(
+        app,
+        ["evaluate", "--setting", "main", "--no-physics-penalty", "--policies", "static", "--seeds", "7",
+         "--episodes", "1", "--data", str(tiny_dataset), "--out", str(out)],
+    )  # fmt: skip
+    assert result.exit_code == 2 and not out.exists()
+    assert "setting 'main' has no_physics_penalty=False; the evaluation asks for True" in " ".join(
+        result.output.split()
+    )
