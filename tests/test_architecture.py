@@ -235,7 +235,6 @@ KNOWN_TASK_DEBT = {
     "cli.bench_agent",
     "cli.bench_train",
     "cli.data",
-    "evaluation.settings",
     "experiments.paper",
     "experiments.ray_executor",
     "experiments.sweep",
@@ -258,7 +257,6 @@ KNOWN_TASK_DEBT = {
     "perf.llm_bench",
     "perf.scale_bench",
     "perf.train_bench",
-    "report.naming",
     "training.jax_algorithm",
     "training.jax_trainer",
 }

@@ -49,6 +49,7 @@ BUILTIN_BASES = {
     "RunMetadataError": "ValueError",
     "ProtocolMismatch": "ValueError",
     "UnknownTaskError": "ValueError",
+    "SettingError": "ValueError",
     "HttpAgentError": "ValueError",
     "InvalidRequest": "ValueError",
     "IsolatedAgentError": "ValueError",

@@ -15,6 +15,8 @@ from ..agents.specs import LLM_AGENT, parse_agent_args, parse_agent_list, parse_
 from ..config import BenchmarkConfig, load_config
 from ..evaluation.rundir import RunDirError, check_target
 from ..evaluation.runner import EvaluationSpec, check_agents, run_evaluation
+from ..evaluation.settings import SETTINGS
+from ..evaluation.settings_file import load_settings
 from ..governance.request import GovernanceRequest
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
 from ..tasks.registry import DEFAULT_TASK, get_task
@@ -57,6 +59,13 @@ VECNORMALIZE = typer.Option(
     "--vecnormalize",
     metavar="[NAME=]PATH",
     help="VecNormalize statistics (VecNormalize.save) for an sb3: agent; NAME= picks the agent when there are several.",
+)
+# The settings file of every command that names settings (evaluate, paper): docs/settings.md.
+SETTINGS_FILE = typer.Option(
+    None,
+    "--settings-file",
+    help="YAML file declaring settings of your own (reward switch, governance, config overrides, the settings "
+    "the report compares them with); see docs/settings.md.",
 )
 #: The --policies help of every command that takes agent specs (its default is the command's own).
 USER_AGENTS_HELP = (
@@ -151,6 +160,13 @@ def evaluate(
     no_physics_penalty: bool = typer.Option(
         False, "--no-physics-penalty", help="The ablation: drop λp (V + A) from the reward; V and A are still recorded."
     ),
+    setting: str | None = typer.Option(
+        None,
+        "--setting",
+        help=f"A registered setting ({', '.join(SETTINGS)}, or one of --settings-file or a plugin). Default: main; "
+        "no_physics with --no-physics-penalty; llm / llm_no_physics with --agentic planner_auditor.",
+    ),
+    settings_file: Path | None = SETTINGS_FILE,
     config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
     models: list[str] | None = typer.Option(
         None,
@@ -184,6 +200,8 @@ def evaluate(
     if config is not None and task != DEFAULT_TASK:
         raise CliError(f"--config is the solar market's configuration; task {task!r} takes its own defaults")
     cfg = load_config(config) if config else BenchmarkConfig()
+    if settings_file is not None:
+        load_settings(settings_file)
     if out is not None:
         check_target(out, overwrite=overwrite)  # before any work (checked again under the lock)
     try:
@@ -205,10 +223,11 @@ def evaluate(
         run_seeds=parse_seeds(seeds),
         episodes=episodes if episodes is not None else cfg.evaluation.episodes,
         data_dir=data,
-        no_physics_penalty=no_physics_penalty,
+        no_physics_penalty=no_physics_penalty or None,  # unset: the setting's reward
         config=cfg if task == DEFAULT_TASK else None,  # None: the task's default configuration
         models=parse_models(models or []),
         agentic=options,
+        setting=setting,
         concurrency=llm_concurrency,
         agent_args=agent_args,
         vecnormalize=parse_vecnormalize(vecnormalize or [], named),
@@ -221,7 +240,7 @@ def evaluate(
         check_agents(spec)  # unknown names, imports, models, names used twice, action shapes: before any work
     except (ValueError, FileNotFoundError) as error:
         raise cli_error(error) from None
-    label = "evaluate" if options is None else f"evaluate-{spec.setting}"
+    label = "evaluate" if options is None and setting is None else f"evaluate-{spec.setting}"
     # --llm-backend local: started here, always stopped; one server slot per episode in flight
     with agentic_cli.serving(governance, options, parallel=llm_concurrency, needs_llm=llm_agent):
         _evaluate(spec, out or _default_run_dir(cfg, label), "evaluation", overwrite, step_format.value)

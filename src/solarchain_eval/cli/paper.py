@@ -17,6 +17,7 @@ from ..agents.specs import parse_agent_args, parse_vecnormalize
 from ..config import BenchmarkConfig, load_config
 from ..evaluation.records import SUMMARY_FILE
 from ..evaluation.settings import KNOWN_SETTINGS
+from ..evaluation.settings_file import load_settings
 from ..experiments.grid import GridSpec, Unit, plan_units
 from ..experiments.layout import combined_dir
 from ..experiments.paper import GridError, run_paper
@@ -41,7 +42,7 @@ from .common import (
     reports_errors,
     results_table,
 )
-from .evaluate import AGENT_ARG, ISOLATE, USER_AGENTS_HELP, VECNORMALIZE
+from .evaluate import AGENT_ARG, ISOLATE, SETTINGS_FILE, USER_AGENTS_HELP, VECNORMALIZE
 from .progress import TrainingProgress
 
 register_user_error(GridError)
@@ -199,6 +200,7 @@ def paper(
     settings: str | None = typer.Option(
         None, "--settings", help="Comma-separated settings (default: every registered one: main, no_physics, ...)."
     ),
+    settings_file: Path | None = SETTINGS_FILE,
     policies: str | None = typer.Option(
         None,
         "--policies",
@@ -283,6 +285,8 @@ def paper(
     refuse_file_out(out)
     cfg = load_config(config) if config else BenchmarkConfig()
     options = agentic_cli.resolve(governance)
+    if settings_file is not None:
+        load_settings(settings_file)
     chosen_settings = _settings(settings)
     try:
         builtins, choice = _policies(policies, extra_policies, chosen_settings), _choice(policies)

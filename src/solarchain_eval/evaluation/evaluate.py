@@ -34,7 +34,7 @@ from ..tasks.registry import DEFAULT_TASK, get_task
 from .records import metrics_frame, summarize
 from .rollout import EpisodeResult
 from .runner import EvaluationSpec, run_evaluation
-from .settings import KNOWN_SETTINGS, SETTING_MAIN, SETTING_NO_PHYSICS
+from .settings import SETTING_MAIN, Setting
 
 
 @dataclass
@@ -84,30 +84,13 @@ def summary_frame(summary: list[dict[str, Any]]) -> pd.DataFrame:
     return pd.DataFrame(rows)
 
 
-def _setting_options(
-    setting: str, agentic: AgenticOptions | bool | None
-) -> tuple[bool, AgenticOptions | None, str | None]:
-    """(no physics penalty, Planner/Auditor options, setting label) of the requested setting."""
-    known = KNOWN_SETTINGS.get(setting)
-    if known is None:
-        raise AgentSpecError(f"unknown setting {setting!r} (choose from {', '.join(KNOWN_SETTINGS)})")
-    options = AgenticOptions() if agentic is True else (agentic or None)
-    if options is None and known.agentic:
-        options = AgenticOptions()  # the paper's layer with the rule planner and auditor
-    if options is not None and not known.agentic:
-        if setting not in (SETTING_MAIN, SETTING_NO_PHYSICS):
-            raise AgentSpecError(f"setting {setting!r} runs without the Planner/Auditor layer; drop agentic=")
-        return known.no_physics_penalty, options, None  # the paper's governed counterpart
-    return known.no_physics_penalty, options, setting
-
-
 def evaluate(
     agent: Any,
     *,
     data: str | Path | None = None,
     seeds: Sequence[int] = PAPER_SEEDS,
     episodes: int = PAPER_EPISODES,
-    setting: str = SETTING_MAIN,
+    setting: str | Setting = SETTING_MAIN,
     agentic: AgenticOptions | bool | None = None,
     out: str | Path | None = None,
     name: str | None = None,
@@ -136,12 +119,15 @@ def evaluate(
         Run seeds (default: the paper's three).
     episodes : int
         Episodes per run seed (default: the paper's 30).
-    setting : str
+    setting : str or Setting
         ``"main"`` or ``"no_physics"`` (the reward without the physics penalty); the governed
-        ``"llm"`` / ``"llm_no_physics"`` run every agent behind the Planner/Auditor layer.
+        ``"llm"`` / ``"llm_no_physics"`` run every agent behind the Planner/Auditor layer. Any
+        registered setting's name, or a :class:`~solarchain_eval.evaluation.settings.Setting`
+        (its config overrides are applied on top of ``config``).
     agentic : AgenticOptions or True, optional
         Run behind the Planner/Auditor layer with these options (True: the rule planner and
-        auditor); with ``"main"``/``"no_physics"`` it selects ``"llm"``/``"llm_no_physics"``.
+        auditor); with ``"main"``/``"no_physics"`` it selects ``"llm"``/``"llm_no_physics"``
+        (a setting's governed counterpart: the one declaring a governance contrast with it).
     out : path, optional
         Publish the run directory there (``metrics.csv``, ``actions.csv``, ..., ``run_metadata.json``
         with checksums); by default the run is written to a temporary directory and removed.
@@ -180,6 +166,8 @@ def evaluate(
     AgentSpecError
         An agent that cannot be used (with ``isolate``: one that cannot be pickled), a name against
         the rule, or two agents with one name.
+    SettingError
+        An unknown setting, or ``agentic`` with a setting that has no governed counterpart.
     AgentFailure
         A user agent's code raised, or it returned an invalid action or ``end_episode`` value
         (one line naming the agent, run seed, episode and step); nothing is published.
@@ -201,17 +189,15 @@ def evaluate(
         from ..agents.adapters import as_agent
 
         agents = [as_agent(agents[0], name=name) if not isinstance(agents[0], str) else f"{name}={agents[0]}"]
-    no_physics_penalty, options, label = _setting_options(setting, agentic)
     spec = EvaluationSpec(
         policies=agents,
         run_seeds=tuple(int(s) for s in seeds),
         episodes=int(episodes),
         data_dir=Path(data) if data is not None else None,
-        no_physics_penalty=no_physics_penalty,
-        config=config,
+        config=config,  # None: the task's default configuration
         models=dict(models or {}),
-        agentic=options,
-        setting_label=label,
+        agentic=agentic,
+        setting=setting,
         agent_args=dict(agent_args or {}),
         llm=llm,
         isolate=isolate,

@@ -40,7 +40,8 @@ from .reserved import check_reserved
 from .rollout import EpisodeResult, begin_run, run_policy
 from .run_metadata import RunMetadata
 from .rundir import RunDirWriter, kill_point
-from .settings import KNOWN_SETTINGS, setting_name
+from .setting_resolution import resolve_setting
+from .settings import Setting
 
 
 @dataclass
@@ -53,17 +54,22 @@ class EvaluationSpec:
     ``task`` names the market (:func:`~solarchain_eval.tasks.registry.get_task`); ``config`` is that
     task's configuration (None: its default, for the solar market ``BenchmarkConfig()``), and a
     task other than the solar market offers its own baselines by name (``Task.baselines``).
-    With ``agentic`` set, every policy is wrapped by the Planner/Auditor layer and the
-    setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``). ``setting_label`` names a
-    setting added with :func:`~solarchain_eval.evaluation.settings.register_setting` instead; its
-    reward and governance must agree with ``no_physics_penalty`` and ``agentic``.
+
+    ``setting`` (a :class:`~solarchain_eval.evaluation.settings.Setting` or a registered name)
+    fixes the reward, the governance and the config overrides; once built, ``setting`` is its
+    name, and ``no_physics_penalty`` and ``agentic`` are what it runs with. Without it, as
+    before: with ``agentic`` set, every policy is wrapped by the Planner/Auditor layer and the
+    setting is ``llm`` (``llm_no_physics`` with ``no_physics_penalty``); ``setting_label`` names a
+    registered setting whose reward and governance must agree with those two.
+    (:func:`~solarchain_eval.evaluation.setting_resolution.resolve_setting` reconciles them.)
     """
 
     policies: Sequence[str | Policy]
     run_seeds: Sequence[int] = PAPER_SEEDS
     episodes: int = PAPER_EPISODES
     data_dir: Path | None = None
-    no_physics_penalty: bool = False
+    #: The reward switch (None: the setting's; False without a setting).
+    no_physics_penalty: bool | None = None
     #: The task's configuration (None: ``get_task(task).default_config()``, set on construction).
     config: Any = None
     models: dict[str, Path] = field(default_factory=dict)
@@ -84,26 +90,27 @@ class EvaluationSpec:
     isolate: bool = False
     #: The market evaluated, by name (:mod:`solarchain_eval.tasks`).
     task: str = DEFAULT_TASK
+    #: The setting (a Setting or a registered name); its name once the spec is built.
+    setting: Setting | str | None = None
+    _setting: Setting = field(init=False, repr=False, compare=False)
 
     def __post_init__(self) -> None:
         if self.config is None:  # an unknown task name is refused here, before any work
             self.config = get_task(self.task).default_config()
-        if self.setting_label is None:
-            return
-        known = KNOWN_SETTINGS.get(self.setting_label)
-        if known is None:
-            raise ValueError(f"unknown setting {self.setting_label!r} (registered: {', '.join(KNOWN_SETTINGS)})")
-        if (known.no_physics_penalty, known.agentic) != (self.no_physics_penalty, self.agentic is not None):
-            raise ValueError(
-                f"setting {self.setting_label!r} has no_physics_penalty={known.no_physics_penalty} and "
-                f"agentic={known.agentic}; the evaluation asks for {self.no_physics_penalty} and {self.agentic is not None}"
-            )
+        self._setting, self.agentic = resolve_setting(
+            self.setting, label=self.setting_label, no_physics_penalty=self.no_physics_penalty, agentic=self.agentic
+        )
+        self.setting = self._setting.name
+        self.no_physics_penalty = self._setting.no_physics_penalty
 
     @property
-    def setting(self) -> str:
-        if self.setting_label is not None:
-            return self.setting_label
-        return setting_name(agentic=self.agentic is not None, no_physics_penalty=self.no_physics_penalty)
+    def setting_spec(self) -> Setting:
+        """The resolved :class:`~solarchain_eval.evaluation.settings.Setting`."""
+        return self._setting
+
+    def run_config(self) -> Any:
+        """The config the evaluation runs: ``config`` with the setting's reward switch and overrides."""
+        return self._setting.apply(self.config, get_task(self.task))
 
 
 @dataclass
@@ -130,8 +137,8 @@ def dataset_provenance(data: Any) -> dict[str, Any]:
 
 
 def resolved_config(spec: EvaluationSpec) -> Any:
-    """The spec's task configuration with its setting's reward switch applied."""
-    return get_task(spec.task).setting_config(spec.config, no_physics_penalty=spec.no_physics_penalty)
+    """The spec's task configuration with its setting's reward switch and config overrides applied."""
+    return spec.run_config()
 
 
 def make_policies(spec: EvaluationSpec, stack: ExitStack | None = None) -> list[Policy]:

@@ -253,7 +253,10 @@ def unit_task(
         checkpoint_every=spec.checkpoint_every,
         no_physics_penalty=no_physics,
         model_paths=models,
-        agentic=spec.agentic if (setting is not None and setting.agentic and unit.kind == "eval") else None,
+        # a setting that declares its Planner/Auditor options is run with them
+        agentic=(setting.governance or spec.agentic)
+        if (setting is not None and setting.agentic and unit.kind == "eval")
+        else None,
         identity=unit_identity,
         command=tuple(command or sys.argv),
         lagrangian=spec.lagrangian if unit.policy == "ppo-lag" else None,
@@ -263,6 +266,7 @@ def unit_task(
         vecnormalize=absolute_paths(spec.vecnormalize) if agent is not None else {},
         isolate=spec.isolate and agent is not None,
         chunk_steps=spec.chunk_steps,
+        setting=setting if unit.kind == "eval" else None,
     )
 
 

@@ -24,6 +24,7 @@ from typing import Any
 
 from ..common.atomic_files import atomic_write_json, sha256_file
 from ..config import BenchmarkConfig
+from ..evaluation.settings import Setting
 from ..governance.factory import AgenticOptions
 from ..protocol import EPISODE_SEED_RULES
 from ..training.jax_progress import ChunkProgress
@@ -60,6 +61,8 @@ class UnitTask:
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
     isolate: bool = False  # eval units of a user agent: run it in a process of its own
     chunk_steps: int | None = None  # JAX train units: env steps per chunk (None: the algorithm's default)
+    #: Eval units: their setting itself, since a spawned worker has not registered the user's settings.
+    setting: Setting | None = None
 
 
 @dataclass(frozen=True)
@@ -276,6 +279,7 @@ def _evaluate_unit(task: UnitTask) -> None:
         episode_seeds=EPISODE_SEED_RULES[task.episode_seed_protocol],
         agentic=task.agentic,  # the Planner/Auditor layer in the agentic settings
         setting_label=unit.setting,
+        setting=task.setting,
         agent_args=dict(task.agent_args),
         vecnormalize=dict(task.vecnormalize),
         isolate=task.isolate,

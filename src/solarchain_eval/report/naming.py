@@ -1,6 +1,9 @@
 """Display names and row orders of policies and settings, as the paper prints them.
 
-One home for every label the report shows, so tables and figures agree.
+One home for every label the report shows, so tables and figures agree. The settings' labels and
+the pairs the report compares (RL+LLM against RL, no-physics against physics) are read from the
+settings' declarations (:class:`~solarchain_eval.evaluation.settings.Setting`'s ``label``,
+``governance_label`` and ``compare_with``), not written here.
 """
 
 from __future__ import annotations
@@ -10,15 +13,16 @@ from typing import Any
 
 from ..agents.checkpoints import TRAINABLE_ALGOS
 from ..evaluation.settings import (
+    ABLATION_CONTRAST,
+    GOVERNANCE_CONTRAST,
     KNOWN_SETTINGS,
-    SETTING_AGENTIC,
-    SETTING_AGENTIC_NO_PHYSICS,
     SETTING_LABELS,
-    SETTING_MAIN,
-    SETTING_NO_PHYSICS,
     SETTINGS,
+    setting_pairs,
 )
-from ..market.baselines import BASELINES
+from ..tasks.registry import get_task
+
+BASELINES = tuple(get_task().baselines())
 
 #: Policy display names (the paper's spelling).
 POLICY_DISPLAY = {
@@ -41,14 +45,22 @@ USER_AGENT_SUFFIX = " (user agent)"
 
 #: Setting labels of the four-setting tables ("Governance" / "Setting" columns of the body).
 GOVERNANCE_LABELS = {name: KNOWN_SETTINGS[name].governance_label for name in SETTINGS}
-#: Row order of the four-setting appendix tables (RL, RL+LLM, RL no-physics, RL+LLM no-physics).
-GOVERNANCE_ORDER = (SETTING_MAIN, SETTING_AGENTIC, SETTING_NO_PHYSICS, SETTING_AGENTIC_NO_PHYSICS)
-#: The LLM appendix tables name an agentic setting by its reward ("Main" / "No-physics").
-AGENTIC_REWARD_LABELS = {SETTING_AGENTIC: "Main", SETTING_AGENTIC_NO_PHYSICS: "No-physics"}
-#: Each agentic setting and the raw-RL setting with the same reward (for RL+LLM - RL deltas).
-AGENTIC_BASE = {SETTING_AGENTIC: SETTING_MAIN, SETTING_AGENTIC_NO_PHYSICS: SETTING_NO_PHYSICS}
-#: Each physics-penalised setting and its no-physics ablation (for no-physics - physics deltas).
-ABLATION_PAIRS = {SETTING_MAIN: SETTING_NO_PHYSICS, SETTING_AGENTIC: SETTING_AGENTIC_NO_PHYSICS}
+#: Each agentic setting and the raw-RL setting it adds the layer to (its ``governance`` contrast;
+#: for RL+LLM - RL deltas).
+AGENTIC_BASE = {treated: base for base, treated, _ in setting_pairs(GOVERNANCE_CONTRAST, SETTINGS)}
+#: Each physics-penalised setting and its no-physics ablation (the ``ablation`` contrast; for
+#: no-physics - physics deltas).
+ABLATION_PAIRS = {base: treated for base, treated, _ in setting_pairs(ABLATION_CONTRAST, SETTINGS)}
+#: Row order of the four-setting appendix tables: each raw-RL setting, then the settings that govern
+#: it (RL, RL+LLM, RL no-physics, RL+LLM no-physics).
+GOVERNANCE_ORDER = tuple(
+    name
+    for base in SETTINGS
+    if base not in AGENTIC_BASE
+    for name in (base, *(treated for treated, of in AGENTIC_BASE.items() if of == base))
+)
+#: The LLM appendix tables name an agentic setting by its base's reward label ("Main" / "No-physics").
+AGENTIC_REWARD_LABELS = {treated: KNOWN_SETTINGS[base].label for treated, base in AGENTIC_BASE.items()}
 
 __all__ = [
     "SETTINGS",
@@ -82,8 +94,10 @@ def policy_label(policy: str) -> str:
 
 
 def setting_label(setting: str) -> str:
-    """Display name of a setting as the appendix prints it ("Main", "LLM No-physics", ...)."""
-    return SETTING_LABELS.get(setting, setting)
+    """Display name of a setting as the appendix prints it ("Main", "LLM No-physics", ...; a
+    registered setting's ``label``; any other name as it is)."""
+    known = KNOWN_SETTINGS.get(setting)
+    return known.label if known is not None else SETTING_LABELS.get(setting, setting)
 
 
 def is_learned(policy: str) -> bool:
