@@ -61,8 +61,12 @@ LOG_KEYS = (
     "action_delta",
     "reason",
 )
-ACTION_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "step", "episode_start_hour")
-CITY_HOUR_KEYS = ("policy", "setting", "run_seed", "episode", "step", "hour", "city", "city_reward", "liquidity_ratio")
+#: The ids every task's ``actions.csv`` holds (its step fields follow; the solar paper tables also read
+#: the market's ``episode_start_hour``, which its step fields carry).
+ACTION_KEYS = ("policy", "setting", "run_seed", "episode", "episode_seed", "step")
+#: The columns every task's per-step extras table holds (the solar heat map also reads ``hour`` and
+#: ``liquidity_ratio``, which the solar market's table carries).
+CITY_HOUR_KEYS = ("policy", "setting", "run_seed", "episode", "step", "city", "city_reward")
 #: Columns of ``governance_diagnostics.csv`` the audit-quality tables read.
 DIAGNOSTICS_REQUIRED = (
     "policy",
