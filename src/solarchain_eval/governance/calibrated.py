@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..llm.errors import CallSite
-from ..market.actions import ActionCodec
+from ..tasks.governance_view import LeverCodec
 from .errors import GovernanceConfigError
 from .planner import EpisodeContext, PlanOutcome, RulePlanner
 from .schemas import (
@@ -97,14 +97,14 @@ class CalibratedRulePlanner(RulePlanner):
 
     Parameters
     ----------
-    codec : ActionCodec
+    codec : LeverCodec
     target_rate : float
         The audit rate to reach, in (0, 1].
     """
 
     kind = "calibrated-rule"
 
-    def __init__(self, codec: ActionCodec, target_rate: float = DEFAULT_TARGET_AUDIT_RATE) -> None:
+    def __init__(self, codec: LeverCodec, target_rate: float = DEFAULT_TARGET_AUDIT_RATE) -> None:
         super().__init__(codec)
         if not 0.0 < target_rate <= 1.0:
             raise GovernanceConfigError(

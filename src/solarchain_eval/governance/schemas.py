@@ -5,20 +5,22 @@ one the OpenAI SDK derives from them in strict mode (see :func:`~solarchain_eval
 strict (extra or missing fields, wrong types, NaN and infinities are errors). Validation then
 turns a parsed output into the values that may touch the market: every number is clipped to
 the benchmark's ranges (each clip is reported as a :class:`ClipEvent`), the auditor's action is
-sanitised with the environment's :class:`~solarchain_eval.market.actions.ActionCodec`
-(including α + ℓ ≤ 0.98), and free text is length-capped and only ever logged.
+sanitised with the market's lever codec (:class:`~solarchain_eval.tasks.governance_view.LeverCodec`;
+for the solar market including α + ℓ ≤ 0.98), and free text is length-capped and only ever logged.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from ..market.actions import ActionCodec
+from ..tasks.governance_view import LeverCodec
+from .view import default_view
 
 #: Maximum lengths of the free-text fields (characters); longer text is cut and logged.
 GOVERNANCE_MODE_MAX_CHARS = 64
@@ -120,26 +122,36 @@ class AgentAction(_StrictOutput):
     burn_rate: float
 
 
-#: The field descriptions of :class:`AgentAction` (part of the schema a hosted model sees).
-AGENT_FIELD_DESCRIPTIONS = {
-    "reward_ratio": "Reward ratio alpha: share of backed supply paid out as reward tokens.",
-    "liquidity_ratio": "Liquidity ratio l: share of backed supply added to the liquidity pool.",
-    "burn_rate": "Burn rate b: fraction of demand burned.",
-}
+def __getattr__(name: str) -> Any:
+    # The default task's lever descriptions, kept under their old name (they are the market's text).
+    if name == "AGENT_FIELD_DESCRIPTIONS":
+        return dict(default_view().prompts.lever_descriptions)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def agent_action_model(codec: ActionCodec) -> type[AgentAction]:
-    """:class:`AgentAction` with each field bounded to ``codec``'s range (``ge``/``le``)."""
-    return _bounded_agent_action(tuple(codec.lo), tuple(codec.hi))
+def agent_action_model(codec: LeverCodec, descriptions: Mapping[str, str] | None = None) -> type[AgentAction]:
+    """:class:`AgentAction` with each field bounded to ``codec``'s range (``ge``/``le``).
+
+    ``descriptions`` names the levers (field names, in order) and describes each (the market's
+    :attr:`~solarchain_eval.tasks.governance_view.GovernancePrompts.lever_descriptions`; None:
+    the default task's).
+    """
+    if descriptions is None:
+        descriptions = default_view().prompts.lever_descriptions
+    return _bounded_agent_action(tuple(codec.lo), tuple(codec.hi), tuple(descriptions.items()))
 
 
 @functools.cache  # one class per range: the same schema (and cache keys) for every agent
-def _bounded_agent_action(lo: tuple[float, ...], hi: tuple[float, ...]) -> type[AgentAction]:
+def _bounded_agent_action(
+    lo: tuple[float, ...], hi: tuple[float, ...], described: tuple[tuple[str, str], ...]
+) -> type[AgentAction]:
     fields: dict[str, Any] = {
-        name: (float, Field(ge=low, le=high, description=AGENT_FIELD_DESCRIPTIONS[name]))
-        for name, low, high in zip(ACTION_FIELDS, lo, hi, strict=True)
+        name: (float, Field(ge=low, le=high, description=text))
+        for (name, text), low, high in zip(described, lo, hi, strict=True)
     }
-    return create_model("AgentAction", __base__=AgentAction, __doc__=AgentAction.__doc__, **fields)
+    # Other levers than the solar market's: the same strict model without its three fields.
+    base = AgentAction if tuple(fields) == ACTION_FIELDS else _StrictOutput
+    return create_model("AgentAction", __base__=base, __doc__=AgentAction.__doc__, **fields)
 
 
 # --- validated forms -------------------------------------------------------------------------
@@ -211,7 +223,7 @@ def _cap_text(field: str, text: str, limit: int, events: list[ClipEvent]) -> str
     return text[:limit]
 
 
-def validate_plan(output: PlannerOutput, codec: ActionCodec, episode_steps: int) -> tuple[Plan, list[ClipEvent]]:
+def validate_plan(output: PlannerOutput, codec: LeverCodec, episode_steps: int) -> tuple[Plan, list[ClipEvent]]:
     """Clip a parsed plan to the benchmark's ranges (docs/planner_auditor.md#schemas).
 
     Bounds are sorted (a swap is reported) and clipped to the action ranges; thresholds,
@@ -260,7 +272,7 @@ def _bound_pairs(bounds: ActionBounds) -> list[tuple[float, float]]:
     return [(b.low, b.high) for b in (bounds.reward_ratio, bounds.liquidity_ratio, bounds.burn_rate)]
 
 
-def validate_audit(output: AuditorOutput, codec: ActionCodec) -> tuple[AuditVerdict, list[ClipEvent]]:
+def validate_audit(output: AuditorOutput, codec: LeverCodec) -> tuple[AuditVerdict, list[ClipEvent]]:
     """Sanitise the auditor's action (ranges and α + ℓ ≤ cap, float32) and cap its text."""
     events: list[ClipEvent] = []
     raw = (output.final_action.reward_ratio, output.final_action.liquidity_ratio, output.final_action.burn_rate)

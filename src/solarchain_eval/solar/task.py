@@ -25,6 +25,7 @@ from ..envs.registration import ENV_ID
 from ..market.baselines import BASELINES, make_baseline
 from ..records_schema import EPISODE_METRIC_COLUMNS
 from ..tasks.base import Lever, MetricSpec
+from .governance_view import SolarGovernanceView
 from .metrics import episode_metrics_from_steps
 
 _DEFAULT_MARKET = MarketConfig()
@@ -96,6 +97,11 @@ class SolarTask:
 
     def baselines(self) -> Mapping[str, Callable[..., Any]]:
         return {name: (lambda config, _name=name: make_baseline(_name, config.market)) for name in BASELINES}
+
+    # --- governance: the view the Planner/Auditor layer and the LLM agent read (tasks/governance_view.py)
+    def governance_view(self, config: Any = None) -> SolarGovernanceView:
+        """The market as the governance layer sees it, for a benchmark config or its market section."""
+        return SolarGovernanceView.from_config(config)
 
 
 #: The solar market task (registered as ``solar`` in :mod:`solarchain_eval.tasks.registry`).
