@@ -9,7 +9,7 @@ returns the final action re-encoded to [0, 1]^3; ``observe`` records the execute
 The wrapper always acts in continuous mode (a discrete base policy's index is decoded with the
 env's discrete table), as the original release did. Everything it reads from the market goes
 through the market's governance view (:class:`~solarchain_eval.tasks.governance_view.GovernanceView`):
-the codec, the risk signals' places in the observation, the episode's risk context, the
+the codec, the risk signals in the observation, the episode's risk context, the
 counterfactual oracle and the executed levers of each step.
 """
 
@@ -107,7 +107,6 @@ class GovernedPolicy:
         self._env = env
         view = self._view = self.view if self.view is not None else resolve_view(env.config)
         self._codec = view.codec
-        self._risk_features = view.risk_features
         self._observation_names = view.observation_names
         self._episode = int(episode)
         self._run_seed = int(run_seed)
@@ -150,10 +149,7 @@ class GovernedPolicy:
         plan, step = self._plan, self._step
         proposed = self._decode(self.base.act(observation))
         bounded = bound_action(proposed, plan, self._codec)
-        at_violation, at_gap, at_slippage = self._risk_features
-        violation = float(observation[at_violation])
-        gap = float(observation[at_gap])
-        slippage = float(observation[at_slippage])
+        violation, gap, slippage = self._view.risk_signals(observation)
         k = kappa(bounded, self._previous)
         reasons, soft = self.controls.triggers_used(hard_reasons(violation, gap, slippage, plan), soft_trigger(k, plan))
         self._evaluate.new_step()

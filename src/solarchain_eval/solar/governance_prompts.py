@@ -58,7 +58,6 @@ AUDITOR_INSTRUCTION = (
 )
 
 
-
 #: The observation fields the agent's prompt shows, with their units (docs/environment.md); the
 #: context states ``hour_of_day`` instead of ``hour_sin``/``hour_cos``.
 AGENT_OBSERVATION_UNITS = {

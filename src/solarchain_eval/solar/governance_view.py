@@ -77,7 +77,6 @@ class SolarGovernanceView:
     market: MarketConfig
     lever_names: tuple[str, str, str] = LEVER_NAMES
     observation_names: tuple[str, ...] = OBSERVATION_NAMES
-    risk_features: tuple[int, int, int] = (OBS_VIOLATION, OBS_GAP, OBS_SLIPPAGE)
     recent_fields: tuple[str, ...] = RECENT_FIELDS
     prompts: GovernancePrompts = SOLAR_PROMPTS
 
@@ -86,6 +85,9 @@ class SolarGovernanceView:
         """The view of a :class:`~solarchain_eval.config.BenchmarkConfig` or its market section."""
         market = _market(config)
         return cls(ActionCodec.from_config(market), market)
+
+    def risk_signals(self, observation: np.ndarray) -> tuple[float, float, float]:
+        return float(observation[OBS_VIOLATION]), float(observation[OBS_GAP]), float(observation[OBS_SLIPPAGE])
 
     def initial_action(self, env: Any) -> Action:
         return initial_action(env.config.market)

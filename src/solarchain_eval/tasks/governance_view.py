@@ -7,8 +7,8 @@ reaches a market only through a :class:`GovernanceView`, which a task returns fr
 
 - the three levers: their names and the *codec* between the policy's [0, 1]³ and the executed
   levers (:class:`LeverCodec`), and the action the market starts from;
-- the observation's feature names and which three of them are the risk signals the hard triggers
-  read (:attr:`GovernanceView.risk_features`: a violation rate, a supply gap, a slippage);
+- the observation's feature names and the three risk signals the hard triggers read from it
+  (:meth:`GovernanceView.risk_signals`: a violation rate, a supply gap, a slippage);
 - the per-episode context a planner reads before the episode (:class:`EpisodeRisk`);
 - the counterfactual oracle: the outcome of another action from the same state, its cost and
   reward, and the values the diagnostics record;
@@ -109,8 +109,8 @@ class EpisodeRisk:
     penalty_in_reward : bool
         Whether the reward charges the feasibility (physics) penalty in this setting.
     signals : tuple of 3 float64 arrays
-        Per step, the three risk signals in the order of :attr:`GovernanceView.risk_features`
-        (violation, gap, slippage), unclipped, as the observation will show them.
+        Per step, the three risk signals in the order of :meth:`GovernanceView.risk_signals`
+        (violation, gap, slippage), unclipped (the observation may clip them).
     statistics : dict of str to float
         The named episode statistics the LLM planner's prompt shows (insertion order kept).
     """
@@ -134,9 +134,6 @@ class GovernanceView(Protocol):
         The levers' names: the ``info`` keys of the executed levers and the keys of the prompts' actions.
     observation_names : tuple of str
         The observation vector's features, in order.
-    risk_features : tuple of 3 int
-        Indices in the observation of the hard triggers' signals: a violation rate (audited above
-        its threshold), a supply gap (below) and a slippage (above).
     recent_fields : tuple of str
         The ``info`` keys of the previous step's outcome that the auditor's prompt shows.
     prompts : GovernancePrompts
@@ -146,9 +143,13 @@ class GovernanceView(Protocol):
     codec: LeverCodec
     lever_names: tuple[str, str, str]
     observation_names: tuple[str, ...]
-    risk_features: tuple[int, int, int]
     recent_fields: tuple[str, ...]
     prompts: GovernancePrompts
+
+    def risk_signals(self, observation: np.ndarray) -> tuple[float, float, float]:
+        """The hard triggers' signals in an observation: a violation rate (audited above its
+        threshold), a supply gap (below) and a slippage (above), as the observation holds them."""
+        ...
 
     def initial_action(self, env: Any) -> Action:
         """The executed action the market starts an episode from (the first step's previous action)."""
