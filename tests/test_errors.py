@@ -49,6 +49,7 @@ BUILTIN_BASES = {
     "RunMetadataError": "ValueError",
     "ProtocolMismatch": "ValueError",
     "UnknownTaskError": "ValueError",
+    "NoGovernanceViewError": "ValueError",
     "HttpAgentError": "ValueError",
     "InvalidRequest": "ValueError",
     "IsolatedAgentError": "ValueError",
