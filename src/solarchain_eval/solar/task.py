@@ -92,16 +92,16 @@ class SolarTask:
     def step_extras(self, info: Mapping[str, Any]) -> tuple[float, ...]:
         return tuple(info["city_rewards"].values())
 
+    # --- governance: the view the Planner/Auditor layer and the LLM agent read (tasks/governance_view.py)
+    def governance_view(self, config: Any = None) -> SolarGovernanceView:
+        """The market as the governance layer sees it, for a benchmark config or its market section."""
+        return SolarGovernanceView.from_config(config)
+
     def identity(self, config: BenchmarkConfig) -> dict[str, Any]:
         return {"env": self.env_id}
 
     def baselines(self) -> Mapping[str, Callable[..., Any]]:
         return {name: (lambda config, _name=name: make_baseline(_name, config.market)) for name in BASELINES}
-
-    # --- governance: the view the Planner/Auditor layer and the LLM agent read (tasks/governance_view.py)
-    def governance_view(self, config: Any = None) -> SolarGovernanceView:
-        """The market as the governance layer sees it, for a benchmark config or its market section."""
-        return SolarGovernanceView.from_config(config)
 
 
 #: The solar market task (registered as ``solar`` in :mod:`solarchain_eval.tasks.registry`).
