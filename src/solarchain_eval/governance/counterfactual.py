@@ -78,6 +78,7 @@ class CounterfactualEvaluator:
         self._env = env
         self.view = view if view is not None else resolve_view(env.config)
         self._codec: LeverCodec = self.view.codec
+        self._oracle = self.view.oracle(env)
         self._memo: dict[Action, Any] = {}
         self._raw_memo: dict[Action, Any] = {}  # by the action as given: skips re-encoding
         self.least_action = least_backing_action(self._codec)
@@ -98,7 +99,7 @@ class CounterfactualEvaluator:
         """The outcome of an action already in executed form (skips decode(encode(·)))."""
         outcome = self._memo.get(executed)
         if outcome is None:
-            outcome = self._memo[executed] = self.view.counterfactual(self._env, executed)
+            outcome = self._memo[executed] = self._oracle(executed)
         return outcome
 
 

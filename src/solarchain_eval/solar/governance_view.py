@@ -144,8 +144,8 @@ class SolarGovernanceView:
         # The env reports the executed levers (float32 values) in its info.
         return (info["reward_ratio"], info["liquidity_ratio"], info["burn_rate"])
 
-    def counterfactual(self, env: Any, executed: Action) -> StepOutcome:
-        return env.counterfactual_step(executed)
+    def oracle(self, env: Any) -> Callable[[Action], StepOutcome]:
+        return env.counterfactual_step
 
     def outcome_cost(self, outcome: StepOutcome) -> float:
         """cost = V + A (the env's ``info["cost"]``, same order of operations)."""

@@ -176,8 +176,9 @@ class GovernanceView(Protocol):
         ``sent``, the normalised action the layer handed the env."""
         ...
 
-    def counterfactual(self, env: Any, executed: Action) -> Any:
-        """The outcome of executing ``executed`` from ``env``'s current state, leaving ``env`` untouched."""
+    def oracle(self, env: Any) -> Callable[[Action], Any]:
+        """The counterfactual oracle of ``env``: a function from an executed action to the outcome
+        executing it from ``env``'s current state would have, leaving ``env`` untouched."""
         ...
 
     def outcome_cost(self, outcome: Any) -> float:
