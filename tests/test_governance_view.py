@@ -13,7 +13,7 @@ import pytest
 from solarchain_eval.governance import AgenticOptions, Governance
 from solarchain_eval.governance.llm_agent import LLMAgent
 from solarchain_eval.governance.planner import episode_context
-from solarchain_eval.governance.schemas import ActionBounds, AuditPolicy, Bounds, PlannerOutput
+from solarchain_eval.governance.schemas import AuditPolicy
 from solarchain_eval.governance.wrapper import EXTRA_DIAGNOSTICS_KEY, EXTRA_LOG_KEY
 from solarchain_eval.llm.client import LLMReply
 from solarchain_eval.tasks.governance_view import (
@@ -155,6 +155,7 @@ def test_the_rule_layer_governs_the_toy_market_through_its_view():
     extras, observations, _, sent = run_governed(AgenticOptions(planner="rule", auditor="rule"), ToyView())
     rows = extras[EXTRA_LOG_KEY]
     assert len(rows) == STEPS
+    assert list(rows[0]["plan"]["bounds"]) == ["release", "reorder", "margin"]  # the view's levers name the plan
     plan = rows[0]["plan"]["audit_policy"]
     for row, observation, action in zip(rows, observations, sent, strict=True):
         gap = float(_gap(float(observation[0]), float(observation[1])))
@@ -213,14 +214,15 @@ class ScriptedClient:
 
 
 def test_llm_planner_and_agent_speak_the_views_text_and_levers():
+    from solarchain_eval.governance.auditor import LLMAuditor, StepContext
     from solarchain_eval.governance.planner import LLMPlanner
     from solarchain_eval.llm.errors import CallSite
 
-    wide = Bounds(low=0.0, high=1.0)
-    plan = PlannerOutput(
-        governance_mode="toy",
-        action_bounds=ActionBounds(reward_ratio=Bounds(low=0.0, high=0.4), liquidity_ratio=wide, burn_rate=wide),
-        audit_policy=AuditPolicy(
+    wide = {"low": 0.0, "high": 1.0}
+    plan = {
+        "governance_mode": "toy",
+        "action_bounds": {"release": {"low": 0.0, "high": 0.4}, "reorder": wide, "margin": wide},
+        "audit_policy": AuditPolicy(
             violation_threshold=0.5,
             gap_threshold=-0.5,
             jitter_threshold=3.0,
@@ -228,20 +230,57 @@ def test_llm_planner_and_agent_speak_the_views_text_and_levers():
             max_audits_per_episode=2,
             target_audit_rate=0.2,
             cooldown_steps=0,
-        ),
-        rationale="scripted",
-    )
+        ).model_dump(),
+        "rationale": "scripted",
+    }
     env = ToyEnv()
     env.reset(seed=1)
     client = ScriptedClient([plan])
     view = ToyView()
-    outcome = LLMPlanner(client, view.codec, view.prompts).plan(
+    levers = tuple(TOY_PROMPTS.lever_descriptions.items())
+    outcome = LLMPlanner(client, view.codec, view.prompts, levers).plan(
         episode_context(env, 0, view), CallSite("planner", "p", 0, 0)
     )
     assert client.messages[0][0]["content"] == TOY_PROMPTS.system
     assert client.messages[0][1]["content"].startswith(TOY_PROMPTS.planner_instruction)
+    assert (
+        '"benchmark_ranges":{"release":[0.0,1.0],"reorder":[0.0,1.0],"margin":[0.0,1.0]'
+        in client.messages[0][1]["content"]
+    )
     assert '"opening_stock":5' in client.messages[0][1]["content"]
     assert outcome.plan.bounds[0] == (0.0, 0.4)
+    assert list(outcome.plan.to_log()["bounds"]) == ["release", "reorder", "margin"]
+
+    verdict = {
+        "decision": "revise",
+        "final_action": {"release": 0.1, "reorder": 1.5, "margin": 0.0},
+        "risk_assessment": {"physics": "low", "liquidity": "high", "jitter": "low", "fairness": "unknown"},
+        "reason": "scripted",
+    }
+    auditor_client = ScriptedClient([verdict])
+    step = StepContext(
+        step=3,
+        hour=3,
+        observation={"stock": 1.0, "demand": 2.0},
+        violation_rate=0.0,
+        supply_gap=-0.5,
+        static_slippage=2.0,
+        bounded_action=(0.4, 0.5, 0.0),
+        previous_action=(0.0, 0.0, 0.0),
+        kappa=0.9,
+        plan=outcome.plan,
+        hard_reasons=("gap",),
+        soft_trigger=False,
+        recent=None,
+    )
+    audited = LLMAuditor(auditor_client, view.codec, view.prompts, levers).audit(
+        step, CallSite("auditor", "p", 0, 0, 3)
+    )
+    message = auditor_client.messages[0][1]["content"]
+    assert message.startswith(TOY_PROMPTS.auditor_instruction)
+    assert '"bounded_proposed_action":{"release":0.4,"reorder":0.5,"margin":0.0}' in message
+    assert audited.final_action == (np.float32(0.1), 1.0, 0.0)  # reorder clipped to its range
+    assert audited.llm["clipped"][0]["field"] == "final_action.reorder"
 
     agent_client = ScriptedClient([{"release": 0.25, "reorder": 0.5, "margin": 2.0}])
     agent = LLMAgent(agent_client, view, name="toy-llm")

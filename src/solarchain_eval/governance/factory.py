@@ -191,6 +191,8 @@ class Governance:
         self.options = options
         self.view: GovernanceView = resolve_view(view)
         codec = self.view.codec
+        described = self.view.prompts.lever_descriptions
+        self.levers = tuple((name, described.get(name, name)) for name in self.view.lever_names)
         self.client: StructuredLLM | None = None
         if options.uses_llm:
             assert options.llm is not None
@@ -202,13 +204,13 @@ class Governance:
 
     def _planner(self, kind: str, codec: LeverCodec) -> Planner:
         if kind == "rule":
-            return RulePlanner(codec)
+            return RulePlanner(codec, self.levers)
         if kind == "default":
-            return DefaultPlanner(codec)
+            return DefaultPlanner(codec, self.levers)
         if kind == "calibrated-rule":
-            return CalibratedRulePlanner(codec, self.options.target_audit_rate)
+            return CalibratedRulePlanner(codec, self.options.target_audit_rate, self.levers)
         assert self.client is not None
-        return LLMPlanner(self.client, codec, self.view.prompts)
+        return LLMPlanner(self.client, codec, self.view.prompts, self.levers)
 
     def _auditor(self, kind: str, codec: LeverCodec) -> Auditor:
         if kind == "rule":
@@ -224,7 +226,7 @@ class Governance:
         if kind == "oracle":
             return OracleAuditor(codec, self.options.oracle_reward_loss, self.view)
         assert self.client is not None
-        return LLMAuditor(self.client, codec, self.view.prompts)
+        return LLMAuditor(self.client, codec, self.view.prompts, self.levers)
 
     def wrap(self, policy: Policy) -> GovernedPolicy:
         return GovernedPolicy(

@@ -22,7 +22,16 @@ from ..llm.client import StructuredLLM
 from ..llm.errors import CallSite
 from ..tasks.governance_view import EpisodeRisk, GovernancePrompts, GovernanceView, LeverCodec
 from .prompts import planner_messages
-from .schemas import ACTION_FIELDS, ActionBounds, AuditPolicy, Bounds, Plan, PlannerOutput, validate_plan
+from .schemas import (
+    ACTION_FIELDS,
+    AuditPolicy,
+    Levers,
+    Plan,
+    PlannerOutput,
+    action_bounds,
+    output_models,
+    validate_plan,
+)
 from .view import resolve_view
 
 PLANNER_KINDS = ("rule", "llm", "default", "calibrated-rule")
@@ -91,10 +100,10 @@ class EpisodeContext:
             hourly_signals=tuple(np.clip(x.astype(np.float32), -10.0, 10.0) for x in (violation, gap, slippage)),
         )
 
-    def to_prompt(self, codec: LeverCodec) -> dict[str, Any]:
+    def to_prompt(self, codec: LeverCodec, lever_names: tuple[str, ...] = ACTION_FIELDS) -> dict[str, Any]:
         # Run-constant keys first: they form a prefix shared with the previous planner call.
         return {
-            "benchmark_ranges": benchmark_ranges(codec),
+            "benchmark_ranges": benchmark_ranges(codec, lever_names),
             "episode_steps": self.episode_steps,
             "physics_penalty_in_reward": self.physics_penalty,
             "start_hour_of_day": self.start_hour % 24,
@@ -131,17 +140,18 @@ class Planner(Protocol):
     def plan(self, context: EpisodeContext, site: CallSite) -> PlanOutcome: ...
 
 
-def _bounds(low: float, high: float) -> Bounds:
-    return Bounds(low=low, high=high)
-
-
 class RulePlanner:
-    """The rule planner (docs/planner_auditor.md#rule-planner)."""
+    """The rule planner (docs/planner_auditor.md#rule-planner).
+
+    ``levers`` (name, description) of the market's levers names the output's bounds (None: the
+    solar market's).
+    """
 
     kind = "rule"
 
-    def __init__(self, codec: LeverCodec) -> None:
+    def __init__(self, codec: LeverCodec, levers: Levers | None = None) -> None:
         self.codec = codec
+        self.output_model = output_models(levers)[0]
 
     def output(self, context: EpisodeContext) -> PlannerOutput:
         lo, hi = self.codec.lo, self.codec.hi
@@ -151,23 +161,18 @@ class RulePlanner:
             or context.mean_static_slippage > RISK_MEAN_SLIPPAGE
         )
         if risky:
-            return PlannerOutput(
+            return self.output_model(
                 governance_mode="rule_conservative",
-                action_bounds=ActionBounds(
-                    reward_ratio=_bounds(lo[0], min(0.45, hi[0])),
-                    liquidity_ratio=_bounds(max(0.35, lo[1]), hi[1]),
-                    burn_rate=_bounds(0.02, min(0.18, hi[2])),
+                action_bounds=action_bounds(
+                    self.output_model,
+                    [(lo[0], min(0.45, hi[0])), (max(0.35, lo[1]), hi[1]), (0.02, min(0.18, hi[2]))],
                 ),
                 audit_policy=CONSERVATIVE_POLICY,
                 rationale="Episode risk signals (violations, shortfall or slippage) call for conservative bounds.",
             )
-        return PlannerOutput(
+        return self.output_model(
             governance_mode="rule_balanced",
-            action_bounds=ActionBounds(
-                reward_ratio=_bounds(lo[0], hi[0]),
-                liquidity_ratio=_bounds(lo[1], hi[1]),
-                burn_rate=_bounds(lo[2], hi[2]),
-            ),
+            action_bounds=action_bounds(self.output_model, list(zip(lo, hi, strict=True))),
             audit_policy=BALANCED_POLICY,
             rationale="Low episode risk: full action ranges with balanced audit thresholds.",
         )
@@ -182,18 +187,14 @@ class DefaultPlanner:
 
     kind = "default"
 
-    def __init__(self, codec: LeverCodec) -> None:
+    def __init__(self, codec: LeverCodec, levers: Levers | None = None) -> None:
         self.codec = codec
+        self.output_model = output_models(levers)[0]
 
     def plan(self, context: EpisodeContext, site: CallSite) -> PlanOutcome:
-        lo, hi = self.codec.lo, self.codec.hi
-        output = PlannerOutput(
+        output = self.output_model(
             governance_mode="default_full_bounds",
-            action_bounds=ActionBounds(
-                reward_ratio=_bounds(lo[0], hi[0]),
-                liquidity_ratio=_bounds(lo[1], hi[1]),
-                burn_rate=_bounds(lo[2], hi[2]),
-            ),
+            action_bounds=action_bounds(self.output_model, list(zip(self.codec.lo, self.codec.hi, strict=True))),
             audit_policy=BALANCED_POLICY,
             rationale="Default plan: full action ranges, balanced audit thresholds.",
         )
@@ -206,13 +207,21 @@ class LLMPlanner:
 
     kind = "llm"
 
-    def __init__(self, client: StructuredLLM, codec: LeverCodec, prompts: GovernancePrompts | None = None) -> None:
+    def __init__(
+        self,
+        client: StructuredLLM,
+        codec: LeverCodec,
+        prompts: GovernancePrompts | None = None,
+        levers: Levers | None = None,
+    ) -> None:
         self.client = client
         self.codec = codec
         self.prompts = prompts  # the market's text (None: the default task's)
+        self.output_model = output_models(levers)[0]
+        self.lever_names = tuple(self.output_model.model_fields["action_bounds"].annotation.model_fields)  # type: ignore[union-attr]
 
     def plan(self, context: EpisodeContext, site: CallSite) -> PlanOutcome:
-        messages = planner_messages(context.to_prompt(self.codec), self.prompts)
-        reply = self.client.request(messages, PlannerOutput, site)
+        messages = planner_messages(context.to_prompt(self.codec, self.lever_names), self.prompts)
+        reply = self.client.request(messages, self.output_model, site)
         plan, events = validate_plan(reply.output, self.codec, context.episode_steps)  # type: ignore[arg-type]
         return PlanOutcome(plan, {**reply.meta, "clipped": [e.to_log() for e in events]})

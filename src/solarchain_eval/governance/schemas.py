@@ -110,6 +110,55 @@ class AuditorOutput(_StrictOutput):
     reason: str = Field(description="Why (logged, never executed).")
 
 
+Levers = tuple[tuple[str, str], ...]  # (name, description) of each lever, in order
+
+
+@functools.cache  # one pair of classes per set of levers: the same schemas (and cache keys) every call
+def output_models(levers: Levers | None = None) -> tuple[type[PlannerOutput], type[AuditorOutput]]:
+    """The Planner's and the Auditor's output models for a market's levers.
+
+    ``levers`` None or the solar market's three names: :class:`PlannerOutput` and
+    :class:`AuditorOutput` themselves. Other names: the same models with ``action_bounds`` and
+    ``final_action`` holding one field per lever (each bounds field described by the lever's text).
+    """
+    if levers is None or tuple(name for name, _ in levers) == ACTION_FIELDS:
+        return PlannerOutput, AuditorOutput
+    bounds = create_model(
+        "ActionBounds",
+        __base__=_StrictOutput,
+        **{name: (Bounds, Field(description=f"Bounds on {text}")) for name, text in levers},
+    )
+    values = create_model("ActionValues", __base__=_StrictOutput, **{name: (float, ...) for name, _ in levers})
+    planner_fields, auditor_fields = PlannerOutput.model_fields, AuditorOutput.model_fields
+    planner = create_model(
+        "PlannerOutput",
+        __base__=_StrictOutput,
+        __doc__=PlannerOutput.__doc__,
+        governance_mode=(str, planner_fields["governance_mode"]),
+        action_bounds=(bounds, ...),
+        audit_policy=(AuditPolicy, ...),
+        rationale=(str, planner_fields["rationale"]),
+    )
+    auditor = create_model(
+        "AuditorOutput",
+        __base__=_StrictOutput,
+        __doc__=AuditorOutput.__doc__,
+        decision=(Literal["approve", "revise"], auditor_fields["decision"]),
+        final_action=(values, auditor_fields["final_action"]),
+        risk_assessment=(RiskAssessment, ...),
+        reason=(str, auditor_fields["reason"]),
+    )
+    return planner, auditor  # type: ignore[return-value]
+
+
+def action_bounds(model: type[PlannerOutput], bounds: list[tuple[float, float]]) -> Any:
+    """The ``action_bounds`` value of ``model`` with one (low, high) pair per lever, in order."""
+    fields = model.model_fields["action_bounds"].annotation.model_fields  # type: ignore[union-attr]
+    return model.model_fields["action_bounds"].annotation(  # type: ignore[misc]
+        **{name: Bounds(low=low, high=high) for name, (low, high) in zip(fields, bounds, strict=True)}
+    )
+
+
 class AgentAction(_StrictOutput):
     """This hour's action, in market units, each value inside its range."""
 
@@ -181,11 +230,13 @@ class Plan:
     target_audit_rate: float
     cooldown_steps: int
     rationale: str
+    #: The levers' names, the keys of the logged bounds (the Planner's output's ``action_bounds`` fields).
+    lever_names: tuple[str, str, str] = ACTION_FIELDS
 
     def to_log(self) -> dict[str, Any]:
         return {
             "governance_mode": self.governance_mode,
-            "bounds": {name: list(pair) for name, pair in zip(ACTION_FIELDS, self.bounds, strict=True)},
+            "bounds": {name: list(pair) for name, pair in zip(self.lever_names, self.bounds, strict=True)},
             "audit_policy": {
                 "violation_threshold": self.violation_threshold,
                 "gap_threshold": self.gap_threshold,
@@ -231,9 +282,8 @@ def validate_plan(output: PlannerOutput, codec: LeverCodec, episode_steps: int) 
     """
     events: list[ClipEvent] = []
     bounds = []
-    for name, pair, low, high in zip(
-        ACTION_FIELDS, _bound_pairs(output.action_bounds), codec.lo, codec.hi, strict=True
-    ):
+    names = tuple(type(output.action_bounds).model_fields)
+    for name, pair, low, high in zip(names, _bound_pairs(output.action_bounds), codec.lo, codec.hi, strict=True):
         lo, hi = pair
         if lo > hi:
             events.append(ClipEvent(f"action_bounds.{name}", [lo, hi], [hi, lo]))
@@ -264,25 +314,27 @@ def validate_plan(output: PlannerOutput, codec: LeverCodec, episode_steps: int) 
         ),
         cooldown_steps=int(_clip("audit_policy.cooldown_steps", p.cooldown_steps, 0, episode_steps, events)),
         rationale=_cap_text("rationale", output.rationale, TEXT_MAX_CHARS, events),
+        lever_names=names,  # type: ignore[arg-type]
     )
     return plan, events
 
 
 def _bound_pairs(bounds: ActionBounds) -> list[tuple[float, float]]:
-    return [(b.low, b.high) for b in (bounds.reward_ratio, bounds.liquidity_ratio, bounds.burn_rate)]
+    return [(b.low, b.high) for b in (getattr(bounds, name) for name in type(bounds).model_fields)]
 
 
 def validate_audit(output: AuditorOutput, codec: LeverCodec) -> tuple[AuditVerdict, list[ClipEvent]]:
     """Sanitise the auditor's action (ranges and α + ℓ ≤ cap, float32) and cap its text."""
     events: list[ClipEvent] = []
-    raw = (output.final_action.reward_ratio, output.final_action.liquidity_ratio, output.final_action.burn_rate)
+    names = tuple(type(output.final_action).model_fields)
+    raw = tuple(getattr(output.final_action, name) for name in names)
     clipped = [
         _clip(f"final_action.{name}", value, low, high, events)
-        for name, value, low, high in zip(ACTION_FIELDS, raw, codec.lo, codec.hi, strict=True)
+        for name, value, low, high in zip(names, raw, codec.lo, codec.hi, strict=True)
     ]
     total = clipped[0] + clipped[1]
     if total > codec.max_total_allocation:
-        events.append(ClipEvent("final_action.reward_ratio+liquidity_ratio", total, codec.max_total_allocation))
+        events.append(ClipEvent(f"final_action.{names[0]}+{names[1]}", total, codec.max_total_allocation))
     final = codec.sanitize(*raw)
     verdict = AuditVerdict(
         decision=output.decision,
