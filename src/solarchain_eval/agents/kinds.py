@@ -13,6 +13,8 @@ from collections.abc import Callable
 from typing import Any
 
 from ..common.redaction import redact_spec
+from ..tasks.governance_view import governance_view_of
+from ..tasks.registry import get_task
 from .adapters import AgentError, AgentFailure, SB3ModelAgent, as_agent, discrete_actions
 from .base import Policy
 from .named import LLM_AGENT_FACTORY, load_factory, make_policy
@@ -39,7 +41,9 @@ def _llm(request: AgentRequest, context: AgentContext) -> Policy:
             "the llm-agent needs a model endpoint: {opt_llm_backend} local, or {opt_llm_api} URL with {opt_llm_model}"
         )
     open_llm_agent = load_factory(LLM_AGENT_FACTORY)
-    return open_llm_agent(request.llm, context.config.market, name=spec.name or LLM_AGENT)
+    return open_llm_agent(
+        request.llm, governance_view_of(get_task(context.task), context.config), name=spec.name or LLM_AGENT
+    )
 
 
 def _sb3(request: AgentRequest, context: AgentContext) -> Policy:

@@ -31,6 +31,7 @@ from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS, episode_seed_rule_name, paper_episode_seeds
 from ..records_schema import RECORDS_SCHEMA_VERSION
 from ..tasks.base import Task
+from ..tasks.governance_view import governance_view_of
 from ..tasks.registry import DEFAULT_TASK, get_task
 from .fingerprint import protocol_fingerprint, protocol_id
 from .inflight import run_in_flight
@@ -300,7 +301,11 @@ def run_evaluation(
     with ExitStack() as stack:
         policies = make_policies(spec, stack)
         writer = stack.enter_context(RunDirWriter(run_dir, overwrite=overwrite, keep=keep))
-        governance = stack.enter_context(Governance(spec.agentic, config.market)) if spec.agentic is not None else None
+        governance = (
+            stack.enter_context(Governance(spec.agentic, governance_view_of(task, config)))
+            if spec.agentic is not None
+            else None
+        )
         assert writer.staging is not None
         stream = stack.enter_context(RecordStream(writer.staging, extras, step_format, task))
         results: list[EpisodeResult] = []

@@ -38,6 +38,7 @@ from ..governance.factory import AgenticOptions, Governance, LLMOptions
 from ..llm.errors import LLMError
 from ..protocol import EPISODE_SEED_RULES
 from ..tasks.base import Task
+from ..tasks.governance_view import governance_view_of
 from ..tasks.registry import DEFAULT_TASK
 from .inflight import is_stateless
 from .records import METRICS_FILE
@@ -406,7 +407,9 @@ def _verify_policies(
     if common:
         return [PolicyVerification(n, CANNOT_REBUILD, reason=common) for n in names]
     assert rule is not None and not isinstance(agentic, str)
-    governance = stack.enter_context(Governance(agentic, config.market)) if agentic is not None else None
+    governance = (
+        stack.enter_context(Governance(agentic, governance_view_of(task, config))) if agentic is not None else None
+    )
     rerun = _Rerun(
         task=task,
         config=config,

@@ -23,11 +23,11 @@ import numpy as np
 
 from ..llm.client import StructuredLLM
 from ..llm.errors import CallSite
-from ..market.actions import ActionCodec
+from ..tasks.governance_view import GovernancePrompts, LeverCodec
 from .planner import benchmark_ranges
 from .prompts import auditor_messages
 from .scheduler import Action, action_delta
-from .schemas import ACTION_FIELDS, AuditorOutput, Plan, validate_audit
+from .schemas import Levers, Plan, output_models, validate_audit
 
 AUDITOR_KINDS = ("rule", "llm", "approve-only", "always-audit", "random", "oracle")
 #: Observation fields the auditor prompt leaves out: they repeat ``hour_of_day`` and ``previous_action``.
@@ -58,13 +58,13 @@ class StepContext:
     hard_reasons: tuple[str, ...]
     soft_trigger: bool
     recent: dict[str, float] | None
-    #: The step's counterfactual evaluator (market-unit action -> StepOutcome from the same
-    #: state and price shock; docs/governance.md); never shown to a model.
+    #: The step's counterfactual evaluator (market-unit action -> the market's outcome from the
+    #: same state and price shock; docs/governance.md); never shown to a model.
     counterfactual: Callable[[Action], Any] | None = field(default=None, compare=False, repr=False)
 
-    def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
+    def to_prompt(self, codec: LeverCodec) -> dict[str, Any]:
         def named(action: Action) -> dict[str, float]:
-            return {name: round(float(v), 6) for name, v in zip(ACTION_FIELDS, action, strict=True)}
+            return {name: round(float(v), 6) for name, v in zip(self.plan.lever_names, action, strict=True)}
 
         policy = self.plan.to_log()
         del policy["rationale"]  # model-written free text: long, and nothing to decide on
@@ -75,7 +75,7 @@ class StepContext:
             k: float(f"{v:.6g}") for k, v in self.observation.items() if k not in PROMPT_OMITTED_OBSERVATIONS
         }
         return {
-            "benchmark_ranges": benchmark_ranges(codec),
+            "benchmark_ranges": benchmark_ranges(codec, self.plan.lever_names),
             "planner_policy": policy,
             "step": self.step,
             "hour_of_day": self.hour,
@@ -117,7 +117,7 @@ def rule_risks(context: StepContext) -> tuple[bool, bool, bool]:
     )
 
 
-def rule_revision(context: StepContext, codec: ActionCodec) -> tuple[Action, list[str]]:
+def rule_revision(context: StepContext, codec: LeverCodec) -> tuple[Action, list[str]]:
     """The rule auditor's revised action (sanitised float32) and the risks that drove it."""
     physics, liquidity, jitter = rule_risks(context)
     a = np.array(context.bounded_action, dtype=_F32)
@@ -143,7 +143,7 @@ class RuleAuditor:
 
     kind = "rule"
 
-    def __init__(self, codec: ActionCodec) -> None:
+    def __init__(self, codec: LeverCodec) -> None:
         self.codec = codec
 
     def audit(self, context: StepContext, site: CallSite) -> AuditOutcome:
@@ -167,12 +167,21 @@ class LLMAuditor:
 
     kind = "llm"
 
-    def __init__(self, client: StructuredLLM, codec: ActionCodec) -> None:
+    def __init__(
+        self,
+        client: StructuredLLM,
+        codec: LeverCodec,
+        prompts: GovernancePrompts | None = None,
+        levers: Levers | None = None,
+    ) -> None:
         self.client = client
         self.codec = codec
+        self.prompts = prompts  # the market's text (None: the default task's)
+        self.output_model = output_models(levers)[1]
 
     def audit(self, context: StepContext, site: CallSite) -> AuditOutcome:
-        reply = self.client.request(auditor_messages(context.to_prompt(self.codec)), AuditorOutput, site)
+        messages = auditor_messages(context.to_prompt(self.codec), self.prompts)
+        reply = self.client.request(messages, self.output_model, site)
         verdict, events = validate_audit(reply.output, self.codec)  # type: ignore[arg-type]
         llm = {**reply.meta, "clipped": [e.to_log() for e in events]}
         final = verdict.final_action if verdict.decision == "revise" else context.bounded_action

@@ -14,7 +14,7 @@ from __future__ import annotations
 import numpy as np
 
 from ..llm.errors import CallSite
-from ..market.actions import ActionCodec
+from ..tasks.governance_view import LeverCodec
 from .errors import GovernanceConfigError
 from .planner import EpisodeContext, PlanOutcome, RulePlanner
 from .schemas import (
@@ -23,7 +23,7 @@ from .schemas import (
     SLIPPAGE_THRESHOLD_RANGE,
     VIOLATION_THRESHOLD_RANGE,
     AuditPolicy,
-    PlannerOutput,
+    Levers,
     validate_plan,
 )
 
@@ -97,15 +97,17 @@ class CalibratedRulePlanner(RulePlanner):
 
     Parameters
     ----------
-    codec : ActionCodec
+    codec : LeverCodec
     target_rate : float
         The audit rate to reach, in (0, 1].
     """
 
     kind = "calibrated-rule"
 
-    def __init__(self, codec: ActionCodec, target_rate: float = DEFAULT_TARGET_AUDIT_RATE) -> None:
-        super().__init__(codec)
+    def __init__(
+        self, codec: LeverCodec, target_rate: float = DEFAULT_TARGET_AUDIT_RATE, levers: Levers | None = None
+    ) -> None:
+        super().__init__(codec, levers)
         if not 0.0 < target_rate <= 1.0:
             raise GovernanceConfigError(
                 f"the calibrated planner's target audit rate must be in (0, 1], got {target_rate}"
@@ -119,7 +121,7 @@ class CalibratedRulePlanner(RulePlanner):
         (tv, tg, ts), rate = calibrated_thresholds(context.hourly_signals, self.target_rate)
         steps = context.episode_steps
         budget = max(int(np.round(self.target_rate * steps)), 1)
-        output = PlannerOutput(
+        output = self.output_model(
             governance_mode=rule.governance_mode.replace("rule_", "calibrated_"),
             action_bounds=rule.action_bounds,
             audit_policy=AuditPolicy(

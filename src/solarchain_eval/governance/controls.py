@@ -8,9 +8,9 @@ Auditor controls (selected with ``--auditor`` like ``rule`` and ``approve-only``
   (``random_audit_rate``), or else the plan's budget B, with the rule auditor's revision.
   Against ``rule`` it isolates the selectivity of the triggers.
 - ``oracle``: the scheduler's steps, and on each the action of the benchmark's 125-point grid
-  (or ā) that minimises the counterfactual cost V + A with a reward loss against ā of at most
-  ``oracle_reward_loss``. With an unbounded loss its cost is the least any action can reach,
-  as cost only grows with α + ℓ.
+  (or ā) that minimises the counterfactual cost (the market's view's; the solar market's V + A)
+  with a reward loss against ā of at most ``oracle_reward_loss``. With an unbounded loss, on the
+  solar market, its cost is the least any action can reach, as cost only grows with α + ℓ.
 
 Scheduler ablations (:class:`SchedulerControls`): which triggers may call an audit (all, hard
 only, soft only, one hard trigger alone) and overrides of the plan's budget and cooldown.
@@ -26,11 +26,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..llm.errors import CallSite
-from ..market.actions import ActionCodec
+from ..tasks.governance_view import GovernanceView, LeverCodec
 from .auditor import REVISION_TOLERANCE, AuditOutcome, RuleAuditor, StepContext
-from .counterfactual import executed_form, step_cost
+from .counterfactual import executed_form
 from .errors import GovernanceConfigError
 from .scheduler import HARD_REASONS, Decision, action_delta
+from .view import default_view
 
 #: Trigger sets of the ablations: every trigger, the hard ones, the soft one, or one hard trigger.
 TRIGGER_SETS = ("all", "hard", "soft", *HARD_REASONS)
@@ -121,7 +122,7 @@ class RandomAuditor(RuleAuditor):
 
     Parameters
     ----------
-    codec : ActionCodec
+    codec : LeverCodec
     rates : float or mapping of policy name -> float, optional
         The audit rate to match (a mapping gives each policy its own, e.g. the reference
         auditor's measured rate); None or a policy absent from the mapping: the plan's budget B.
@@ -135,7 +136,7 @@ class RandomAuditor(RuleAuditor):
 
     def __init__(
         self,
-        codec: ActionCodec,
+        codec: LeverCodec,
         rates: float | Mapping[str, float] | None = None,
         seed: int = 0,
         counts: Mapping[tuple[str, int, int], int] | None = None,
@@ -162,17 +163,22 @@ class OracleAuditor:
 
     Parameters
     ----------
-    codec : ActionCodec
+    codec : LeverCodec
     reward_loss : float
         Largest admissible reward(ā) - reward(a) per audited step (``inf``: unbounded).
+    view : GovernanceView, optional
+        The market's view, which reads an outcome's cost and reward (None: the default task's).
     """
 
     kind = "oracle"
 
-    def __init__(self, codec: ActionCodec, reward_loss: float = DEFAULT_ORACLE_REWARD_LOSS) -> None:
+    def __init__(
+        self, codec: LeverCodec, reward_loss: float = DEFAULT_ORACLE_REWARD_LOSS, view: GovernanceView | None = None
+    ) -> None:
         if not (reward_loss >= 0):
             raise GovernanceConfigError(f"the oracle's reward-loss bound must be non-negative, got {reward_loss}")
         self.codec = codec
+        self.view = view if view is not None else default_view()
         self.reward_loss = float(reward_loss)
         self.grid = codec.discrete_table(ORACLE_GRID_LEVELS)
         # Each candidate with the form the env executes, computed once (the evaluator would
@@ -185,18 +191,21 @@ class OracleAuditor:
         evaluate = context.counterfactual
         if evaluate is None:
             raise GovernanceConfigError("the oracle auditor needs the counterfactual evaluator (a governed env step)")
+        cost_of, reward_of = self.view.outcome_cost, self.view.outcome_reward
         base = evaluate(context.bounded_action)
-        floor = base.reward - self.reward_loss if math.isfinite(self.reward_loss) else -math.inf
-        best, best_cost, best_reward = context.bounded_action, step_cost(base), base.reward
+        base_reward = reward_of(base)
+        floor = base_reward - self.reward_loss if math.isfinite(self.reward_loss) else -math.inf
+        best, best_cost, best_reward = context.bounded_action, cost_of(base), base_reward
         evaluate_executed = getattr(evaluate, "executed", None)
         for action, executed in zip(self.grid, self._executed, strict=True):
             outcome = evaluate_executed(executed) if evaluate_executed is not None else evaluate(action)
-            if outcome.reward < floor:
+            reward = reward_of(outcome)
+            if reward < floor:
                 continue
-            cost = step_cost(outcome)
+            cost = cost_of(outcome)
             improves = cost < best_cost or (best is not context.bounded_action and cost == best_cost)
-            if improves and (cost < best_cost or outcome.reward > best_reward):
-                best, best_cost, best_reward = action, cost, outcome.reward
+            if improves and (cost < best_cost or reward > best_reward):
+                best, best_cost, best_reward = action, cost, reward
         return best, best_cost, best_reward
 
     def audit(self, context: StepContext, site: CallSite) -> AuditOutcome:

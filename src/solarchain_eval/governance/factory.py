@@ -8,15 +8,15 @@ from pathlib import Path
 from typing import Any
 
 from ..agents.base import Policy
-from ..config import MarketConfig
 from ..llm.client import LLMSettings, StructuredLLM
 from ..llm.errors import LLMConfigError
-from ..market.actions import ActionCodec
+from ..tasks.governance_view import GovernanceView, LeverCodec
 from .auditor import AUDITOR_KINDS, ApproveOnlyAuditor, Auditor, LLMAuditor, RuleAuditor
 from .calibrated import DEFAULT_TARGET_AUDIT_RATE, CalibratedRulePlanner
 from .controls import DEFAULT_ORACLE_REWARD_LOSS, AlwaysAuditAuditor, OracleAuditor, RandomAuditor, SchedulerControls
 from .errors import GovernanceConfigError
 from .planner import PLANNER_KINDS, DefaultPlanner, LLMPlanner, Planner, RulePlanner
+from .view import resolve_view
 from .wrapper import GovernedPolicy
 
 
@@ -178,11 +178,21 @@ class Governance:
     """Wraps policies with one planner and auditor; owns the shared LLM client.
 
     Use as a context manager (or call :meth:`close`) so the HTTP client is released.
+
+    Parameters
+    ----------
+    options : AgenticOptions
+    view : GovernanceView or config
+        The governed market's view (``task.governance_view(config)``); a benchmark config or its
+        market section stands for the default task's view of it (the solar market).
     """
 
-    def __init__(self, options: AgenticOptions, market: MarketConfig) -> None:
+    def __init__(self, options: AgenticOptions, view: Any) -> None:
         self.options = options
-        codec = ActionCodec.from_config(market)
+        self.view: GovernanceView = resolve_view(view)
+        codec = self.view.codec
+        described = self.view.prompts.lever_descriptions
+        self.levers = tuple((name, described.get(name, name)) for name in self.view.lever_names)
         self.client: StructuredLLM | None = None
         if options.uses_llm:
             assert options.llm is not None
@@ -192,17 +202,17 @@ class Governance:
         self.planner = self._planner(options.planner, codec)
         self.auditor = self._auditor(options.auditor, codec)
 
-    def _planner(self, kind: str, codec: ActionCodec) -> Planner:
+    def _planner(self, kind: str, codec: LeverCodec) -> Planner:
         if kind == "rule":
-            return RulePlanner(codec)
+            return RulePlanner(codec, self.levers)
         if kind == "default":
-            return DefaultPlanner(codec)
+            return DefaultPlanner(codec, self.levers)
         if kind == "calibrated-rule":
-            return CalibratedRulePlanner(codec, self.options.target_audit_rate)
+            return CalibratedRulePlanner(codec, self.options.target_audit_rate, self.levers)
         assert self.client is not None
-        return LLMPlanner(self.client, codec)
+        return LLMPlanner(self.client, codec, self.view.prompts, self.levers)
 
-    def _auditor(self, kind: str, codec: ActionCodec) -> Auditor:
+    def _auditor(self, kind: str, codec: LeverCodec) -> Auditor:
         if kind == "rule":
             return RuleAuditor(codec)
         if kind == "approve-only":
@@ -214,13 +224,18 @@ class Governance:
                 codec, self.options.random_audit_rate, self.options.random_seed, self.options.random_audit_counts
             )
         if kind == "oracle":
-            return OracleAuditor(codec, self.options.oracle_reward_loss)
+            return OracleAuditor(codec, self.options.oracle_reward_loss, self.view)
         assert self.client is not None
-        return LLMAuditor(self.client, codec)
+        return LLMAuditor(self.client, codec, self.view.prompts, self.levers)
 
     def wrap(self, policy: Policy) -> GovernedPolicy:
         return GovernedPolicy(
-            policy, self.planner, self.auditor, controls=self.options.controls, diagnostics=self.options.diagnostics
+            policy,
+            self.planner,
+            self.auditor,
+            controls=self.options.controls,
+            diagnostics=self.options.diagnostics,
+            view=self.view,
         )
 
     def close(self) -> None:

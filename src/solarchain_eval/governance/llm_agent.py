@@ -7,8 +7,9 @@ the hour of day, the observation by name and the previous hour's outcome, and as
 market's ranges. A reply that does not validate (out of range, malformed) is asked again up to
 ``max_retries`` times with the problem named, then fails the run with a typed
 :class:`~solarchain_eval.llm.errors.LLMError` naming the policy, episode and step. The action is
-encoded to [0, 1]³ with the env's :class:`~solarchain_eval.market.actions.ActionCodec` (which
-also applies the α + ℓ cap), as any policy that thinks in market units.
+encoded to [0, 1]³ with the market's lever codec (for the solar market this also applies the
+α + ℓ cap), as any policy that thinks in market units. The market's governance view supplies the
+levers, the observation's names and the prompt's domain text.
 
 Fairness: the agent sees what any policy sees, no more. Its hooks take no env (the rollout passes
 the env only to hooks that declare it): only the observations, the previous step's ``info`` and
@@ -26,15 +27,13 @@ from typing import Any
 
 import numpy as np
 
-from ..config import MarketConfig
 from ..llm.client import StructuredLLM
 from ..llm.errors import CallSite
-from ..market.actions import ActionCodec
-from ..market.observation import OBSERVATION_NAMES
 from .factory import LLMOptions
 from .planner import benchmark_ranges
-from .prompts import AGENT_OBSERVATION_UNITS, AGENT_OUTCOME_UNITS, agent_messages
+from .prompts import agent_messages
 from .schemas import agent_action_model
+from .view import resolve_view
 from .wrapper import EXTRA_METRICS_KEY
 
 LLM_AGENT_NAME = "llm-agent"
@@ -55,19 +54,23 @@ class LLMAgent:
     client : StructuredLLM
         The endpoint client (its settings, cache and typed errors); the agent does not close it
         (see :func:`open_llm_agent` for one that does).
-    market : MarketConfig
-        The action ranges and the allocation cap the prompt and the schema state.
+    view : GovernanceView or config
+        The market's governance view (its levers, ranges, observation names and prompt text); a
+        benchmark config or its market section stands for the default task's view of it.
     name : str
         The ``policy`` column of the records.
     """
 
     action_mode = "continuous"
 
-    def __init__(self, client: StructuredLLM, market: MarketConfig, *, name: str = LLM_AGENT_NAME) -> None:
+    def __init__(self, client: StructuredLLM, view: Any, *, name: str = LLM_AGENT_NAME) -> None:
         self.client = client
         self.name = name
-        self.codec = ActionCodec.from_config(market)
-        self.output_type = agent_action_model(self.codec)
+        self.view = resolve_view(view)
+        self.codec = self.view.codec
+        self.prompts = self.view.prompts
+        self.output_type = agent_action_model(self.codec, self.prompts.lever_descriptions)
+        self._levers = tuple(self.prompts.lever_descriptions)
         self._owns_client = False
         self._run_seed = 0
         self._episode = 0
@@ -92,17 +95,17 @@ class LLMAgent:
     def act(self, observation: np.ndarray) -> np.ndarray:
         site = CallSite(AGENT_SITE_KIND, self.name, self._run_seed, self._episode, self._step)
         reply = self.client.request(
-            agent_messages(self.context(observation)),
+            agent_messages(self.context(observation), self.prompts),
             self.output_type,
             site,
             invalid_retries=self.client.settings.max_retries,
         )
         self._calls.append(reply.meta)
         action = reply.output
-        return self.codec.encode(action.reward_ratio, action.liquidity_ratio, action.burn_rate)  # type: ignore[attr-defined]
+        return self.codec.encode(*(getattr(action, lever) for lever in self._levers))
 
     def observe(self, info: dict[str, Any]) -> None:
-        self._previous = {name: _sig(float(info[name])) for name in AGENT_OUTCOME_UNITS}
+        self._previous = {name: _sig(float(info[name])) for name in self.prompts.agent_outcome_units}
         self._step += 1
 
     def end_episode(self) -> dict[str, Any]:
@@ -117,12 +120,12 @@ class LLMAgent:
     # --- helpers ------------------------------------------------------------------------------
     def context(self, observation: np.ndarray) -> dict[str, Any]:
         """What the prompt shows this step: run-constant keys first (a shared prompt prefix)."""
-        named = dict(zip(OBSERVATION_NAMES, observation.tolist(), strict=True))
+        named = dict(zip(self.view.observation_names, observation.tolist(), strict=True))
         return {
-            "action_ranges": benchmark_ranges(self.codec),
+            "action_ranges": benchmark_ranges(self.codec, self._levers),
             "step": self._step,
             "hour_of_day": (self._start_hour + self._step) % 24,
-            "observation": {name: _sig(named[name]) for name in AGENT_OBSERVATION_UNITS},
+            "observation": {name: _sig(named[name]) for name in self.prompts.agent_observation_units},
             "previous_hour_outcome": self._previous,
         }
 
@@ -156,7 +159,7 @@ def llm_agent_metrics(calls: list[dict[str, Any]]) -> dict[str, Any]:
     }
 
 
-def open_llm_agent(options: LLMOptions, market: MarketConfig, *, name: str = LLM_AGENT_NAME) -> LLMAgent:
+def open_llm_agent(options: LLMOptions, view: Any, *, name: str = LLM_AGENT_NAME) -> LLMAgent:
     """An :class:`LLMAgent` with its own client for ``options``; ``close()`` releases the client.
 
     Raises
@@ -165,6 +168,6 @@ def open_llm_agent(options: LLMOptions, market: MarketConfig, *, name: str = LLM
         Settings that cannot build a client (no key outside replay, a cache mode without a directory).
     """
     client = StructuredLLM(options.settings, cache_dir=options.cache_dir, cache_mode=options.cache_mode)
-    agent = LLMAgent(client, market, name=name)
+    agent = LLMAgent(client, view, name=name)
     agent._owns_client = True
     return agent

@@ -1,8 +1,9 @@
 """Planners: called once per episode, they return the bounds and audit policy in force.
 
 - ``rule`` (docs/planner_auditor.md#rule-planner): "rule_conservative" when the episode's
-  max ν > 0.01, min gap < -0.10 or mean σ > 0.75 (statistics of the hourly table over the
-  episode's 24 hours), else "rule_balanced".
+  max ν > 0.01, min gap < -0.10 or mean σ > 0.75 (its risk signals over the episode's hours, as
+  the market's governance view reads them: for the solar market, from the hourly table), else
+  "rule_balanced".
 - ``default``: the full action ranges and the balanced thresholds (isolates the Auditor).
 - ``llm``: the model's structured plan, validated and clipped (each clip logged).
 
@@ -19,9 +20,19 @@ import numpy as np
 
 from ..llm.client import StructuredLLM
 from ..llm.errors import CallSite
-from ..market.actions import ActionCodec
+from ..tasks.governance_view import EpisodeRisk, GovernancePrompts, GovernanceView, LeverCodec
 from .prompts import planner_messages
-from .schemas import ActionBounds, AuditPolicy, Bounds, Plan, PlannerOutput, validate_plan
+from .schemas import (
+    ACTION_FIELDS,
+    AuditPolicy,
+    Levers,
+    Plan,
+    PlannerOutput,
+    action_bounds,
+    output_models,
+    validate_plan,
+)
+from .view import resolve_view
 
 PLANNER_KINDS = ("rule", "llm", "default", "calibrated-rule")
 
@@ -56,10 +67,12 @@ def _sig(value: float) -> float:
 
 @dataclass(frozen=True)
 class EpisodeContext:
-    """What a planner knows before the episode: its hours' statistics and the rules.
+    """What a planner knows before the episode: its risk signals' statistics and the rules.
 
-    Statistics are over the episode's hours of the hourly table; ``supply_gap`` is the
-    observation's (G_v - Q) / max(Q, 1e-6) (unclipped, float64). Energies in MWh.
+    Built from the market's :class:`~solarchain_eval.tasks.governance_view.EpisodeRisk`
+    (:meth:`from_risk`): the three headline statistics are the maximum violation rate, the
+    minimum supply gap and the mean slippage over the episode's steps (float64); ``statistics``
+    are the market's named statistics the LLM planner's prompt shows.
     """
 
     start_hour: int
@@ -73,10 +86,24 @@ class EpisodeContext:
     #: ±10): what the calibrated planner takes its quantiles of; never shown to a model.
     hourly_signals: tuple[np.ndarray, np.ndarray, np.ndarray] | None = field(default=None, compare=False, repr=False)
 
-    def to_prompt(self, codec: ActionCodec) -> dict[str, Any]:
+    @classmethod
+    def from_risk(cls, risk: EpisodeRisk) -> EpisodeContext:
+        violation, gap, slippage = (np.asarray(x) for x in risk.signals)
+        return cls(
+            start_hour=int(risk.start_hour),
+            episode_steps=int(risk.episode_steps),
+            physics_penalty=bool(risk.penalty_in_reward),
+            max_violation_rate=float(np.max(violation)),
+            min_supply_gap=float(np.min(gap)),
+            mean_static_slippage=float(np.mean(slippage)),
+            statistics=dict(risk.statistics),
+            hourly_signals=tuple(np.clip(x.astype(np.float32), -10.0, 10.0) for x in (violation, gap, slippage)),
+        )
+
+    def to_prompt(self, codec: LeverCodec, lever_names: tuple[str, ...] = ACTION_FIELDS) -> dict[str, Any]:
         # Run-constant keys first: they form a prefix shared with the previous planner call.
         return {
-            "benchmark_ranges": benchmark_ranges(codec),
+            "benchmark_ranges": benchmark_ranges(codec, lever_names),
             "episode_steps": self.episode_steps,
             "physics_penalty_in_reward": self.physics_penalty,
             "start_hour_of_day": self.start_hour % 24,
@@ -84,47 +111,21 @@ class EpisodeContext:
         }
 
 
-def benchmark_ranges(codec: ActionCodec) -> dict[str, Any]:
-    """The action ranges and the allocation cap, as both prompts show them."""
+def benchmark_ranges(codec: LeverCodec, lever_names: tuple[str, ...] = ACTION_FIELDS) -> dict[str, Any]:
+    """The action ranges by lever name and the allocation cap, as the prompts show them."""
     return {
-        "reward_ratio": [codec.lo[0], codec.hi[0]],
-        "liquidity_ratio": [codec.lo[1], codec.hi[1]],
-        "burn_rate": [codec.lo[2], codec.hi[2]],
+        **{name: [low, high] for name, low, high in zip(lever_names, codec.lo, codec.hi, strict=True)},
         "max_total_allocation": codec.max_total_allocation,
     }
 
 
-def episode_context(env: Any, start_hour: int) -> EpisodeContext:
-    """Statistics of the episode starting at ``start_hour`` from ``env``'s hourly table."""
-    table, steps = env.table, env.episode_steps
-    hours = np.minimum(np.arange(start_hour, start_hour + steps), table.hours - 1)
-    violation = np.ascontiguousarray(table.raw_violation_rate[hours])
-    gap = np.ascontiguousarray(env.market_hours.supply_gap[hours])
-    slippage = np.ascontiguousarray(table.static_slippage[hours])
-    verified = np.ascontiguousarray(table.verified_mwh[hours])
-    demand = np.ascontiguousarray(table.demand_mwh[hours])
-    stats = {
-        "max_violation_rate": float(np.max(violation)),
-        "mean_violation_rate": float(np.mean(violation)),
-        "min_supply_gap": float(np.min(gap)),
-        "mean_supply_gap": float(np.mean(gap)),
-        "mean_static_slippage": float(np.mean(slippage)),
-        "max_static_slippage": float(np.max(slippage)),
-        "mean_verified_supply_MWh": float(np.mean(verified)),
-        "max_verified_supply_MWh": float(np.max(verified)),
-        "mean_demand_MWh": float(np.mean(demand)),
-        "hours_with_supply_shortfall": float(np.sum(gap < 0)),
-    }
-    return EpisodeContext(
-        start_hour=int(start_hour),
-        episode_steps=int(steps),
-        physics_penalty=not env.config.no_physics_penalty,
-        max_violation_rate=stats["max_violation_rate"],
-        min_supply_gap=stats["min_supply_gap"],
-        mean_static_slippage=stats["mean_static_slippage"],
-        statistics=stats,
-        hourly_signals=tuple(np.clip(x.astype(np.float32), -10.0, 10.0) for x in (violation, gap, slippage)),
-    )
+def episode_context(env: Any, start_hour: int, view: GovernanceView | None = None) -> EpisodeContext:
+    """The context of the episode ``env`` starts at ``start_hour``, from the market's governance view.
+
+    ``view`` None: the default task's view of ``env.config`` (the solar market).
+    """
+    view = view if view is not None else resolve_view(env.config)
+    return EpisodeContext.from_risk(view.episode_risk(env, int(start_hour)))
 
 
 @dataclass(frozen=True)
@@ -139,17 +140,18 @@ class Planner(Protocol):
     def plan(self, context: EpisodeContext, site: CallSite) -> PlanOutcome: ...
 
 
-def _bounds(low: float, high: float) -> Bounds:
-    return Bounds(low=low, high=high)
-
-
 class RulePlanner:
-    """The rule planner (docs/planner_auditor.md#rule-planner)."""
+    """The rule planner (docs/planner_auditor.md#rule-planner).
+
+    ``levers`` (name, description) of the market's levers names the output's bounds (None: the
+    solar market's).
+    """
 
     kind = "rule"
 
-    def __init__(self, codec: ActionCodec) -> None:
+    def __init__(self, codec: LeverCodec, levers: Levers | None = None) -> None:
         self.codec = codec
+        self.output_model = output_models(levers)[0]
 
     def output(self, context: EpisodeContext) -> PlannerOutput:
         lo, hi = self.codec.lo, self.codec.hi
@@ -159,23 +161,18 @@ class RulePlanner:
             or context.mean_static_slippage > RISK_MEAN_SLIPPAGE
         )
         if risky:
-            return PlannerOutput(
+            return self.output_model(
                 governance_mode="rule_conservative",
-                action_bounds=ActionBounds(
-                    reward_ratio=_bounds(lo[0], min(0.45, hi[0])),
-                    liquidity_ratio=_bounds(max(0.35, lo[1]), hi[1]),
-                    burn_rate=_bounds(0.02, min(0.18, hi[2])),
+                action_bounds=action_bounds(
+                    self.output_model,
+                    [(lo[0], min(0.45, hi[0])), (max(0.35, lo[1]), hi[1]), (0.02, min(0.18, hi[2]))],
                 ),
                 audit_policy=CONSERVATIVE_POLICY,
                 rationale="Episode risk signals (violations, shortfall or slippage) call for conservative bounds.",
             )
-        return PlannerOutput(
+        return self.output_model(
             governance_mode="rule_balanced",
-            action_bounds=ActionBounds(
-                reward_ratio=_bounds(lo[0], hi[0]),
-                liquidity_ratio=_bounds(lo[1], hi[1]),
-                burn_rate=_bounds(lo[2], hi[2]),
-            ),
+            action_bounds=action_bounds(self.output_model, list(zip(lo, hi, strict=True))),
             audit_policy=BALANCED_POLICY,
             rationale="Low episode risk: full action ranges with balanced audit thresholds.",
         )
@@ -190,18 +187,14 @@ class DefaultPlanner:
 
     kind = "default"
 
-    def __init__(self, codec: ActionCodec) -> None:
+    def __init__(self, codec: LeverCodec, levers: Levers | None = None) -> None:
         self.codec = codec
+        self.output_model = output_models(levers)[0]
 
     def plan(self, context: EpisodeContext, site: CallSite) -> PlanOutcome:
-        lo, hi = self.codec.lo, self.codec.hi
-        output = PlannerOutput(
+        output = self.output_model(
             governance_mode="default_full_bounds",
-            action_bounds=ActionBounds(
-                reward_ratio=_bounds(lo[0], hi[0]),
-                liquidity_ratio=_bounds(lo[1], hi[1]),
-                burn_rate=_bounds(lo[2], hi[2]),
-            ),
+            action_bounds=action_bounds(self.output_model, list(zip(self.codec.lo, self.codec.hi, strict=True))),
             audit_policy=BALANCED_POLICY,
             rationale="Default plan: full action ranges, balanced audit thresholds.",
         )
@@ -214,11 +207,21 @@ class LLMPlanner:
 
     kind = "llm"
 
-    def __init__(self, client: StructuredLLM, codec: ActionCodec) -> None:
+    def __init__(
+        self,
+        client: StructuredLLM,
+        codec: LeverCodec,
+        prompts: GovernancePrompts | None = None,
+        levers: Levers | None = None,
+    ) -> None:
         self.client = client
         self.codec = codec
+        self.prompts = prompts  # the market's text (None: the default task's)
+        self.output_model = output_models(levers)[0]
+        self.lever_names = tuple(self.output_model.model_fields["action_bounds"].annotation.model_fields)  # type: ignore[union-attr]
 
     def plan(self, context: EpisodeContext, site: CallSite) -> PlanOutcome:
-        reply = self.client.request(planner_messages(context.to_prompt(self.codec)), PlannerOutput, site)
+        messages = planner_messages(context.to_prompt(self.codec, self.lever_names), self.prompts)
+        reply = self.client.request(messages, self.output_model, site)
         plan, events = validate_plan(reply.output, self.codec, context.episode_steps)  # type: ignore[arg-type]
         return PlanOutcome(plan, {**reply.meta, "clipped": [e.to_log() for e in events]})

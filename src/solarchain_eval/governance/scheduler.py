@@ -9,11 +9,12 @@ soft ones need audits used < B and, when the cooldown c > 0, step - last audited
 
 from __future__ import annotations
 
+import struct
 from dataclasses import dataclass
 
 import numpy as np
 
-from ..market.actions import ActionCodec, action_jitter_f32
+from ..tasks.governance_view import LeverCodec
 from .schemas import Plan
 
 HARD_REASONS = ("violation", "gap", "slippage")
@@ -21,6 +22,21 @@ SKIP_BUDGET = "budget"
 SKIP_COOLDOWN = "cooldown"
 
 Action = tuple[float, float, float]
+
+# Python floats rounded to float32 by struct packing (the market's float32 scalar arithmetic).
+_F1 = struct.Struct("f")
+_F3 = struct.Struct("3f")
+
+
+def l1_f32(a: Action, b: Action) -> float:
+    """|a - b|_1 of float32 actions in float32, summed left to right (numpy's order).
+
+    The same operations as the solar market's action jitter, so κ and the action delta equal
+    the env's jitter to the last bit.
+    """
+    d0, d1, d2 = _F3.unpack(_F3.pack(abs(a[0] - b[0]), abs(a[1] - b[1]), abs(a[2] - b[2])))
+    (partial,) = _F1.unpack(_F1.pack(d0 + d1))
+    return _F1.unpack(_F1.pack(partial + d2))[0]
 
 
 def audit_budget(max_audits: int, target_rate: float, episode_steps: int) -> int:
@@ -32,7 +48,7 @@ def audit_budget(max_audits: int, target_rate: float, episode_steps: int) -> int
     return int(np.clip(min(int(max_audits), max(target, 1)), 1, episode_steps))
 
 
-def bound_action(proposed: Action, plan: Plan, codec: ActionCodec) -> Action:
+def bound_action(proposed: Action, plan: Plan, codec: LeverCodec) -> Action:
     """ā: each component clipped to the plan's bounds, kept float32, then sanitised.
 
     The clipped values are rounded to float32 before sanitising, as the original release
@@ -44,7 +60,7 @@ def bound_action(proposed: Action, plan: Plan, codec: ActionCodec) -> Action:
 
 def kappa(bounded: Action, previous: Action) -> float:
     """κ = |ā - a_prev|_1 of the float32 actions, summed in float32, returned widened."""
-    return float(action_jitter_f32(bounded, previous))
+    return float(l1_f32(bounded, previous))
 
 
 def soft_trigger(kappa_l1: float, plan: Plan) -> bool:
@@ -54,7 +70,7 @@ def soft_trigger(kappa_l1: float, plan: Plan) -> bool:
 
 def action_delta(final: Action, proposed: Action) -> float:
     """|final - proposed|_1 in float32 (docs/reproducing.md#floating-point-rules), returned as a Python float."""
-    return float(action_jitter_f32(final, proposed))
+    return float(l1_f32(final, proposed))
 
 
 def hard_reasons(violation_rate: float, supply_gap: float, static_slippage: float, plan: Plan) -> list[str]:

@@ -5,20 +5,22 @@ one the OpenAI SDK derives from them in strict mode (see :func:`~solarchain_eval
 strict (extra or missing fields, wrong types, NaN and infinities are errors). Validation then
 turns a parsed output into the values that may touch the market: every number is clipped to
 the benchmark's ranges (each clip is reported as a :class:`ClipEvent`), the auditor's action is
-sanitised with the environment's :class:`~solarchain_eval.market.actions.ActionCodec`
-(including α + ℓ ≤ 0.98), and free text is length-capped and only ever logged.
+sanitised with the market's lever codec (:class:`~solarchain_eval.tasks.governance_view.LeverCodec`;
+for the solar market including α + ℓ ≤ 0.98), and free text is length-capped and only ever logged.
 """
 
 from __future__ import annotations
 
 import functools
+from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar, Literal
 
 import numpy as np
 from pydantic import BaseModel, ConfigDict, Field, create_model
 
-from ..market.actions import ActionCodec
+from ..tasks.governance_view import LeverCodec
+from .view import default_view
 
 #: Maximum lengths of the free-text fields (characters); longer text is cut and logged.
 GOVERNANCE_MODE_MAX_CHARS = 64
@@ -108,6 +110,55 @@ class AuditorOutput(_StrictOutput):
     reason: str = Field(description="Why (logged, never executed).")
 
 
+Levers = tuple[tuple[str, str], ...]  # (name, description) of each lever, in order
+
+
+@functools.cache  # one pair of classes per set of levers: the same schemas (and cache keys) every call
+def output_models(levers: Levers | None = None) -> tuple[type[PlannerOutput], type[AuditorOutput]]:
+    """The Planner's and the Auditor's output models for a market's levers.
+
+    ``levers`` None or the solar market's three names: :class:`PlannerOutput` and
+    :class:`AuditorOutput` themselves. Other names: the same models with ``action_bounds`` and
+    ``final_action`` holding one field per lever (each bounds field described by the lever's text).
+    """
+    if levers is None or tuple(name for name, _ in levers) == ACTION_FIELDS:
+        return PlannerOutput, AuditorOutput
+    bounds = create_model(
+        "ActionBounds",
+        __base__=_StrictOutput,
+        **{name: (Bounds, Field(description=f"Bounds on {text}")) for name, text in levers},
+    )
+    values = create_model("ActionValues", __base__=_StrictOutput, **{name: (float, ...) for name, _ in levers})
+    planner_fields, auditor_fields = PlannerOutput.model_fields, AuditorOutput.model_fields
+    planner = create_model(
+        "PlannerOutput",
+        __base__=_StrictOutput,
+        __doc__=PlannerOutput.__doc__,
+        governance_mode=(str, planner_fields["governance_mode"]),
+        action_bounds=(bounds, ...),
+        audit_policy=(AuditPolicy, ...),
+        rationale=(str, planner_fields["rationale"]),
+    )
+    auditor = create_model(
+        "AuditorOutput",
+        __base__=_StrictOutput,
+        __doc__=AuditorOutput.__doc__,
+        decision=(Literal["approve", "revise"], auditor_fields["decision"]),
+        final_action=(values, auditor_fields["final_action"]),
+        risk_assessment=(RiskAssessment, ...),
+        reason=(str, auditor_fields["reason"]),
+    )
+    return planner, auditor  # type: ignore[return-value]
+
+
+def action_bounds(model: type[PlannerOutput], bounds: list[tuple[float, float]]) -> Any:
+    """The ``action_bounds`` value of ``model`` with one (low, high) pair per lever, in order."""
+    fields = model.model_fields["action_bounds"].annotation.model_fields  # type: ignore[union-attr]
+    return model.model_fields["action_bounds"].annotation(  # type: ignore[misc]
+        **{name: Bounds(low=low, high=high) for name, (low, high) in zip(fields, bounds, strict=True)}
+    )
+
+
 class AgentAction(_StrictOutput):
     """This hour's action, in market units, each value inside its range."""
 
@@ -120,26 +171,36 @@ class AgentAction(_StrictOutput):
     burn_rate: float
 
 
-#: The field descriptions of :class:`AgentAction` (part of the schema a hosted model sees).
-AGENT_FIELD_DESCRIPTIONS = {
-    "reward_ratio": "Reward ratio alpha: share of backed supply paid out as reward tokens.",
-    "liquidity_ratio": "Liquidity ratio l: share of backed supply added to the liquidity pool.",
-    "burn_rate": "Burn rate b: fraction of demand burned.",
-}
+def __getattr__(name: str) -> Any:
+    # The default task's lever descriptions, kept under their old name (they are the market's text).
+    if name == "AGENT_FIELD_DESCRIPTIONS":
+        return dict(default_view().prompts.lever_descriptions)
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
 
 
-def agent_action_model(codec: ActionCodec) -> type[AgentAction]:
-    """:class:`AgentAction` with each field bounded to ``codec``'s range (``ge``/``le``)."""
-    return _bounded_agent_action(tuple(codec.lo), tuple(codec.hi))
+def agent_action_model(codec: LeverCodec, descriptions: Mapping[str, str] | None = None) -> type[AgentAction]:
+    """:class:`AgentAction` with each field bounded to ``codec``'s range (``ge``/``le``).
+
+    ``descriptions`` names the levers (field names, in order) and describes each (the market's
+    :attr:`~solarchain_eval.tasks.governance_view.GovernancePrompts.lever_descriptions`; None:
+    the default task's).
+    """
+    if descriptions is None:
+        descriptions = default_view().prompts.lever_descriptions
+    return _bounded_agent_action(tuple(codec.lo), tuple(codec.hi), tuple(descriptions.items()))
 
 
 @functools.cache  # one class per range: the same schema (and cache keys) for every agent
-def _bounded_agent_action(lo: tuple[float, ...], hi: tuple[float, ...]) -> type[AgentAction]:
+def _bounded_agent_action(
+    lo: tuple[float, ...], hi: tuple[float, ...], described: tuple[tuple[str, str], ...]
+) -> type[AgentAction]:
     fields: dict[str, Any] = {
-        name: (float, Field(ge=low, le=high, description=AGENT_FIELD_DESCRIPTIONS[name]))
-        for name, low, high in zip(ACTION_FIELDS, lo, hi, strict=True)
+        name: (float, Field(ge=low, le=high, description=text))
+        for (name, text), low, high in zip(described, lo, hi, strict=True)
     }
-    return create_model("AgentAction", __base__=AgentAction, __doc__=AgentAction.__doc__, **fields)
+    # Other levers than the solar market's: the same strict model without its three fields.
+    base = AgentAction if tuple(fields) == ACTION_FIELDS else _StrictOutput
+    return create_model("AgentAction", __base__=base, __doc__=AgentAction.__doc__, **fields)
 
 
 # --- validated forms -------------------------------------------------------------------------
@@ -169,11 +230,13 @@ class Plan:
     target_audit_rate: float
     cooldown_steps: int
     rationale: str
+    #: The levers' names, the keys of the logged bounds (the Planner's output's ``action_bounds`` fields).
+    lever_names: tuple[str, str, str] = ACTION_FIELDS
 
     def to_log(self) -> dict[str, Any]:
         return {
             "governance_mode": self.governance_mode,
-            "bounds": {name: list(pair) for name, pair in zip(ACTION_FIELDS, self.bounds, strict=True)},
+            "bounds": {name: list(pair) for name, pair in zip(self.lever_names, self.bounds, strict=True)},
             "audit_policy": {
                 "violation_threshold": self.violation_threshold,
                 "gap_threshold": self.gap_threshold,
@@ -211,7 +274,7 @@ def _cap_text(field: str, text: str, limit: int, events: list[ClipEvent]) -> str
     return text[:limit]
 
 
-def validate_plan(output: PlannerOutput, codec: ActionCodec, episode_steps: int) -> tuple[Plan, list[ClipEvent]]:
+def validate_plan(output: PlannerOutput, codec: LeverCodec, episode_steps: int) -> tuple[Plan, list[ClipEvent]]:
     """Clip a parsed plan to the benchmark's ranges (docs/planner_auditor.md#schemas).
 
     Bounds are sorted (a swap is reported) and clipped to the action ranges; thresholds,
@@ -219,9 +282,8 @@ def validate_plan(output: PlannerOutput, codec: ActionCodec, episode_steps: int)
     """
     events: list[ClipEvent] = []
     bounds = []
-    for name, pair, low, high in zip(
-        ACTION_FIELDS, _bound_pairs(output.action_bounds), codec.lo, codec.hi, strict=True
-    ):
+    names = tuple(type(output.action_bounds).model_fields)
+    for name, pair, low, high in zip(names, _bound_pairs(output.action_bounds), codec.lo, codec.hi, strict=True):
         lo, hi = pair
         if lo > hi:
             events.append(ClipEvent(f"action_bounds.{name}", [lo, hi], [hi, lo]))
@@ -252,25 +314,27 @@ def validate_plan(output: PlannerOutput, codec: ActionCodec, episode_steps: int)
         ),
         cooldown_steps=int(_clip("audit_policy.cooldown_steps", p.cooldown_steps, 0, episode_steps, events)),
         rationale=_cap_text("rationale", output.rationale, TEXT_MAX_CHARS, events),
+        lever_names=names,  # type: ignore[arg-type]
     )
     return plan, events
 
 
 def _bound_pairs(bounds: ActionBounds) -> list[tuple[float, float]]:
-    return [(b.low, b.high) for b in (bounds.reward_ratio, bounds.liquidity_ratio, bounds.burn_rate)]
+    return [(b.low, b.high) for b in (getattr(bounds, name) for name in type(bounds).model_fields)]
 
 
-def validate_audit(output: AuditorOutput, codec: ActionCodec) -> tuple[AuditVerdict, list[ClipEvent]]:
+def validate_audit(output: AuditorOutput, codec: LeverCodec) -> tuple[AuditVerdict, list[ClipEvent]]:
     """Sanitise the auditor's action (ranges and α + ℓ ≤ cap, float32) and cap its text."""
     events: list[ClipEvent] = []
-    raw = (output.final_action.reward_ratio, output.final_action.liquidity_ratio, output.final_action.burn_rate)
+    names = tuple(type(output.final_action).model_fields)
+    raw = tuple(getattr(output.final_action, name) for name in names)
     clipped = [
         _clip(f"final_action.{name}", value, low, high, events)
-        for name, value, low, high in zip(ACTION_FIELDS, raw, codec.lo, codec.hi, strict=True)
+        for name, value, low, high in zip(names, raw, codec.lo, codec.hi, strict=True)
     ]
     total = clipped[0] + clipped[1]
     if total > codec.max_total_allocation:
-        events.append(ClipEvent("final_action.reward_ratio+liquidity_ratio", total, codec.max_total_allocation))
+        events.append(ClipEvent(f"final_action.{names[0]}+{names[1]}", total, codec.max_total_allocation))
     final = codec.sanitize(*raw)
     verdict = AuditVerdict(
         decision=output.decision,

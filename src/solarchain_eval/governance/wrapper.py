@@ -7,20 +7,21 @@ returns the final action re-encoded to [0, 1]^3; ``observe`` records the execute
 ``end_episode`` returns the per-step log rows and the episode's agentic metrics.
 
 The wrapper always acts in continuous mode (a discrete base policy's index is decoded with the
-env's discrete table), as the original release did.
+env's discrete table), as the original release did. Everything it reads from the market goes
+through the market's governance view (:class:`~solarchain_eval.tasks.governance_view.GovernanceView`):
+the codec, the risk signals in the observation, the episode's risk context, the
+counterfactual oracle and the executed levers of each step.
 """
 
 from __future__ import annotations
 
-from collections.abc import Callable
 from typing import Any
 
 import numpy as np
 
 from ..agents.base import Policy
 from ..llm.errors import CallSite
-from ..market.actions import DiscreteActions, initial_action
-from ..market.observation import OBS_GAP, OBS_SLIPPAGE, OBS_VIOLATION, OBSERVATION_NAMES
+from ..tasks.governance_view import GovernanceView
 from .auditor import Auditor, StepContext
 from .controls import FixedScheduler, SchedulerControls
 from .counterfactual import CounterfactualEvaluator, diagnostics_row
@@ -28,18 +29,16 @@ from .metrics import episode_agentic_metrics
 from .planner import Planner, episode_context
 from .scheduler import AuditScheduler, action_delta, audit_budget, bound_action, hard_reasons, kappa, soft_trigger
 from .schemas import as_f32_list
+from .view import default_view, resolve_view
 
-#: The previous step's outcome shown to the auditor (``info`` keys).
-RECENT_FIELDS = (
-    "reward",
-    "matched_energy_MWh",
-    "unmet_demand_MWh",
-    "liquidity",
-    "token_price",
-    "slippage",
-    "physics_violation_rate",
-    "artificial_liquidity_MWh",
-)
+
+def __getattr__(name: str) -> Any:
+    # The default task's outcome fields shown to the auditor, kept under their old name.
+    if name == "RECENT_FIELDS":
+        return default_view().recent_fields
+    raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+
+
 _HOOKS = ("begin_episode", "observe", "end_episode")
 
 #: Keys of the dict ``end_episode`` returns (merged into ``EpisodeResult.extras``): the
@@ -66,6 +65,9 @@ class GovernedPolicy:
     diagnostics : bool
         Also record the counterfactual outcome of the proposal, ā and the final action at every
         step (docs/governance.md); the executed trajectory is the same either way.
+    view : GovernanceView, optional
+        The market as the layer sees it; None: the default task's view of the env's config (the
+        solar market), resolved at each episode's start.
     """
 
     action_mode = "continuous"
@@ -80,7 +82,9 @@ class GovernedPolicy:
         auditor: Auditor,
         controls: SchedulerControls | None = None,
         diagnostics: bool = False,
+        view: GovernanceView | None = None,
     ) -> None:
+        self.view = view
         self.base = base
         self.name = base.name
         self.planner = planner
@@ -101,23 +105,25 @@ class GovernedPolicy:
 
     def begin_episode(self, *, env: Any, episode: int, run_seed: int, episode_seed: int, start_hour: int) -> None:
         self._env = env
-        self._codec = env.codec
+        view = self._view = self.view if self.view is not None else resolve_view(env.config)
+        self._codec = view.codec
+        self._observation_names = view.observation_names
         self._episode = int(episode)
         self._run_seed = int(run_seed)
-        self._decode = _proposal_decoder(env, self.base.action_mode)
-        self._steps = int(env.episode_steps)
+        self._decode = view.proposal_decoder(env, self.base.action_mode)
         site = CallSite("planner", self.name, self._run_seed, self._episode, None)
-        outcome = self.planner.plan(episode_context(env, int(start_hour)), site)
+        context = episode_context(env, int(start_hour), view)
+        self._steps = context.episode_steps
+        outcome = self.planner.plan(context, site)
         self._plan = outcome.plan
         self._plan_log = {**outcome.plan.to_log(), "llm": outcome.llm}
         self._start_scheduler()
-        m = env.config.market
-        self._previous = initial_action(m)  # a_prev at reset, as the env starts from it
+        self._previous = view.initial_action(env)  # a_prev at reset, as the env starts from it
         self._recent: dict[str, float] | None = None
         self._step = 0
         self._rows = []
         self._diagnostics_rows = []
-        self._evaluate = CounterfactualEvaluator(env)
+        self._evaluate = CounterfactualEvaluator(env, view)
         self._pending: dict[str, Any] | None = None
         self._planner_retries = int((outcome.llm or {}).get("retries", 0))
         hook = self._base_hooks["begin_episode"]
@@ -143,9 +149,7 @@ class GovernedPolicy:
         plan, step = self._plan, self._step
         proposed = self._decode(self.base.act(observation))
         bounded = bound_action(proposed, plan, self._codec)
-        violation = float(observation[OBS_VIOLATION])
-        gap = float(observation[OBS_GAP])
-        slippage = float(observation[OBS_SLIPPAGE])
+        violation, gap, slippage = self._view.risk_signals(observation)
         k = kappa(bounded, self._previous)
         reasons, soft = self.controls.triggers_used(hard_reasons(violation, gap, slippage, plan), soft_trigger(k, plan))
         self._evaluate.new_step()
@@ -154,8 +158,8 @@ class GovernedPolicy:
         if decision.audited:
             context = StepContext(
                 step=step,
-                hour=(self._env.episode_start_hour + step) % 24,
-                observation={name: float(v) for name, v in zip(OBSERVATION_NAMES, observation, strict=True)},
+                hour=self._view.hour_of_day(self._env, step),
+                observation={name: float(v) for name, v in zip(self._observation_names, observation, strict=True)},
                 violation_rate=violation,
                 supply_gap=gap,
                 static_slippage=slippage,
@@ -197,20 +201,21 @@ class GovernedPolicy:
         }
         if self.diagnostics:
             self._diagnostics_rows.append(diagnostics_row(self._pending, self._evaluate, proposed, bounded, final))
-        return self._codec.encode(*final)
+        self._sent = self._codec.encode(*final)
+        return self._sent
 
     def observe(self, info: dict[str, Any]) -> None:
         row = self._pending
         if row is None:
             raise RuntimeError("observe() called without a preceding act()")
-        executed = (info["reward_ratio"], info["liquidity_ratio"], info["burn_rate"])
-        row["absolute_hour"] = int(info["absolute_hour"])
-        row["hour"] = int(info["hour"])
+        view = self._view
+        executed = view.executed_action(info, self._sent)
+        row["absolute_hour"], row["hour"] = view.step_hours(self._env, self._step, info)
         row["executed_action"] = as_f32_list(executed)
         self._rows.append(row)
         self._pending = None
         self._previous = tuple(float(v) for v in executed)
-        self._recent = {name: float(info[name]) for name in RECENT_FIELDS}
+        self._recent = {name: float(info[name]) for name in view.recent_fields}
         self._step += 1
         hook = self._base_hooks["observe"]
         if hook is not None:
@@ -237,12 +242,3 @@ class GovernedPolicy:
         if self.diagnostics:
             extras[EXTRA_DIAGNOSTICS_KEY] = self._diagnostics_rows
         return extras
-
-
-def _proposal_decoder(env: Any, action_mode: str) -> Callable[[Any], tuple[float, float, float]]:
-    """Decode a base-policy action to market units (float32 values), by the base's mode."""
-    if action_mode == "discrete":
-        return DiscreteActions.from_codec(env.codec, env.config.discrete_levels).decode
-    if action_mode != "continuous":
-        raise ValueError(f"unknown action mode {action_mode!r}")
-    return env.codec.decode

@@ -28,6 +28,7 @@ from ..market.baselines import BASELINES, make_baseline
 from ..records_schema import EPISODE_METRIC_COLUMNS
 from ..tasks.base import Lever, MetricSpec, PaperReference
 from ..tasks.benchmark_config import BenchmarkConfigMethods
+from .governance_view import SolarGovernanceView
 from .metrics import episode_metrics_from_steps
 
 _DEFAULT_MARKET = MarketConfig()
@@ -118,6 +119,11 @@ class SolarTask(BenchmarkConfigMethods):
 
     def step_extras(self, info: Mapping[str, Any]) -> tuple[float, ...]:
         return tuple(info["city_rewards"].values())
+
+    # --- governance: the view the Planner/Auditor layer and the LLM agent read (tasks/governance_view.py)
+    def governance_view(self, config: Any = None) -> SolarGovernanceView:
+        """The market as the governance layer sees it, for a benchmark config or its market section."""
+        return SolarGovernanceView.from_config(config)
 
     def identity(self, config: BenchmarkConfig) -> dict[str, Any]:
         return {"env": self.env_id}
