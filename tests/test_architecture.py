@@ -219,9 +219,7 @@ GENERIC_WINGS = (
 #: only the task interface.
 KNOWN_TASK_DEBT = {
     "",
-    "agents.http_agent",
     "agents.jax_network",
-    "agents.sb3",
     "cli.bench",
     "cli.bench_agent",
     "cli.bench_train",

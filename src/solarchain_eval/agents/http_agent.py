@@ -23,7 +23,8 @@ import httpx
 import numpy as np
 
 from ..common.redaction import redact_url
-from ..market.observation import OBSERVATION_NAMES
+from ..tasks.base import observation_names_of
+from ..tasks.registry import get_task
 from .adapters import AgentFailure
 
 ACTION_MODES = ("continuous", "discrete")
@@ -151,6 +152,8 @@ class HttpAgent:
         self.retries = int(retries)
         self.discrete_actions = int(discrete_actions)
         self.stateless = bool(stateless)
+        #: Sent with each observation: the solar market's feature names unless the evaluation sets its task's.
+        self.observation_names: tuple[str, ...] | None = observation_names_of(get_task())
         self._connections = _Connections()
         self._local = threading.local()
         self._check_reachable(host, port)
@@ -224,7 +227,8 @@ class HttpAgent:
         hour = episode.start_hour + episode.step
         request = {
             "observation": np.asarray(observation, dtype=np.float64).ravel().tolist(),
-            "observation_names": list(OBSERVATION_NAMES),
+            # the task's feature names (the solar market's twelve); an empty list when it declares none
+            "observation_names": list(self.observation_names or ()),
             "hour": hour,
             "hour_of_day": hour % 24,
             "step": episode.step,

@@ -13,6 +13,7 @@ from collections.abc import Callable
 from typing import Any
 
 from ..common.redaction import redact_spec
+from ..tasks.base import observation_names_of
 from ..tasks.governance_view import governance_view_of
 from ..tasks.registry import get_task
 from .adapters import AgentError, AgentFailure, SB3ModelAgent, as_agent, discrete_actions
@@ -50,7 +51,7 @@ def _sb3(request: AgentRequest, context: AgentContext) -> Policy:
     spec = request.spec
     assert spec is not None
     algo, _, path = spec.target.partition(":")
-    model = load_sb3_model(algo, path, context.config)
+    model = load_sb3_model(algo, path, context.config, context.task)
     stats = load_vecnormalize(request.vecnormalize) if request.vecnormalize else None
     agent = SB3ModelAgent(model, name=spec.name, obs_normalizer=stats)
     return as_agent(agent, discrete_actions=discrete_actions(context.config, context.task))
@@ -62,6 +63,7 @@ def _http(request: AgentRequest, context: AgentContext) -> Policy:
     spec = request.spec
     assert spec is not None and spec.name is not None  # the spec parser requires NAME= for a URL
     agent = HttpAgent(spec.name, spec.target, **request.args)
+    agent.observation_names = observation_names_of(get_task(context.task))
     return as_agent(agent, name=spec.name, discrete_actions=discrete_actions(context.config, context.task))
 
 

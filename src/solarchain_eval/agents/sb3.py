@@ -35,7 +35,8 @@ import numpy as np
 
 from ..common.errors import InputDataError, NamesOptions, RefusedError
 from ..config import BenchmarkConfig
-from ..market.observation import OBSERVATION_SHAPE
+from ..tasks.base import observation_names_of
+from ..tasks.registry import get_task
 from .checkpoints import MODEL_FILE, TRAINABLE_ACTION_MODES, algorithm_class, trained_algo
 from .safe_pickle import safe_loads
 
@@ -172,18 +173,22 @@ def load_model(name: str, path: Path) -> Any:
     return _load_safely(algorithm_class(name), Path(path), name.upper())
 
 
-def check_model_spaces(model: Any, action_mode: str, config: BenchmarkConfig, source: Path | str) -> None:
-    """Refuse a model whose observation or action space does not fit the env (errors name ``source``)."""
+def check_model_spaces(model: Any, action_mode: str, config: Any, source: Path | str, task: str | None = None) -> None:
+    """Refuse a model whose observation or action space does not fit the env of ``task`` (default:
+    the solar market; errors name ``source``)."""
+    market = get_task(task)
+    names = observation_names_of(market)
     obs_shape = tuple(model.observation_space.shape or ())
-    if obs_shape != OBSERVATION_SHAPE:
-        raise ValueError(f"{source}: the model observes shape {obs_shape}, the env gives {OBSERVATION_SHAPE}")
+    if names is not None and obs_shape != (len(names),):
+        raise ValueError(f"{source}: the model observes shape {obs_shape}, the env gives {(len(names),)}")
     space = model.action_space
+    n_levers = len(market.levers)
     if action_mode == "discrete":
-        expected = config.discrete_levels**3
+        expected = int(config.discrete_levels) ** n_levers
         if getattr(space, "n", None) != expected:
             raise ValueError(f"{source}: the model has {getattr(space, 'n', space)} actions, the env {expected}")
-    elif tuple(space.shape or ()) != (3,):
-        raise ValueError(f"{source}: the model's actions have shape {space.shape}, the env expects (3,)")
+    elif tuple(space.shape or ()) != (n_levers,):
+        raise ValueError(f"{source}: the model's actions have shape {space.shape}, the env expects ({n_levers},)")
 
 
 def sb3_algorithm(algo: str) -> type:
@@ -210,15 +215,15 @@ def sb3_algorithm(algo: str) -> type:
     return cls
 
 
-def load_sb3_model(algo: str, path: Path | str, config: BenchmarkConfig) -> Any:
-    """Load a model of any SB3 / sb3-contrib algorithm on the CPU and check it fits the env."""
+def load_sb3_model(algo: str, path: Path | str, config: Any, task: str | None = None) -> Any:
+    """Load a model of any SB3 / sb3-contrib algorithm on the CPU and check it fits the env of ``task``."""
     path = Path(path)
     cls = sb3_algorithm(algo)
     if not path.is_file():
         raise ValueError(f"no model file {path}")
     model = _load_safely(cls, path, cls.__name__)
     mode = "discrete" if getattr(model.action_space, "n", None) is not None else "continuous"
-    check_model_spaces(model, mode, config, path)
+    check_model_spaces(model, mode, config, path, task)
     return model
 
 

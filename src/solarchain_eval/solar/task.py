@@ -25,6 +25,7 @@ from ..data.table import HourlyTable, load_table
 from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
 from ..envs.registration import ENV_ID
 from ..market.baselines import BASELINES, make_baseline
+from ..market.observation import OBSERVATION_NAMES
 from ..records_schema import EPISODE_METRIC_COLUMNS
 from ..tasks.base import Lever, MetricSpec, PaperReference
 from ..tasks.benchmark_config import BenchmarkConfigMethods
@@ -98,6 +99,8 @@ class SolarTask(BenchmarkConfigMethods):
     levers: tuple[Lever, ...] = SOLAR_LEVERS
     step_fields: tuple[str, ...] = STEP_INFO_KEYS
     metrics: tuple[MetricSpec, ...] = SOLAR_METRICS
+    #: The observation's features, in order (optional Task attribute: agents/ reads it through the task).
+    observation_names: tuple[str, ...] = OBSERVATION_NAMES
     # --- the report's and the leaderboard's concern (optional Task attributes, tasks/base.py) ---
     paper_reference: PaperReference | None = SOLAR_PAPER_REFERENCE
     dataset_manifest: str | None = MANIFEST_FILE

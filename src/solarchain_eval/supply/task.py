@@ -21,7 +21,7 @@ from ..config import BenchmarkConfig
 from ..tasks.base import Lever, MetricSpec
 from ..tasks.benchmark_config import BenchmarkConfigMethods
 from .baselines import SUPPLY_BASELINES, make_supply_baseline
-from .env import STEP_FIELDS, SupplyChainEnv
+from .env import OBSERVATION_NAMES, STEP_FIELDS, SupplyChainEnv
 from .metrics import SUPPLY_METRICS, supply_episode_metrics
 from .registration import SUPPLY_ENV_ID
 from .table import SupplyTable, default_supply_dir, load_supply_table, supply_provenance
@@ -42,6 +42,7 @@ class SupplyChainTask(BenchmarkConfigMethods):
     levers: tuple[Lever, ...] = SUPPLY_LEVERS
     step_fields: tuple[str, ...] = STEP_FIELDS
     metrics: tuple[MetricSpec, ...] = SUPPLY_METRICS
+    observation_names: tuple[str, ...] = OBSERVATION_NAMES
 
     def data_dir(self, data_dir: str | Path | None, config: Any) -> Path:
         if data_dir:

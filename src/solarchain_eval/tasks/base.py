@@ -176,6 +176,17 @@ class Task(Protocol):
         ...
 
 
+def observation_names_of(task: Task) -> tuple[str, ...] | None:
+    """The names of the task's observation features, in order, when the task declares them.
+
+    ``observation_names`` is an optional attribute of a task (the solar market's twelve features);
+    agents behind HTTP receive the names with each observation, and a trained model's observation
+    shape is checked against their number. None: the task declares none (nothing is checked).
+    """
+    names = getattr(task, "observation_names", None)
+    return None if names is None else tuple(str(n) for n in names)
+
+
 def metric_names(task: Task) -> tuple[str, ...]:
     """The task's episode-metric column names, in order."""
     return tuple(m.name for m in task.metrics)
