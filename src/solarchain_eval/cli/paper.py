@@ -24,6 +24,7 @@ from ..experiments.units import UnitProgress, UnitResult
 from ..experiments.user_agents import PolicyChoice, resolve_agents, split_policies
 from ..governance.request import GovernanceRequest
 from ..protocol import EPISODE_SEED_RULE_LINES, EPISODE_SEED_RULES, PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS
+from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.jax_progress import DEFAULT_CHUNK_STEPS
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 from . import agentic as agentic_cli
@@ -256,6 +257,9 @@ def paper(
         True, "--report/--no-report", help="Write ROOT/report (tables, figures, index.html) after a complete grid."
     ),
     governance: GovernanceRequest = GOVERNANCE,
+    task: str = typer.Option(
+        DEFAULT_TASK, "--task", help="The task every unit trains and evaluates on (default: the solar market)."
+    ),
 ) -> None:
     """The paper's experiment matrix: train, evaluate, combine, report.
 
@@ -307,6 +311,7 @@ def paper(
             vecnormalize=stats,
             isolate=isolate,
             chunk_steps=chunk_steps,
+            task=get_task(task).name,  # an unknown task is a one-line error here
         )
         if chunk_steps is not None and spec.backend != "jax":
             raise CliError("--chunk-steps applies to --backend jax (SB3 checkpoints every --checkpoint-every steps)")

@@ -42,6 +42,8 @@ from ..evaluation.settings import (
 )
 from ..governance.factory import AgenticOptions
 from ..protocol import EPISODE_SEED_RULES, PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS, independent_episode_seeds
+from ..tasks.base import has_jax_env
+from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
 from ..training.sb3_trainer import DEFAULT_CHECKPOINT_EVERY
 from .layout import UNITS_DIR, eval_unit_dir, seed_model_dir, train_unit_dir
@@ -97,6 +99,8 @@ class GridSpec:
     #: train state checkpointed (None: the algorithm's default). The models do not depend on it,
     #: so it is not part of the grid's identity.
     chunk_steps: int | None = None
+    #: The task every unit trains and evaluates on (part of the identity when it is not the solar market).
+    task: str = DEFAULT_TASK
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         """The built-in policies evaluated in ``setting`` (:meth:`setting_agents` adds the user agents)."""
@@ -149,6 +153,8 @@ class GridSpec:
             raise ValueError(f"chunk_steps ({self.chunk_steps}) must be at least 1 and needs the jax backend")
         if self.backend != "sb3" and self.uses_lagrangian:
             raise ValueError("ppo-lag trains with the sb3 backend only")
+        if self.backend == "jax" and not has_jax_env(get_task(self.task)):
+            raise ValueError(f"the jax backend needs a JAX environment, and task {self.task!r} has none")
         if self.agents:
             from .user_agents import check_agent_names  # the agent registry, only for grids with user agents
 
