@@ -224,7 +224,9 @@ def test_progress_chunks_keep_sb3s_step_counts(tiny_dataset, algo, timesteps, ex
     from solarchain_eval.training.jax_algorithm import make_algo
 
     mode = "discrete" if algo == "dqn" else "continuous"
-    instance = make_algo(algo, SolarChainJaxEnv(make_env_params(tiny_dataset, action_mode=mode)), BenchmarkConfig(), timesteps)
+    instance = make_algo(
+        algo, SolarChainJaxEnv(make_env_params(tiny_dataset, action_mode=mode)), BenchmarkConfig(), timesteps
+    )
     per_iteration = instance.num_envs * (instance.num_steps if algo == "ppo" else 1)
     chunks = math.ceil(instance.total_timesteps / instance.eval_freq)
     assert chunks * math.ceil(instance.eval_freq / per_iteration) * per_iteration == expected
