@@ -172,3 +172,22 @@ def test_paper_smoke_runs_on_the_toy_task(toy_tasks, tmp_path):
     assert result.exit_code == 0, result.output
     metadata = json.loads((root / "paper_metadata.json").read_text())
     assert metadata["complete"] and metadata["identity"]["task"] == "toy-stock"
+
+
+def test_sweep_takes_a_task_and_builds_only_the_solar_markets_datasets(toy_tasks, tmp_path):
+    spec = tmp_path / "sweep.yaml"
+    spec.write_text(
+        """
+grid: {timesteps: 10, episodes: 1, seeds: [7], settings: [main], policies: [static]}
+dataset: {start: "2026-06-01", end: "2026-06-03", seed: 7}
+axes:
+  lambda_p: [0.0, 2.0]
+""",
+        encoding="utf-8",
+    )
+    result = runner.invoke(app, ["sweep", str(spec), "--out", str(tmp_path / "out"), "--task", "toy-stock"])
+    assert result.exit_code == 2, result.output
+    assert "builds the solar market's datasets" in result.output and str(spec.name) in result.output
+    assert not (tmp_path / "out" / "datasets").exists()
+    result = runner.invoke(app, ["sweep", str(spec), "--out", str(tmp_path / "u"), "--task", "no-such-market"])
+    assert result.exit_code == 2 and "unknown task 'no-such-market'" in result.output
