@@ -220,24 +220,13 @@ GENERIC_WINGS = (
 KNOWN_TASK_DEBT = {
     "",
     "agents.jax_network",
-    "cli.bench",
-    "cli.bench_agent",
-    "cli.bench_train",
     "cli.data",
-    "experiments.paper",
     "experiments.ray_executor",
     "experiments.sweep",
     "experiments.sweep_spec",
     "jax",
-    "perf.agent_bench",
-    "perf.env_bench",
-    "perf.jax_env_bench",
-    "perf.jax_train_bench",
     "perf.llm_bench",
     "perf.scale_bench",
-    "perf.train_bench",
-    "training.jax_algorithm",
-    "training.jax_trainer",
 }
 
 

@@ -36,7 +36,7 @@ def _algorithm(algo: str, tiny_dataset, aligned: bool, timesteps: int = 2048):
     config = BenchmarkConfig()
     params = make_env_params(tiny_dataset, action_mode="discrete" if algo == "dqn" else "continuous")
     if aligned:
-        return make_algo(algo, params, config, timesteps), params
+        return make_algo(algo, SolarChainJaxEnv(params), config, timesteps), params
     settings = rejax_config(algo, config, timesteps)
     return rejax.get_algo(algo).create(env=SolarChainJaxEnv(params), env_params=params, **settings), params
 

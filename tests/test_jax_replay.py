@@ -84,12 +84,12 @@ def test_sampling_work_does_not_grow_with_the_buffer():
 @pytest.mark.parametrize("algo", ["sac", "dqn"])
 def test_sac_and_dqn_train_states_hold_the_sb3_buffer(tiny_dataset, algo):
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.envs.jax_env import SolarChainJaxEnv, make_env_params
     from solarchain_eval.training.jax_algorithm import make_algo, rejax_config
     from solarchain_eval.training.jax_alignment import REPLAY_SAMPLING, SB3_ALIGNMENT
 
     params = make_env_params(tiny_dataset, action_mode="discrete" if algo == "dqn" else "continuous")
-    instance = make_algo(algo, params, BenchmarkConfig(), 500, buffer_timesteps=300_000)
+    instance = make_algo(algo, SolarChainJaxEnv(params), BenchmarkConfig(), 500, buffer_timesteps=300_000)
     state = instance.init_state(jax.random.key(0))
     assert type(state.replay_buffer) is SB3ReplayBuffer and state.replay_buffer.size == 300_000
     assert SB3_ALIGNMENT[algo]["replay_sampling"] == REPLAY_SAMPLING

@@ -59,7 +59,7 @@ def _assert_same_state(a, b) -> None:
 def runs(tmp_path_factory, tiny_dataset) -> dict:
     """The same SAC training uninterrupted, interrupted after chunk 2 and resumed, and in one call."""
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.envs.jax_env import SolarChainJaxEnv, make_env_params
     from solarchain_eval.training.jax_algorithm import compile_training
     from solarchain_eval.training.jax_chunks import ChunkedTraining
 
@@ -80,10 +80,10 @@ def runs(tmp_path_factory, tiny_dataset) -> dict:
     resumed = train_jax(
         spec, seed_dirs(root / "resumed", SEEDS), on_progress=resumed_reports.append, on_note=notes.append
     )
-    params = make_env_params(tiny_dataset, action_mode="continuous")
-    one_loop = ChunkedTraining("sac", SEEDS, STEPS, params, BenchmarkConfig(), CHUNK)
+    env = SolarChainJaxEnv(make_env_params(tiny_dataset, action_mode="continuous"))
+    one_loop = ChunkedTraining("sac", SEEDS, STEPS, env, BenchmarkConfig(), CHUNK)
     one_loop.compile()
-    rejax_train, _ = compile_training("sac", SEEDS, STEPS, params, BenchmarkConfig())
+    rejax_train, _ = compile_training("sac", SEEDS, STEPS, env, BenchmarkConfig())
     return {
         "rejax": rejax_train(one_loop.keys)[0],
         "root": root,

@@ -94,11 +94,11 @@ def _direct_actor(algo: str, model_path: Path, data_dir: Path):
     from flax import serialization
 
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.envs.jax_env import SolarChainJaxEnv, make_env_params
     from solarchain_eval.training.jax_algorithm import make_algo
 
     mode = "discrete" if algo == "dqn" else "continuous"
-    instance = make_algo(algo, make_env_params(data_dir, action_mode=mode), BenchmarkConfig(), 1000)
+    instance = make_algo(algo, SolarChainJaxEnv(make_env_params(data_dir, action_mode=mode)), BenchmarkConfig(), 1000)
     state = instance.init_state(jax.random.key(0))
     template = state.q_ts.params if algo == "dqn" else state.actor_ts.params
     params = serialization.from_bytes(template, model_path.read_bytes())
@@ -220,11 +220,13 @@ def test_progress_chunks_keep_sb3s_step_counts(tiny_dataset, algo, timesteps, ex
     import math
 
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.envs.jax_env import SolarChainJaxEnv, make_env_params
     from solarchain_eval.training.jax_algorithm import make_algo
 
     mode = "discrete" if algo == "dqn" else "continuous"
-    instance = make_algo(algo, make_env_params(tiny_dataset, action_mode=mode), BenchmarkConfig(), timesteps)
+    instance = make_algo(
+        algo, SolarChainJaxEnv(make_env_params(tiny_dataset, action_mode=mode)), BenchmarkConfig(), timesteps
+    )
     per_iteration = instance.num_envs * (instance.num_steps if algo == "ppo" else 1)
     chunks = math.ceil(instance.total_timesteps / instance.eval_freq)
     assert chunks * math.ceil(instance.eval_freq / per_iteration) * per_iteration == expected
@@ -237,10 +239,10 @@ def test_ppo_starts_from_sb3s_orthogonal_initialisation(tiny_dataset):
     import jax
 
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.envs.jax_env import SolarChainJaxEnv, make_env_params
     from solarchain_eval.training.jax_algorithm import make_algo
 
-    instance = make_algo("ppo", make_env_params(tiny_dataset), BenchmarkConfig(), 2048)
+    instance = make_algo("ppo", SolarChainJaxEnv(make_env_params(tiny_dataset)), BenchmarkConfig(), 2048)
     state = instance.init_state(jax.random.key(0))
     gains = {}
     for net, ts in (("actor", state.actor_ts), ("critic", state.critic_ts)):
@@ -268,11 +270,11 @@ def test_sac_and_dqn_start_from_torchs_default_initialisation(tiny_dataset, algo
     import jax
 
     from solarchain_eval.config import BenchmarkConfig
-    from solarchain_eval.envs.jax_env import make_env_params
+    from solarchain_eval.envs.jax_env import SolarChainJaxEnv, make_env_params
     from solarchain_eval.training.jax_algorithm import make_algo
 
     params = make_env_params(tiny_dataset, action_mode="discrete" if algo == "dqn" else "continuous")
-    state = make_algo(algo, params, BenchmarkConfig(), 1000).init_state(jax.random.key(0))
+    state = make_algo(algo, SolarChainJaxEnv(params), BenchmarkConfig(), 1000).init_state(jax.random.key(0))
     networks = {"q": state.q_ts.params} if algo == "dqn" else {"actor": state.actor_ts.params}
     if algo == "sac":
         networks["critics"] = state.critic_ts.params  # twin critics stacked on a leading axis

@@ -76,9 +76,16 @@ def test_a_task_from_the_tests_runs_evaluate_report_leaderboard_verify(toy, tmp_
 
 def test_a_task_from_the_tests_runs_the_paper_grid_smoke_preset(toy, tmp_path):
     out = tmp_path / "paper"
-    _ok(["paper", "--task", "toy-stock", "--preset", "smoke", "--out", out, "--workers", "1"])
+    output = _ok(["paper", "--task", "toy-stock", "--preset", "smoke", "--out", out, "--workers", "1"])
+    # no governance view: the ungoverned settings only, said in one line
+    assert "task 'toy-stock' supplies no governance view: settings main, no_physics only" in output
     metadata = json.loads((out / "paper_metadata.json").read_text())
-    assert metadata.get("task") == "toy-stock"
-    combined = pd.read_csv(next(out.glob("combined/**/metrics.csv")))
-    assert {"total_reward", "idle_stock_units"} <= set(combined.columns)
-    assert "steady" in set(combined["policy"]) and get_task("toy-stock") is toy
+    assert metadata["complete"] and metadata["identity"]["task"] == "toy-stock"
+    assert sorted(p.name for p in (out / "combined").iterdir()) == ["main", "no_physics"]
+    combined = pd.read_csv(out / "combined" / "main" / "metrics.csv")
+    assert list(combined.columns)[-4:] == ["total_reward", "shortfall_units", "stock_swing", "idle_stock_units"]
+    # the task's baseline and the three learned policies, trained on the toy market (DQN in its discrete mode)
+    assert list(dict.fromkeys(combined["policy"])) == ["steady", "ppo", "sac", "dqn"]
+    assert not (out / "combined" / "main" / "city_hour_policy.csv").exists()  # the toy records no extras
+    assert "idle_stock_units (units) ↓" in (out / "report" / "tables" / "task_utility.md").read_text(encoding="utf-8")
+    assert get_task("toy-stock") is toy

@@ -16,13 +16,16 @@ from solarchain_eval.records_schema import Column
 from solarchain_eval.tasks.base import Lever, MetricSpec
 
 STEPS = 12
+LEVELS = 5
 
 
 class ToyEnv(gym.Env):
     def __init__(self, action_mode: str = "continuous") -> None:
         self.action_mode = action_mode
         self.observation_space = gym.spaces.Box(0.0, np.inf, (2,), np.float32)
-        self.action_space = gym.spaces.Box(0.0, 1.0, (3,), np.float32)
+        # discrete: an index into the 5 x 5 x 5 grid of the three levers (for DQN)
+        discrete = action_mode == "discrete"
+        self.action_space = gym.spaces.Discrete(LEVELS**3) if discrete else gym.spaces.Box(0.0, 1.0, (3,), np.float32)
         self.stock = 0.0
 
     def reset(self, *, seed=None, options=None):
@@ -32,6 +35,8 @@ class ToyEnv(gym.Env):
         return np.float32([self.stock, self.demand[0]]), {"episode_start_hour": 0}
 
     def step(self, action):
+        if self.action_mode == "discrete":
+            action = np.asarray(np.unravel_index(int(action), (LEVELS,) * 3)) / (LEVELS - 1)
         release, reorder, margin = (float(x) for x in np.asarray(action, dtype=np.float64))
         wanted = 3.0 * release * (1.0 - 0.5 * margin)
         shortfall = max(0.0, wanted - self.stock)  # the oracle: only stock on hand can ship

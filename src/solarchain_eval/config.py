@@ -218,3 +218,9 @@ def load_config(path: str | Path) -> BenchmarkConfig:
     if not isinstance(payload, dict):
         raise ConfigError(f"{config_path}: the top level must be a mapping of keys to values")
     return config_from_mapping(payload, str(config_path))
+
+
+#: The YAML reading every configuration-like file shares (the sweep file too): the text of a file
+#: with one-line errors, and the loader that refuses repeated keys.
+read_config_text = _read_text
+UniqueKeyLoader = _UniqueKeyLoader

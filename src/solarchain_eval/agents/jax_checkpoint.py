@@ -103,10 +103,16 @@ def register_jax_policies(registry: dict[str, Callable[[BenchmarkConfig, dict[st
     for name in ACTION_MODES:
         fallback = registry[name]
 
-        def build(config: BenchmarkConfig, models: dict[str, Path], name: str = name, fallback=fallback) -> Any:
+        def build(
+            config: BenchmarkConfig,
+            models: dict[str, Path],
+            task: str | None = None,
+            name: str = name,
+            fallback=fallback,
+        ) -> Any:
             path = jax_model_path(name, models)
             if path is None:
-                return fallback(config, models)
+                return fallback(config, models, task=task)
             if name not in models:
                 sb3 = [p for p in model_candidates(name, models) if p.is_file()]
                 if sb3:
@@ -117,4 +123,5 @@ def register_jax_policies(registry: dict[str, Callable[[BenchmarkConfig, dict[st
             return JaxPolicy(name, path, config)
 
         build.__name__ = f"make_{name}_policy"
+        build.takes_task = True  # type: ignore[attr-defined]
         registry[name] = build

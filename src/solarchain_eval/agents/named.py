@@ -57,7 +57,13 @@ def make_policy(
     if key in factories:
         return factories[key](config)
     if key in EXTRA_POLICIES:
-        return EXTRA_POLICIES[key](config, models or {})
+        factory = EXTRA_POLICIES[key]
+        # the learned policies check the model's spaces against the task's env; other factories take two
+        return (
+            factory(config, models or {}, task=task)
+            if getattr(factory, "takes_task", False)
+            else factory(config, models or {})
+        )
     raise ValueError(f"unknown policy '{name}' (choose from {', '.join(known_policies(task))})")
 
 

@@ -260,6 +260,8 @@ class SB3Policy:
     model_path: Path
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     action_mode: str = ""
+    #: The task whose env the model acts in (None: the solar market); its spaces are checked.
+    task: str | None = None
     stateless = True  # deterministic predict, no recurrent state: episodes may run concurrently
 
     def __post_init__(self) -> None:
@@ -268,7 +270,7 @@ class SB3Policy:
         self._check_spaces()
 
     def _check_spaces(self) -> None:
-        check_model_spaces(self.model, self.action_mode, self.config, self.model_path)
+        check_model_spaces(self.model, self.action_mode, self.config, self.model_path, self.task)
 
     def begin_run(self, run_seed: int) -> None:
         return None
@@ -279,10 +281,11 @@ class SB3Policy:
 
 
 def _factory(name: str) -> Callable[[BenchmarkConfig, dict[str, Path]], SB3Policy]:
-    def build(config: BenchmarkConfig, models: dict[str, Path]) -> SB3Policy:
-        return SB3Policy(name, resolve_model_path(name, models), config)
+    def build(config: BenchmarkConfig, models: dict[str, Path], task: str | None = None) -> SB3Policy:
+        return SB3Policy(name, resolve_model_path(name, models), config, task=task)
 
     build.__name__ = f"make_{name}_policy"
+    build.takes_task = True  # type: ignore[attr-defined]  # make_policy passes the evaluated task
     return build
 
 

@@ -8,6 +8,8 @@ from pathlib import Path
 import typer
 from rich.table import Table
 
+from ..tasks.base import has_jax_env
+from ..tasks.registry import DEFAULT_TASK, get_task
 from . import app
 from .common import CliError, console, err_console, reports_errors
 
@@ -40,36 +42,48 @@ def bench(
         help="Instead: time an agentic evaluation (rule planner and auditor; static, random, myopic; 30 episodes) "
         "with and without governance diagnostics and print the slowdown (docs/governance.md).",
     ),
+    task: str = typer.Option(
+        DEFAULT_TASK,
+        "--task",
+        help="The task whose environments are measured (the evaluation and diagnostics timings are the solar "
+        "market's).",
+    ),
 ) -> None:
     """Throughput of the single env, the vector env and the evaluation runner.
 
-    Measures (a) one env through gym.make with random actions, resets included, (b) the native
-    vector env at --num-envs sub-environments, (c) evaluating 1,620 baseline episodes with output
-    files. Each figure is repeated; median and best are shown (shared machines are noisy).
-    Measured figures: docs/performance.md.
+    Measures (a) one env of --task with gym.make's wrappers and random actions, resets included,
+    (b) its vector env (the solar market's native one) at --num-envs sub-environments, (c) evaluating
+    1,620 baseline episodes with output files (the solar market only). Each figure is repeated;
+    median and best are shown (shared machines are noisy). Measured figures: docs/performance.md.
     """
-    from ..data.default import resolve_data_dir
     from ..perf import env_bench as measure
 
     if backend not in ("numpy", "jax"):
         raise typer.BadParameter(f"--backend must be numpy or jax, not {backend!r}")
-    data_dir = resolve_data_dir(data)
-    measure.warm_table(data_dir)
+    market = get_task(task)
+    if diagnostics and task != DEFAULT_TASK:
+        raise CliError(f"--diagnostics times the solar market's governance layer, not task {task!r}")
+    if backend == "jax" and not has_jax_env(market):
+        raise CliError(f"--backend jax: task {task!r} has no JAX environment")
+    data_dir = market.data_dir(data, None)
+    measure.warm_table(data_dir, task)
     if diagnostics:
         _bench_diagnostics(data_dir, repeats)
         return
     results = []
     if backend == "jax":
-        _bench_jax(data_dir, 4096 if num_envs == 1024 else num_envs, calls, episodes, repeats, jax_devices)
+        _bench_jax(data_dir, 4096 if num_envs == 1024 else num_envs, calls, episodes, repeats, jax_devices, task)
         return
     err_console.print("measuring the single env...")
-    results.append((measure.single_env_steps_per_s(data_dir, steps, repeats), True))
+    results.append((measure.single_env_steps_per_s(data_dir, steps, repeats, task), True))
     err_console.print("measuring the vector env...")
-    results.append((measure.vector_env_steps_per_s(data_dir, num_envs, calls, repeats), True))
-    if not skip_evaluation:
+    results.append((measure.vector_env_steps_per_s(data_dir, num_envs, calls, repeats, task), True))
+    if task != DEFAULT_TASK:
+        err_console.print(f"(the evaluation timing is the solar market's: skipped for task {task!r})")
+    elif not skip_evaluation:
         err_console.print("timing the baseline evaluation...")
         results.append((measure.evaluation_seconds(data_dir, max(1, min(repeats, 3))), False))
-    table = Table(title=f"throughput on {data_dir}", title_justify="left")
+    table = Table(title=f"throughput on {data_dir or task}", title_justify="left")
     for column in ("measurement", "median", "best", "unit"):
         table.add_column(column, justify="left" if column in ("measurement", "unit") else "right")
     for result, higher_is_better in results:
@@ -115,7 +129,15 @@ def host_device_count(devices: int | None) -> int:
     return count
 
 
-def _bench_jax(data_dir: Path, num_envs: int, calls: int, episodes: int, repeats: int, devices: int | None) -> None:
+def _bench_jax(
+    data_dir: Path | None,
+    num_envs: int,
+    calls: int,
+    episodes: int,
+    repeats: int,
+    devices: int | None,
+    task: str = DEFAULT_TASK,
+) -> None:
     """The numpy vector env and the JAX env at the same number of envs, and their ratio."""
     from ..perf import env_bench as measure
 
@@ -123,13 +145,13 @@ def _bench_jax(data_dir: Path, num_envs: int, calls: int, episodes: int, repeats
     from ..perf.jax_env_bench import jax_env_steps_per_s
 
     err_console.print(f"measuring the numpy vector env ({num_envs} envs)...")
-    numpy_result = measure.vector_env_steps_per_s(data_dir, num_envs, calls, repeats)
+    numpy_result = measure.vector_env_steps_per_s(data_dir, num_envs, calls, repeats, task)
     err_console.print(f"compiling and measuring the JAX env ({num_envs} envs)...")
     try:
-        jax_result = jax_env_steps_per_s(data_dir, num_envs, episodes, repeats, devices)
+        jax_result = jax_env_steps_per_s(data_dir, num_envs, episodes, repeats, devices, task)
     except ValueError as error:
         raise CliError(f"--jax-devices: {error}") from None
-    table = Table(title=f"env throughput on {data_dir}", title_justify="left")
+    table = Table(title=f"env throughput on {data_dir or task}", title_justify="left")
     for column in ("measurement", "median", "best", "unit"):
         table.add_column(column, justify="left" if column in ("measurement", "unit") else "right")
     table.add_row(numpy_result.name, f"{numpy_result.median:,.0f}", f"{numpy_result.best:,.0f}", "env-steps/s")

@@ -36,10 +36,10 @@ def bench_agent(
     docs/http_agents.md, docs/performance.md.
     """
     from ..agents.http_agent import HttpAgentError
-    from ..data.default import resolve_data_dir
     from ..perf.agent_bench import measure_agent_overhead
+    from ..tasks.registry import get_task
 
-    data_dir = resolve_data_dir(data)
+    data_dir = get_task().data_dir(data, None)  # the solar market's dataset
     err_console.print(f"timing {repeats} x 4 evaluations of {seeds} seed(s) x {episodes} episodes...")
     try:
         result = measure_agent_overhead(data_dir, seeds=seeds, episodes=episodes, repeats=repeats, url=url)

@@ -54,9 +54,9 @@ def bench_train(
         raise CliError(f"unknown backend '{backend}' (choose from sb3, jax)")
     if chunk_steps is not None and (backend != "jax" or from_root is not None):
         raise CliError("--chunk-steps measures JAX trainings: it needs --backend jax and no --from-root")
-    from ..data.default import resolve_data_dir
     from ..perf import train_bench as measure
     from ..perf.env_bench import Throughput
+    from ..tasks.registry import get_task
     from ..training.sb3_trainer import check_algo
 
     if from_root is not None:
@@ -65,7 +65,7 @@ def bench_train(
         except (OSError, ValueError, KeyError) as error:
             raise CliError(f"cannot read unit times from {from_root}: {error}") from None
     else:
-        data_dir = resolve_data_dir(data)
+        data_dir = get_task().data_dir(data, None)  # the solar market's dataset
         names = [check_algo(a) for a in algos.split(",") if a.strip()]
         table = Table(title="SB3 training throughput, one torch thread (steps/s)", title_justify="left")
         for column in ("algorithm", "median", "best", "trivial env median", "env share"):

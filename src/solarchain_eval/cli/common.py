@@ -20,7 +20,7 @@ from rich.text import Text
 from ..common.errors import NamesOptions, OptionsError, SolarChainError, flag_of
 from ..common.redaction import redact_text
 from ..config import check_seeds
-from ..tasks.registry import DEFAULT_TASK
+from ..tasks.registry import DEFAULT_TASK, get_task
 from .help import get_current_context
 
 # Every text printed comes from users, files or servers somewhere (paths, city names, server
@@ -168,6 +168,14 @@ RESULT_COLUMNS = (
     ("mean_slippage", "slippage", 4),
     ("artificial_liquidity_MWh", "artificial liq. (MWh)", 4),
 )
+
+
+def result_columns(task: str) -> Sequence[tuple[str, str, int]]:
+    """The results table's columns for ``task``: the paper's for the solar market, else every
+    metric the task declares (by column name)."""
+    if task == DEFAULT_TASK:
+        return RESULT_COLUMNS
+    return [(m.name, m.name, 4) for m in get_task(task).metrics]
 
 
 def results_table(

@@ -24,7 +24,6 @@ from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
 from .common import (
-    RESULT_COLUMNS,
     TASK,
     CliError,
     cli_error,
@@ -33,6 +32,7 @@ from .common import (
     parse_seeds,
     register_user_error,
     reports_errors,
+    result_columns,
     results_table,
     say,
     show_files,
@@ -128,10 +128,7 @@ def _evaluate(spec: EvaluationSpec, out: Path, title: str, overwrite: bool, step
             step_format=step_format,
         )
     summary = outcome.summary
-    market = get_task(spec.task)
-    # another task's table: its declared metrics, by column name
-    columns = RESULT_COLUMNS if spec.task == DEFAULT_TASK else [(m.name, m.name, 4) for m in market.metrics]
-    console.print(results_table(summary, title, access=outcome.access, columns=columns))
+    console.print(results_table(summary, title, access=outcome.access, columns=result_columns(spec.task)))
     if spec.agentic is not None:
         console.print(agentic_cli.agentic_table(summary, f"Planner/Auditor ({spec.agentic.label()})"))
     show_files(outcome.files, f"wrote {outcome.episodes} episodes in {outcome.wall_s:.1f} s to {out}")

@@ -25,6 +25,8 @@ from ..experiments.units import UnitProgress, UnitResult
 from ..experiments.user_agents import PolicyChoice, resolve_agents, split_policies
 from ..governance.request import GovernanceRequest
 from ..protocol import EPISODE_SEED_RULE_LINES, EPISODE_SEED_RULES, PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS
+from ..tasks.governance_view import GovernedTask
+from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.jax_progress import DEFAULT_CHUNK_STEPS
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 from . import agentic as agentic_cli
@@ -40,6 +42,7 @@ from .common import (
     refuse_file_out,
     register_user_error,
     reports_errors,
+    result_columns,
     results_table,
 )
 from .evaluate import AGENT_ARG, ISOLATE, SETTINGS_FILE, USER_AGENTS_HELP, VECNORMALIZE
@@ -58,14 +61,24 @@ EpisodeSeeds = StrEnum("EpisodeSeeds", {name: name for name in EPISODE_SEED_RULE
 _EPISODE_SEEDS_HELP = " ".join(f"{name}: {line}" for name, line in EPISODE_SEED_RULE_LINES.items())
 
 
-def _settings(text: str | None) -> tuple[str, ...]:
+def _settings(text: str | None, task: str = DEFAULT_TASK) -> tuple[str, ...]:
     if not text:
-        return tuple(KNOWN_SETTINGS)
+        if governance_of(task):
+            return tuple(KNOWN_SETTINGS)
+        # the Planner/Auditor layer needs the market's governance view: without one, the ungoverned settings
+        ungoverned = tuple(name for name, setting in KNOWN_SETTINGS.items() if not setting.agentic)
+        typer.echo(f"task {task!r} supplies no governance view: settings {', '.join(ungoverned)} only")
+        return ungoverned
     names = tuple(part.strip() for part in text.split(",") if part.strip())
     unknown = [n for n in names if n not in KNOWN_SETTINGS]
     if unknown:
         raise CliError(f"unknown setting(s) {', '.join(unknown)} (available: {', '.join(KNOWN_SETTINGS)})")
     return names
+
+
+def governance_of(task: str) -> bool:
+    """Whether the Planner/Auditor layer can govern ``task`` (it supplies a governance view)."""
+    return isinstance(get_task(task), GovernedTask)
 
 
 def _choice(text: str | None) -> PolicyChoice:
@@ -142,12 +155,12 @@ def _run_with_progress(spec: GridSpec, out: Path, **run_options: Any):
             raise cli_error(error) from None
 
 
-def _show_outcome(outcome) -> None:
+def _show_outcome(outcome, task: str = DEFAULT_TASK) -> None:
     """Each combined setting's results table, the root's status, and the failed units (exit 1)."""
     report = outcome.report
     for setting in outcome.combined:
         summary = json.loads((combined_dir(outcome.root, setting) / SUMMARY_FILE).read_text(encoding="utf-8"))
-        console.print(results_table(summary, f"setting {setting}"))
+        console.print(results_table(summary, f"setting {setting}", columns=result_columns(task)))
         protocol = outcome.protocols.get(setting, {}).get("protocol_id")
         if protocol:
             console.print(f"setting {setting}: protocol {protocol}", soft_wrap=True)
@@ -258,6 +271,9 @@ def paper(
         True, "--report/--no-report", help="Write ROOT/report (tables, figures, index.html) after a complete grid."
     ),
     governance: GovernanceRequest = GOVERNANCE,
+    task: str = typer.Option(
+        DEFAULT_TASK, "--task", help="The task every unit trains and evaluates on (default: the solar market)."
+    ),
 ) -> None:
     """The paper's experiment matrix: train, evaluate, combine, report.
 
@@ -287,7 +303,7 @@ def paper(
     options = agentic_cli.resolve(governance)
     if settings_file is not None:
         load_settings(settings_file)
-    chosen_settings = _settings(settings)
+    chosen_settings = _settings(settings, get_task(task).name)
     try:
         builtins, choice = _policies(policies, extra_policies, chosen_settings), _choice(policies)
         named = [s.name for s in choice.agents if s.name is not None]
@@ -311,6 +327,7 @@ def paper(
             vecnormalize=stats,
             isolate=isolate,
             chunk_steps=chunk_steps,
+            task=get_task(task).name,  # an unknown task is a one-line error here
         )
         if chunk_steps is not None and spec.backend != "jax":
             raise CliError("--chunk-steps applies to --backend jax (SB3 checkpoints every --checkpoint-every steps)")
@@ -339,7 +356,7 @@ def paper(
     )
     with agentic_cli.serving(governance, options):
         outcome = _run_with_progress(spec, out, workers=workers, ray_address=ray_address, keep_going=keep_going)
-    _show_outcome(outcome)
+    _show_outcome(outcome, spec.task)
     if outcome.complete and write_report:
         from ..report import build_report
 

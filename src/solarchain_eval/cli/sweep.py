@@ -11,6 +11,7 @@ from ..experiments.grid import Unit
 from ..experiments.grid_root import GridError
 from ..experiments.sweep_spec import SweepError, load_sweep
 from ..experiments.units import UnitResult
+from ..tasks.registry import DEFAULT_TASK, get_task
 from . import app
 from .common import cli_error, console, err_console, invoked_command, register_user_error, reports_errors
 
@@ -30,6 +31,12 @@ def sweep(
         None, "--ray-address", help="Run units as Ray tasks: auto, ray://host:port, or local (needs the ray extra)."
     ),
     keep_going: bool = typer.Option(False, "--keep-going", help="Record failing units and carry on with the others."),
+    task: str = typer.Option(
+        DEFAULT_TASK,
+        "--task",
+        help="The task every point trains and evaluates on (default: the solar market; another task's points "
+        "take their dataset from dataset.data).",
+    ),
 ) -> None:
     """Run a sweep: every combination of the YAML's axes is one grid of the `paper` runner.
 
@@ -44,6 +51,7 @@ def sweep(
     axis with cluster-bootstrap intervals, and findings.csv: where a paper finding holds or
     flips). Re-running the same command skips every finished unit.
     """
+    task = get_task(task).name  # an unknown task is a one-line error before anything else
     sweep_spec = load_sweep(spec_file)
     err_console.print(
         f"sweep {spec_file}: {len(sweep_spec.points)} point(s) over axes {', '.join(sweep_spec.axes) or '(none)'} -> {out}",
@@ -84,6 +92,7 @@ def sweep(
             on_result=on_result,
             on_dataset=on_dataset,
             command=invoked_command(),
+            task=task,
         )
     except RayUnavailableError as error:
         raise cli_error(error) from None

@@ -11,6 +11,8 @@ import typer
 from ..agents.checkpoints import TRAINABLE_ALGOS
 from ..config import BenchmarkConfig, load_config
 from ..protocol import PAPER_SEED
+from ..tasks.base import has_jax_env
+from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.jax_progress import DEFAULT_CHUNK_STEPS
 from ..training.lagrangian import DEFAULT_MULTIPLIER_LR, LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 from ..training.sb3_trainer import (
@@ -109,6 +111,11 @@ def train_command(
         min=0.0,
         help="ppo-lag only: dual-ascent step size; after each rollout λ <- max(0, λ + lr (J_c - D)).",
     ),
+    task: str = typer.Option(
+        DEFAULT_TASK,
+        "--task",
+        help="The task to train on (default: the solar market; --backend jax needs its JAX env).",
+    ),
 ) -> None:
     """Train one model with Stable-Baselines3 (MlpPolicy; learning rate, batch size and gamma from
     the config: 3e-4, 64, 0.98; SB3 defaults otherwise) and write model.zip, train_config.json,
@@ -140,8 +147,10 @@ def train_command(
             raise CliError("--tensorboard is for the SB3 backend (rejax writes no TensorBoard scalars)")
         if key == LAGRANGIAN_ALGO:
             raise CliError(f"--algo {LAGRANGIAN_ALGO} trains with Stable-Baselines3 only (not --backend jax)")
+        if not has_jax_env(get_task(task)):
+            raise CliError(f"--backend jax: task {task!r} has no JAX environment (train it with --backend sb3)")
         run_seeds = parse_seeds(seeds) if seeds else [cfg.seed if seed is None else seed]
-        return _train_jax(key, run_seeds, steps, no_physics_penalty, data, cfg, out_dir, overwrite, chunk_steps)
+        return _train_jax(key, run_seeds, steps, no_physics_penalty, data, cfg, out_dir, overwrite, chunk_steps, task)
     if chunk_steps is not None:
         raise CliError("--chunk-steps applies to --backend jax (SB3 checkpoints every --checkpoint-every steps)")
     spec = TrainSpec(
@@ -155,6 +164,7 @@ def train_command(
         tensorboard_dir=tensorboard,
         torch_threads=torch_threads,
         lagrangian=lagrangian,
+        task=task,
     )
     err_console.print(f"training {key.upper()} for {steps:,} steps (seed {spec.seed}) into {out_dir}", soft_wrap=True)
     with progress_bar(f"training {key}", steps) as advance:
@@ -190,13 +200,14 @@ def _train_jax(
     out_dir: Path,
     overwrite: bool,
     chunk_steps: int | None,
+    task: str = DEFAULT_TASK,
 ) -> None:
     """``train --backend jax``: every seed in one compiled vmap, run in chunks (see docs/jax.md)."""
     try:
         from ..training.jax_trainer import JaxTrainSpec, seed_dirs, train_jax
     except ImportError as error:
         raise CliError(str(error)) from None
-    spec = JaxTrainSpec(algo, tuple(seeds), steps, no_physics_penalty, data, cfg, chunk_steps)
+    spec = JaxTrainSpec(algo, tuple(seeds), steps, no_physics_penalty, data, cfg, chunk_steps, task=task)
     dirs = seed_dirs(out_dir, spec.seeds)
     err_console.print(
         f"training {algo.upper()} with JAX for {spec.timesteps:,} steps × {len(spec.seeds)} seed(s) into {out_dir} "

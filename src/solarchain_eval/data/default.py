@@ -15,6 +15,7 @@ import tempfile
 from pathlib import Path
 
 from ..common.atomic_files import sha256_file
+from ..common.cache import cache_dir as cache_dir  # its home is common/cache.py; named here as before
 from .cities import DEFAULT_END, DEFAULT_NODES_PER_CITY, DEFAULT_SEED, DEFAULT_START, DEFAULT_TIMEZONE, PAPER_CITIES
 from .files import DATASET_FILES, MANIFEST_FILE
 from .published import (
@@ -29,15 +30,6 @@ from .published import (
 DEFAULT_DATASET_NAME = f"paper-published-2026-04-{PAPER_WEATHER_SHA256[:12]}"
 
 logger = logging.getLogger(__name__)
-
-
-def cache_dir() -> Path:
-    """``$SOLARCHAIN_CACHE_DIR``, else ``$XDG_CACHE_HOME/solarchain-eval``, else ``~/.cache/solarchain-eval``."""
-    explicit = os.environ.get("SOLARCHAIN_CACHE_DIR")
-    if explicit:
-        return Path(explicit)
-    base = os.environ.get("XDG_CACHE_HOME") or str(Path.home() / ".cache")
-    return Path(base) / "solarchain-eval"
 
 
 def resolve_data_dir(data_dir: str | Path | None, config_data_dir: str | Path | None = None) -> Path:

@@ -70,6 +70,10 @@ def combine_setting(root: Path, setting: str, unit_dirs: Sequence[Path]) -> dict
     rows: dict[str, int] = {}
     for name in TABLES:
         missing = [str(d / name) for d in unit_dirs if not (d / name).is_file()]
+        if name == CITY_HOUR_FILE and len(missing) == len(unit_dirs):
+            # a task that records no per-step extras writes no such table (Task.step_extra_names)
+            (out / name).unlink(missing_ok=True)
+            continue
         if missing:
             raise FileNotFoundError(f"cannot combine setting '{setting}': {missing[0]} is missing")
         rows[name] = concat_csv([d / name for d in unit_dirs], out / name)

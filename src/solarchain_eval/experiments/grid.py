@@ -42,6 +42,9 @@ from ..evaluation.settings import (
 )
 from ..governance.factory import AgenticOptions
 from ..protocol import EPISODE_SEED_RULES, PAPER_EPISODES, PAPER_SEEDS, PAPER_TIMESTEPS, independent_episode_seeds
+from ..tasks.base import has_jax_env
+from ..tasks.governance_view import GovernedTask
+from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
 from ..training.sb3_trainer import DEFAULT_CHECKPOINT_EVERY
 from .layout import UNITS_DIR, eval_unit_dir, seed_model_dir, train_unit_dir
@@ -63,6 +66,21 @@ PRESETS = {
     # Tiny budgets that exercise every stage (PPO still collects one 2,048-step rollout).
     "smoke": Preset(300, 2, PAPER_SEEDS[:1], DEFAULT_CHECKPOINT_EVERY),
 }
+
+
+def task_policies(policies: tuple[str, ...], task: str) -> tuple[str, ...]:
+    """A setting's policy list for ``task``: the default task's baselines it lists (the paper's
+    settings list the solar market's) stand for the baselines of ``task``, in their place."""
+    if task == DEFAULT_TASK:
+        return tuple(policies)
+    default, own = set(get_task().baselines()), tuple(get_task(task).baselines())
+    listed: list[str] = []
+    for policy in policies:
+        if policy not in default:
+            listed.append(policy)
+        elif not set(own) <= set(listed):
+            listed.extend(own)
+    return tuple(dict.fromkeys(listed))
 
 
 @dataclass(frozen=True)
@@ -97,10 +115,12 @@ class GridSpec:
     #: train state checkpointed (None: the algorithm's default). The models do not depend on it,
     #: so it is not part of the grid's identity.
     chunk_steps: int | None = None
+    #: The task every unit trains and evaluates on (part of the identity when it is not the solar market).
+    task: str = DEFAULT_TASK
 
     def setting_policies(self, setting: str) -> tuple[str, ...]:
         """The built-in policies evaluated in ``setting`` (:meth:`setting_agents` adds the user agents)."""
-        listed = KNOWN_SETTINGS[setting].policies
+        listed = task_policies(KNOWN_SETTINGS[setting].policies, self.task)
         chosen = dict(self.policies_by_setting).get(setting)
         if chosen is not None:
             return tuple(p for p in listed if p in chosen)
@@ -149,6 +169,14 @@ class GridSpec:
             raise ValueError(f"chunk_steps ({self.chunk_steps}) must be at least 1 and needs the jax backend")
         if self.backend != "sb3" and self.uses_lagrangian:
             raise ValueError("ppo-lag trains with the sb3 backend only")
+        governed = [s for s in self.settings if KNOWN_SETTINGS[s].agentic]
+        if governed and not isinstance(get_task(self.task), GovernedTask):
+            raise ValueError(
+                f"settings {', '.join(governed)} run the Planner/Auditor layer, and task {self.task!r} supplies no "
+                "governance view (solarchain_eval.tasks.governance_view)"
+            )
+        if self.backend == "jax" and not has_jax_env(get_task(self.task)):
+            raise ValueError(f"the jax backend needs a JAX environment, and task {self.task!r} has none")
         if self.agents:
             from .user_agents import check_agent_names  # the agent registry, only for grids with user agents
 

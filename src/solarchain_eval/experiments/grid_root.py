@@ -33,6 +33,7 @@ from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
 from ..evaluation.settings import KNOWN_SETTINGS, setting_has_physics_penalty
 from ..protocol import episode_seed_derivation
+from ..tasks.registry import DEFAULT_TASK
 from ..training.sb3_trainer import differences
 from .grid import GridSpec, Unit, eval_model_path
 from .layout import PAPER_METADATA_FILE
@@ -61,6 +62,8 @@ def grid_identity(spec: GridSpec, dataset: dict[str, Any]) -> dict[str, Any]:
     }
     if spec.uses_lagrangian:  # only then: grids without ppo-lag keep their earlier identity
         identity["lagrangian"] = spec.lagrangian.describe()
+    if spec.task != DEFAULT_TASK:  # only another task: solar roots (and the paper's protocol) keep their identity
+        identity["task"] = spec.task
     return identity
 
 
@@ -166,8 +169,9 @@ def root_metadata(
             "episode_seed_protocol": spec.episode_seed_protocol,
             "episode_seed_derivation": episode_seed_derivation(spec.episode_seed_protocol),
             "checkpoint_every": spec.checkpoint_every,
+            "task": spec.task,
         },
-        "data_dir": str(data_dir),
+        "data_dir": None if data_dir is None else str(data_dir),
         "dataset": dataset,
         "execution": {"workers": workers, "ray_address": ray_address, "pid": os.getpid()},
         "command": redact_command(command or sys.argv),
@@ -267,6 +271,7 @@ def unit_task(
         isolate=spec.isolate and agent is not None,
         chunk_steps=spec.chunk_steps,
         setting=setting if unit.kind == "eval" else None,
+        task=spec.task,
     )
 
 

@@ -19,13 +19,11 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
-from ..data.default import resolve_data_dir
-from ..data.provenance import dataset_provenance
-from ..data.table import load_table
 from ..evaluation.fingerprint import protocol_id
 from ..evaluation.records import METADATA_FILE
 from ..evaluation.run_metadata import RunMetadata, RunMetadataError
 from ..evaluation.run_metadata import setting_protocol as merge_setting_protocol
+from ..tasks.registry import get_task
 from .combine import combine_setting
 from .grid import GridSpec, Unit, plan_units
 from .grid_root import (
@@ -91,9 +89,11 @@ def run_paper(
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     cfg = spec.config
-    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir).resolve()
-    table = load_table(data_dir)  # validates the dataset before any work
-    dataset = dataset_provenance(table)
+    task = get_task(spec.task)
+    data_dir = task.data_dir(spec.data_dir, cfg)
+    data_dir = None if data_dir is None else Path(data_dir).resolve()  # None: a task without a dataset
+    table = task.load_data(data_dir)  # validates the dataset before any work
+    dataset = task.provenance(table)
     identity = grid_identity(spec, dataset)
     with locked(root):
         diffs = identity_conflict(root, identity)

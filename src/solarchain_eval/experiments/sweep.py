@@ -30,9 +30,9 @@ from ..common.atomic_files import atomic_write_json, atomic_write_with
 from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
 from ..data.files import MANIFEST_FILE
-from ..data.provenance import dataset_provenance
 from ..evaluation.records import ACTIONS_FILE, METRICS_FILE
 from ..records_schema import EPISODE_COST
+from ..tasks.registry import DEFAULT_TASK, get_task
 from .combine import combine_setting
 from .grid import GridSpec, Unit, plan_units, scoped
 from .grid_root import (
@@ -124,7 +124,9 @@ def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
     return out
 
 
-def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path, policies: GridPolicies) -> GridSpec:
+def _point_spec(
+    sweep: Sweep, point: SweepPoint, data_dir: Path, policies: GridPolicies, task: str = DEFAULT_TASK
+) -> GridSpec:
     g = sweep.spec.grid
     try:
         spec = GridSpec(
@@ -144,6 +146,7 @@ def _point_spec(sweep: Sweep, point: SweepPoint, data_dir: Path, policies: GridP
             agent_args=policies.agent_args,
             vecnormalize=policies.vecnormalize,
             isolate=g.isolate,
+            task=task,
         )
         spec.validate()
     except ValueError as error:
@@ -196,15 +199,20 @@ def _prepare_points(
     policies: GridPolicies,
     on_dataset: Callable[[str, bool], None] | None,
     command: list[str] | None,
+    task: str = DEFAULT_TASK,
 ) -> list[_PointRun]:
-    from ..data.table import load_table
-
+    market = get_task(task)
     tables: dict[str, dict[str, Any]] = {}
     data_dirs: list[Path] = []
     for point in sweep.points:
         if point.uses_existing_data:
             data_dir = _resolve(sweep, str(point.dataset.data)).resolve()
         else:
+            if task != DEFAULT_TASK:  # the dataset axes are the solar market's build parameters
+                raise GridError(
+                    f"{sweep.source}: the dataset section builds the solar market's datasets; "
+                    f"a sweep of task {task!r} takes its dataset as dataset.data"
+                )
             data_dir = (root / DATASETS_DIR / point.dataset_key).resolve()
             if str(data_dir) not in tables:
                 fresh = not (data_dir / MANIFEST_FILE).is_file()
@@ -212,7 +220,7 @@ def _prepare_points(
                     on_dataset(point.dataset_key, fresh)
                 build_point_dataset(sweep, point.dataset, data_dir)
         if str(data_dir) not in tables:
-            tables[str(data_dir)] = dataset_provenance(load_table(data_dir))
+            tables[str(data_dir)] = market.provenance(market.load_data(data_dir))
         data_dirs.append(data_dir)
     # The user agents' first actions on every dataset (their shapes follow its cities), before any unit.
     for data_dir in dict.fromkeys(data_dirs):
@@ -220,7 +228,7 @@ def _prepare_points(
     runs = []
     for point, data_dir in zip(sweep.points, data_dirs, strict=True):
         dataset = tables[str(data_dir)]
-        spec = _point_spec(sweep, point, data_dir, policies)
+        spec = _point_spec(sweep, point, data_dir, policies, task)
         identity = grid_identity(spec, dataset)
         point_root = root / POINTS_DIR / point.point_id
         if identity_conflict(point_root, identity) is not None:
@@ -251,8 +259,13 @@ def run_sweep(
     on_dataset: Callable[[str, bool], None] | None = None,
     command: list[str] | None = None,
     ray_transfer: str = "auto",
+    task: str = DEFAULT_TASK,
 ) -> SweepOutcome:
     """Run (or resume) ``sweep`` into ``root``; see the module docstring.
+
+    ``task``: the task every point trains and evaluates on (default: the solar market); another
+    task's points take their dataset from ``dataset.data`` (the dataset axes build the solar
+    market's).
 
     Raises
     ------
@@ -266,7 +279,7 @@ def run_sweep(
     root = Path(root).resolve()
     root.mkdir(parents=True, exist_ok=True)
     with locked(root, "sweep"):
-        runs = _prepare_points(sweep, root, policies, on_dataset, command)
+        runs = _prepare_points(sweep, root, policies, on_dataset, command, task)
         by_scope = {f"{POINTS_DIR}/{r.point.point_id}": r for r in runs}
         units = [u for r in runs for u in r.units]
         done: set[str] = set()

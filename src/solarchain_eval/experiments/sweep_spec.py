@@ -19,7 +19,7 @@ from typing import Any, Literal
 from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..common.errors import OptionsError
-from ..config import BenchmarkConfig, ConfigError, _read_text, _UniqueKeyLoader, config_from_mapping, load_config
+from ..config import BenchmarkConfig, ConfigError, UniqueKeyLoader, config_from_mapping, load_config, read_config_text
 from ..data.cities import (
     DEFAULT_END,
     DEFAULT_NODES_PER_CITY,
@@ -178,11 +178,11 @@ def _load_yaml(path: Path) -> dict[str, Any]:
     import yaml
 
     try:
-        text = _read_text(path)
+        text = read_config_text(path)
     except ConfigError as error:
         raise SweepError(str(error).replace("config file", "sweep file")) from None
     try:
-        payload = yaml.load(text, Loader=_UniqueKeyLoader)
+        payload = yaml.load(text, Loader=UniqueKeyLoader)
     except yaml.YAMLError as error:
         mark = getattr(error, "problem_mark", None)
         where = f" (line {mark.line + 1}, column {mark.column + 1})" if mark is not None else ""

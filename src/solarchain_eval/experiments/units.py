@@ -27,6 +27,7 @@ from ..config import BenchmarkConfig
 from ..evaluation.settings import Setting
 from ..governance.factory import AgenticOptions
 from ..protocol import EPISODE_SEED_RULES
+from ..tasks.registry import DEFAULT_TASK
 from ..training.jax_progress import ChunkProgress
 from ..training.lagrangian import LagrangianSettings
 from ..training.sb3_trainer import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
@@ -63,6 +64,7 @@ class UnitTask:
     chunk_steps: int | None = None  # JAX train units: env steps per chunk (None: the algorithm's default)
     #: Eval units: their setting itself, since a spawned worker has not registered the user's settings.
     setting: Setting | None = None
+    task: str = DEFAULT_TASK  # the task the unit trains or evaluates on
 
 
 @dataclass(frozen=True)
@@ -210,6 +212,7 @@ def _train_unit(task: UnitTask, log: _UnitLog, on_progress: Callable[[UnitProgre
         config=task.config,
         checkpoint_every=task.checkpoint_every,
         lagrangian=task.lagrangian,
+        task=task.task,
     )
     tenth = max(task.timesteps // 10, 1)
     reported = [0]
@@ -234,7 +237,14 @@ def _train_jax_unit(task: UnitTask, log: _UnitLog, on_progress: Callable[[UnitPr
     unit = task.unit
     seeds = unit.seed_group or (unit.seed,)
     spec = JaxTrainSpec(
-        unit.policy, seeds, task.timesteps, task.no_physics_penalty, task.data_dir, task.config, task.chunk_steps
+        unit.policy,
+        seeds,
+        task.timesteps,
+        task.no_physics_penalty,
+        task.data_dir,
+        task.config,
+        task.chunk_steps,
+        task=task.task,
     )
     out_dirs = {seed: seed_model_dir(task.unit_dir, seed) for seed in seeds}
     for directory in out_dirs.values():
@@ -268,6 +278,8 @@ def _evaluate_unit(task: UnitTask) -> None:
     from ..evaluation.runner import EvaluationSpec, run_evaluation
 
     unit = task.unit
+    # Only another task is named: the evaluation of a solar unit is the one before tasks.
+    named = {"task": task.task} if task.task != DEFAULT_TASK else {}
     spec = EvaluationSpec(
         policies=[task.agent_spec or unit.policy],
         run_seeds=[unit.seed],
@@ -283,6 +295,7 @@ def _evaluate_unit(task: UnitTask) -> None:
         agent_args=dict(task.agent_args),
         vecnormalize=dict(task.vecnormalize),
         isolate=task.isolate,
+        **named,
     )
     if spec.setting != unit.setting:
         raise ValueError(f"unit {unit.name}: the task evaluates setting {spec.setting!r}")

@@ -33,10 +33,10 @@ import numpy as np
 from ..agents.base import Policy
 from ..agents.http_agent import HttpAgent
 from ..agents.isolated import IsolatedAgent
-from ..config import MarketConfig
+from ..config import BenchmarkConfig, MarketConfig
 from ..evaluation.runner import EvaluationSpec, run_evaluation
-from ..market.baselines import StaticPolicy
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
+from ..tasks.registry import get_task
 
 #: The example agent server of a source checkout (it is not part of the installed package).
 EXAMPLE_SERVER = Path(__file__).resolve().parents[3] / "examples" / "http_agent_server.py"
@@ -111,8 +111,9 @@ class AgentBench:
 
 
 def static_action(market: MarketConfig | None = None) -> np.ndarray:
-    """The Static baseline's normalised action (float32, as it acts)."""
-    return np.array(StaticPolicy(market or MarketConfig()).act(np.zeros(0)), dtype=np.float32)
+    """The Static baseline's normalised action (float32, as it acts), from the solar market's baselines."""
+    config = BenchmarkConfig() if market is None else BenchmarkConfig(market=market)
+    return np.array(get_task().baselines()["static"](config).act(np.zeros(0)), dtype=np.float32)
 
 
 @contextmanager

@@ -1,7 +1,9 @@
-"""Throughput measurements of the environments and the evaluation runner.
+"""Throughput measurements of a task's environments and the evaluation runner.
 
 Timings on shared machines vary from run to run, so every figure is measured several times
-and reported as median and best.
+and reported as median and best. The environments are the task's
+(:func:`~solarchain_eval.tasks.registry.get_task`; default the solar market) on its dataset in
+``data_dir`` (None: the task's default) with the default configuration.
 """
 
 from __future__ import annotations
@@ -11,13 +13,14 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
-import gymnasium as gym
 import numpy as np
 
-from ..data.table import HourlyTable, load_table
-from ..envs.registration import ENV_ID
+from ..config import BenchmarkConfig
 from ..protocol import PAPER_SEED
+from ..tasks.base import Task, make_jax_env, make_vector_env
+from ..tasks.registry import DEFAULT_TASK, get_task
 
 
 @dataclass(frozen=True)
@@ -35,14 +38,50 @@ class Throughput:
         return max(self.samples)
 
 
-def single_env_steps_per_s(data_dir: Path, steps: int, repeats: int) -> Throughput:
-    """One env through ``gymnasium.make`` (with its wrappers), random actions, resets included.
+def task_data(task: Task, data_dir: Path | None) -> Any:
+    """The task's dataset in ``data_dir`` (None: its default), as its env factories take it."""
+    return task.load_data(task.data_dir(data_dir, BenchmarkConfig()))
+
+
+def task_jax_env(task: str, data_dir: Path | None) -> Any:
+    """The task's JAX env on its dataset with the default configuration.
+
+    Raises
+    ------
+    ValueError
+        The task has no JAX env.
+    """
+    market = get_task(task)
+    env = make_jax_env(market, BenchmarkConfig(), task_data(market, data_dir))
+    if env is None:
+        raise ValueError(f"task {task!r} has no JAX environment")
+    return env
+
+
+def uniform_actions(space: Any, rows: tuple[int, ...], seed: int) -> np.ndarray:
+    """``rows`` of actions drawn uniformly from the Box ``space`` up front (float32)."""
+    u = np.random.default_rng(seed).random((*rows, *space.shape), dtype=np.float32)
+    low, high = np.float32(space.low), np.float32(space.high)
+    # the [0, 1] box of the solar market keeps its draws exactly
+    return u if np.all(low == 0) and np.all(high == 1) else low + (high - low) * u
+
+
+def with_make_wrappers(env: Any) -> Any:
+    """``env`` inside the wrappers ``gymnasium.make`` adds (the env checker, order enforcing)."""
+    from gymnasium.wrappers import OrderEnforcing, PassiveEnvChecker
+
+    return OrderEnforcing(PassiveEnvChecker(env))
+
+
+def single_env_steps_per_s(data_dir: Path | None, steps: int, repeats: int, task: str = DEFAULT_TASK) -> Throughput:
+    """One env of the task with ``gymnasium.make``'s wrappers, random actions, resets included.
 
     Actions are drawn up front from a uniform generator so the figure measures the env, not
     ``Box.sample``.
     """
-    env = gym.make(ENV_ID, data_dir=str(data_dir))
-    actions = np.random.default_rng(0).random((steps, 3), dtype=np.float32)
+    market = get_task(task)
+    env = with_make_wrappers(market.make_env(BenchmarkConfig(), task_data(market, data_dir)))
+    actions = uniform_actions(env.action_space, (steps,), 0)
     samples = []
     for repeat in range(repeats):
         env.reset(seed=repeat)
@@ -56,16 +95,13 @@ def single_env_steps_per_s(data_dir: Path, steps: int, repeats: int) -> Throughp
     return Throughput("single env (gym.make, random actions, resets included)", "steps/s", tuple(samples))
 
 
-def vector_env_steps_per_s(data_dir: Path, num_envs: int, calls: int, repeats: int) -> Throughput:
-    """The native vector env (SAME_STEP autoreset): every call is ``num_envs`` transitions."""
-    envs = gym.make_vec(
-        ENV_ID,
-        num_envs=num_envs,
-        vectorization_mode="vector_entry_point",
-        data_dir=str(data_dir),
-        autoreset_mode="SameStep",
-    )
-    actions = np.random.default_rng(1).random((8, num_envs, 3), dtype=np.float32)
+def vector_env_steps_per_s(
+    data_dir: Path | None, num_envs: int, calls: int, repeats: int, task: str = DEFAULT_TASK
+) -> Throughput:
+    """The task's vector env (SAME_STEP autoreset): every call is ``num_envs`` transitions."""
+    market = get_task(task)
+    envs = make_vector_env(market, BenchmarkConfig(), task_data(market, data_dir), num_envs, autoreset_mode="SameStep")
+    actions = uniform_actions(envs.single_action_space, (8, num_envs), 1)
     envs.reset(seed=0)
     for i in range(25):  # warm-up: one full episode with its autoreset
         envs.step(actions[i % 8])
@@ -101,5 +137,6 @@ def evaluation_seconds(data_dir: Path, repeats: int) -> Throughput:
     return Throughput("evaluate 1,620 baseline episodes (with output files)", "s", tuple(samples))
 
 
-def warm_table(data_dir: Path) -> HourlyTable:
-    return load_table(data_dir)
+def warm_table(data_dir: Path | None, task: str = DEFAULT_TASK) -> Any:
+    """Load the task's dataset once (a later load is then served warm)."""
+    return task_data(get_task(task), data_dir)

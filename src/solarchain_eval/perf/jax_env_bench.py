@@ -4,16 +4,17 @@ from __future__ import annotations
 
 import time
 from pathlib import Path
+from typing import Any
 
 import jax
 import jax.numpy as jnp
 import numpy as np
 
-from ..envs.jax_env import SolarChainJaxEnv, make_env_params
-from .env_bench import Throughput
+from ..tasks.registry import DEFAULT_TASK
+from .env_bench import Throughput, task_jax_env
 
 
-def make_rollout(env: SolarChainJaxEnv, params, num_envs: int, episodes: int):
+def make_rollout(env: Any, params, num_envs: int, episodes: int):
     """A jitted function running ``episodes`` episodes in each of ``num_envs`` envs.
 
     Every episode starts with a vmapped reset (start hour and shocks drawn with ``jax.random``)
@@ -21,7 +22,7 @@ def make_rollout(env: SolarChainJaxEnv, params, num_envs: int, episodes: int):
     as in the numpy vector-env benchmark. Rewards and observations are summed so that nothing
     the env computes for the agent is optimised away.
     """
-    steps = params.episode_steps
+    steps = params.max_steps_in_episode
     reset = jax.vmap(env.reset_env, in_axes=(0, None))
     step = jax.vmap(env.step_env, in_axes=(None, 0, 0, None))
 
@@ -38,13 +39,15 @@ def make_rollout(env: SolarChainJaxEnv, params, num_envs: int, episodes: int):
             (state, total), _ = jax.lax.scan(one, (state, total + jnp.sum(obs)), jnp.arange(steps))
             return total, None
 
-        total, _ = jax.lax.scan(episode, jnp.zeros((), params.verified_mwh.dtype), jax.random.split(key, episodes))
+        # the env's float width: float64 under jax_enable_x64, else float32
+        total = jnp.zeros((), jax.dtypes.canonicalize_dtype(jnp.float64))
+        total, _ = jax.lax.scan(episode, total, jax.random.split(key, episodes))
         return total
 
     return jax.jit(run), episodes * steps * num_envs
 
 
-def shard_rollout(env: SolarChainJaxEnv, params, num_envs: int, episodes: int, devices: list):
+def shard_rollout(env: Any, params, num_envs: int, episodes: int, devices: list):
     """:func:`make_rollout` with the envs split evenly over ``devices`` (``shard_map``).
 
     Each device runs ``num_envs / len(devices)`` envs with its own key; the function takes one
@@ -68,25 +71,31 @@ def shard_rollout(env: SolarChainJaxEnv, params, num_envs: int, episodes: int, d
     return (
         jax.jit(sharded),
         jax.sharding.NamedSharding(mesh, spec(None, "envs")),
-        episodes * params.episode_steps * num_envs,
+        episodes * params.max_steps_in_episode * num_envs,
     )
 
 
 def jax_env_steps_per_s(
-    data_dir: Path, num_envs: int, episodes: int, repeats: int, devices: int | None = None
+    data_dir: Path | None,
+    num_envs: int,
+    episodes: int,
+    repeats: int,
+    devices: int | None = None,
+    task: str = DEFAULT_TASK,
 ) -> Throughput:
-    """env-steps/s of the jitted, vmapped JAX env (compilation excluded, resets included).
+    """env-steps/s of the task's jitted, vmapped JAX env (compilation excluded, resets included).
 
     ``devices``: how many of JAX's devices to split the envs over (default: all of them).
     """
-    params = make_env_params(data_dir)
-    env = SolarChainJaxEnv(params)
+    env = task_jax_env(task, data_dir)
+    params = env.default_params
     available = jax.devices()
     if devices is not None and not 1 <= devices <= len(available):
         raise ValueError(f"asked for {devices} JAX devices; {len(available)} available")
     used = available[:devices]
     run, actions_sharding, transitions = shard_rollout(env, params, num_envs, episodes, used)
-    actions = np.random.default_rng(1).random((8, num_envs, 3), dtype=np.float32)
+    shape = env.action_space(params).shape
+    actions = np.random.default_rng(1).random((8, num_envs, *shape), dtype=np.float32)
     actions = jax.device_put(actions, actions_sharding)
 
     def keys(seed: int) -> jax.Array:

@@ -23,10 +23,28 @@ import jax
 from ..agents.checkpoints import ACTION_MODES
 from ..agents.jax_checkpoint import JAX_MODEL_FILE
 from ..config import BenchmarkConfig
-from ..envs.jax_env import make_env_params
 from ..protocol import PAPER_SEED
-from ..training.jax_trainer import compile_training, rejax_config, save_network, seed_keys, write_train_config
-from .env_bench import Throughput
+from ..tasks.base import make_jax_env
+from ..tasks.registry import DEFAULT_TASK, get_task
+from ..training.jax_algorithm import compile_training, rejax_config, seed_keys
+from ..training.jax_trainer import save_network, write_train_config
+from .env_bench import Throughput, task_data
+
+
+def training_env(algo: str, data_dir: Path | None, config: BenchmarkConfig, task: str = DEFAULT_TASK) -> Any:
+    """The task's JAX env that ``algo`` trains on (its action mode).
+
+    Raises
+    ------
+    ValueError
+        The task has no JAX env.
+    """
+    market = get_task(task)
+    env = make_jax_env(market, config, task_data(market, data_dir), action_mode=ACTION_MODES[algo])
+    if env is None:
+        raise ValueError(f"task {task!r} has no JAX environment")
+    return env
+
 
 #: Env steps per seed per timed run.
 DEFAULT_STEPS = {"ppo": 6144, "sac": 2000, "dqn": 6000}
@@ -54,6 +72,7 @@ def jax_training_steps_per_s(
     config: BenchmarkConfig | None = None,
     model_dir: Path | None = None,
     buffer_timesteps: int | None = None,
+    task: str = DEFAULT_TASK,
 ) -> JaxTrainingSpeed:
     """Steady rejax training speed of ``algo`` in env steps per second per model.
 
@@ -68,11 +87,11 @@ def jax_training_steps_per_s(
         Size SAC's and DQN's replay buffer for a training of this many steps (default: ``steps``).
     """
     cfg = config or BenchmarkConfig()
-    params = make_env_params(data_dir, config=cfg, action_mode=ACTION_MODES[algo])
+    env = training_env(algo, data_dir, cfg, task)
     batch = tuple(range(seeds))
-    compiled, compile_s = compile_training(algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps)
+    compiled, compile_s = compile_training(algo, batch, steps, env, cfg, buffer_timesteps=buffer_timesteps)
     _, cached_compile_s = compile_training(  # what a later train unit pays
-        algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps
+        algo, batch, steps, env, cfg, buffer_timesteps=buffer_timesteps
     )
     samples, cpu_ratios, cpu_rates, states = [], [], [], None
     for repeat in range(repeats):
@@ -146,6 +165,7 @@ def chunking_cost(
     seeds: int = 3,
     buffer_timesteps: int | None = None,
     config: BenchmarkConfig | None = None,
+    task: str = DEFAULT_TASK,
 ) -> ChunkingCost:
     """What training in chunks costs: ``chunks`` chunks of ``chunk_steps`` env steps per model
     (default: the trainer's) against the same steps in one call, ``repeats`` times each.
@@ -157,14 +177,14 @@ def chunking_cost(
     from ..training.jax_progress import DEFAULT_CHUNK_STEPS
 
     cfg = config or BenchmarkConfig()
-    params = make_env_params(data_dir, config=cfg, action_mode=ACTION_MODES[algo])
+    env = training_env(algo, data_dir, cfg, task)
     batch = tuple(range(seeds))
     per_chunk = chunk_steps or DEFAULT_CHUNK_STEPS[algo]
-    probe = ChunkedTraining(algo, batch, per_chunk, params, cfg, per_chunk, buffer_timesteps)
+    probe = ChunkedTraining(algo, batch, per_chunk, env, cfg, per_chunk, buffer_timesteps)
     steps = chunks * probe.plan.chunk_steps  # whole iterations (PPO rollouts, DQN's 4 envs)
-    training = ChunkedTraining(algo, batch, steps, params, cfg, per_chunk, buffer_timesteps)
+    training = ChunkedTraining(algo, batch, steps, env, cfg, per_chunk, buffer_timesteps)
     training.compile()
-    rejax, _ = compile_training(algo, batch, steps, params, cfg, buffer_timesteps=buffer_timesteps)
+    rejax, _ = compile_training(algo, batch, steps, env, cfg, buffer_timesteps=buffer_timesteps)
     one_loop, chunked, rejax_train, writes = [], [], [], []
     with tempfile.TemporaryDirectory() as tmp:
         checkpoint = Path(tmp) / "jax_chunks.npz"

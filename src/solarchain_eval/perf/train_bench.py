@@ -31,16 +31,15 @@ from ..agents.checkpoints import ACTION_MODES, algorithm_class
 from ..config import BenchmarkConfig
 from ..experiments.grid import GridSpec, Unit, plan_units
 from ..experiments.layout import PAPER_METADATA_FILE, UNITS_DIR
-from ..market.observation import OBSERVATION_SHAPE
-from ..market.spaces import action_space, observation_space
 from ..protocol import PAPER_SEED
+from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.sb3_trainer import (
     TRAIN_METADATA_FILE,
     hyperparameters,
     quiet_logger,
     set_torch_threads,
 )
-from .env_bench import Throughput
+from .env_bench import Throughput, task_data
 
 #: Timed steps per repeat and warm-up steps (past learning starts / one PPO rollout).
 DEFAULT_STEPS = {"ppo": 6144, "sac": 1000, "dqn": 6000}
@@ -48,12 +47,13 @@ WARMUP_STEPS = {"ppo": 2048, "sac": 200, "dqn": 400}
 
 
 class TrivialEnv(gym.Env):
-    """SolarChain-Eval's spaces with nothing behind them: SB3's own cost per step."""
+    """A task's spaces (default: the solar market's) with nothing behind them: SB3's own cost per step."""
 
-    def __init__(self, action_mode: str = "continuous") -> None:
-        self.observation_space = observation_space()
-        self.action_space = action_space(action_mode, BenchmarkConfig().discrete_levels)
-        self._obs = np.zeros(OBSERVATION_SHAPE, dtype=np.float32)
+    def __init__(self, action_mode: str = "continuous", task: str = DEFAULT_TASK) -> None:
+        like = task_env(action_mode, None, task)
+        self.observation_space = like.observation_space
+        self.action_space = like.action_space
+        self._obs = np.zeros(self.observation_space.shape, dtype=np.float32)
         self._k = 0
 
     def reset(self, *, seed: int | None = None, options: dict | None = None):
@@ -92,10 +92,15 @@ def training_steps_per_s(
     return Throughput(f"{algo.upper()} training", "steps/s", tuple(samples))
 
 
-def solarchain_env(algo: str, data_dir: Path) -> gym.Env:
-    from ..envs.env import SolarChainEnv
+def task_env(action_mode: str, data_dir: Path | None, task: str = DEFAULT_TASK) -> gym.Env:
+    """A fresh env of the task on its dataset in ``data_dir`` (None: its default), default config."""
+    market = get_task(task)
+    return market.make_env(BenchmarkConfig(), task_data(market, data_dir), action_mode=action_mode)
 
-    return SolarChainEnv(data_dir=data_dir, action_mode=ACTION_MODES[algo])
+
+def solarchain_env(algo: str, data_dir: Path | None, task: str = DEFAULT_TASK) -> gym.Env:
+    """The env ``algo`` trains on (its action mode) in the task (default: the solar market)."""
+    return task_env(ACTION_MODES[algo], data_dir, task)
 
 
 @dataclass(frozen=True)

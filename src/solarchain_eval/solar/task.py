@@ -27,7 +27,7 @@ from ..envs.registration import ENV_ID
 from ..market.baselines import BASELINES, make_baseline
 from ..market.observation import OBSERVATION_NAMES
 from ..records_schema import EPISODE_METRIC_COLUMNS
-from ..tasks.base import Lever, MetricSpec, PaperReference
+from ..tasks.base import Lever, MetricSpec, PaperReference, TrainLogField
 from ..tasks.benchmark_config import BenchmarkConfigMethods
 from .governance_view import SolarGovernanceView
 from .metrics import episode_metrics_from_steps
@@ -66,6 +66,13 @@ _DECLARED = {
     "final_token_price": ("stability", "none"),
 }
 SOLAR_METRICS = tuple(MetricSpec(column, *_DECLARED[column.name]) for column in EPISODE_METRIC_COLUMNS)
+#: training_log.csv's market columns: volume, V and artificial liquidity as in the evaluation metrics, and the cost.
+SOLAR_TRAINING_LOG = (
+    TrainLogField("episode_volume", "matched_energy_MWh"),
+    TrainLogField("physics_violation_rate", "physics_violation_rate", mean=True),
+    TrainLogField("artificial_liquidity_MWh", "artificial_liquidity_MWh"),
+    TrainLogField("episode_cost", "cost"),
+)
 
 # --- the report's and the leaderboard's concern: the paper's reference ---
 #: What the paper published: its dataset, the metrics its tables cover and its board's columns.
@@ -138,6 +145,30 @@ class SolarTask(BenchmarkConfigMethods):
 
     def step_extra_names(self, data: HourlyTable) -> tuple[str, ...]:
         return tuple(data.cities)
+
+    # --- training's concern: vector and JAX environments, the training log (tasks/base.py) ---
+    training_log: tuple[TrainLogField, ...] = SOLAR_TRAINING_LOG
+
+    def make_vector_env(
+        self,
+        config: BenchmarkConfig,
+        data: HourlyTable,
+        n_envs: int,
+        *,
+        action_mode: str | None = None,
+        autoreset_mode: str | None = None,
+    ) -> Any:
+        """The native batched env (:class:`~solarchain_eval.envs.vector.SolarChainVectorEnv`)."""
+        from ..envs.vector import SolarChainVectorEnv
+
+        reset = {"autoreset_mode": autoreset_mode} if autoreset_mode is not None else {}
+        return SolarChainVectorEnv(n_envs, config=config, table=data, action_mode=action_mode, **reset)
+
+    def make_jax_env(self, config: BenchmarkConfig, data: HourlyTable, *, action_mode: str | None = None) -> Any:
+        """The jittable env (:class:`~solarchain_eval.envs.jax_env.SolarChainJaxEnv`; needs the jax extra)."""
+        from ..envs.jax_env import SolarChainJaxEnv, make_env_params
+
+        return SolarChainJaxEnv(make_env_params(table=data, config=config, action_mode=action_mode))
 
 
 #: The solar market task (registered as ``solar`` in :mod:`solarchain_eval.tasks.registry`).

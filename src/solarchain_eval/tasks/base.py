@@ -241,3 +241,74 @@ def dataset_manifest_of(task: Task) -> str | None:
     """The file in a dataset directory of the task that records how it was built (its optional
     ``dataset_manifest`` attribute, the solar market's ``manifest.json``), or None."""
     return getattr(task, "dataset_manifest", None)
+
+
+# --- training's concern: vector and JAX environments, the training log (optional capabilities) ---
+# A task may have these attributes; one without them gets the defaults below (a vector env over
+# make_env, no JAX env, a training log of the return and length only). They are optional, so they
+# are not members of the Task protocol that ``register_task`` checks; read them with the helpers.
+
+
+@dataclass(frozen=True)
+class TrainLogField:
+    """One per-episode column of ``training_log.csv``: an ``info`` value of each step, summed or averaged.
+
+    Attributes
+    ----------
+    column : str
+        The column's name.
+    info_key : str
+        The key of the env's per-step ``info`` it accumulates.
+    mean : bool
+        The episode mean of the values (else their sum).
+    """
+
+    column: str
+    info_key: str
+    mean: bool = False
+
+
+def make_vector_env(
+    task: Task,
+    config: Any,
+    data: Any,
+    n_envs: int,
+    *,
+    action_mode: str | None = None,
+    autoreset_mode: str | None = None,
+) -> Any:
+    """``n_envs`` environments of ``task`` stepped together, as a Gymnasium ``VectorEnv``.
+
+    The task's own ``make_vector_env(config, data, n_envs, action_mode=..., autoreset_mode=...)``
+    where it has one (the solar market: its native batched env); otherwise Gymnasium's
+    ``SyncVectorEnv`` over :meth:`Task.make_env`. ``autoreset_mode`` is a Gymnasium
+    ``AutoresetMode`` value (``"NextStep"``, the default, or ``"SameStep"``).
+    """
+    own = getattr(task, "make_vector_env", None)
+    if own is not None:
+        return own(config, data, n_envs, action_mode=action_mode, autoreset_mode=autoreset_mode)
+    from gymnasium.vector import AutoresetMode, SyncVectorEnv
+
+    return SyncVectorEnv(
+        [lambda: task.make_env(config, data, action_mode=action_mode)] * n_envs,
+        autoreset_mode=AutoresetMode(autoreset_mode or AutoresetMode.NEXT_STEP),
+    )
+
+
+def make_jax_env(task: Task, config: Any, data: Any, *, action_mode: str | None = None) -> Any | None:
+    """The task's jittable environment (a gymnax ``Environment`` whose ``default_params`` hold
+    ``config`` and ``data``; the JAX trainer's functional ``reset``/``step``, observation and action
+    spaces), from its optional ``make_jax_env(config, data, action_mode=...)``; None when it has none."""
+    own = getattr(task, "make_jax_env", None)
+    return None if own is None else own(config, data, action_mode=action_mode)
+
+
+def has_jax_env(task: Task) -> bool:
+    """Whether ``task`` has a JAX environment (``train --backend jax`` and the JAX benches need one)."""
+    return getattr(task, "make_jax_env", None) is not None
+
+
+def training_log_fields(task: Task) -> tuple[TrainLogField, ...]:
+    """The task's ``training_log.csv`` columns beyond the return and length (its optional
+    ``training_log`` attribute; none without it)."""
+    return tuple(getattr(task, "training_log", ()))

@@ -16,7 +16,7 @@ from __future__ import annotations
 
 import json
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
@@ -29,33 +29,48 @@ from stable_baselines3.common.callbacks import BaseCallback
 from stable_baselines3.common.off_policy_algorithm import OffPolicyAlgorithm
 
 from ..common.atomic_files import atomic_write_csv, atomic_write_json, atomic_write_with, read_csv_exact
+from ..tasks.base import TrainLogField
 
-#: Columns of ``training_log.csv`` (one row per finished training episode).
-TRAIN_LOG_COLUMNS = (
-    "episode",
-    "end_timestep",
-    "episode_return",
-    "episode_length",
-    "episode_volume",
-    "physics_violation_rate",
-    "artificial_liquidity_MWh",
-    "episode_cost",
-    "wall_s",
-)
+#: ``training_log.csv``'s columns (one row per finished training episode) around the task's own
+#: (:func:`~solarchain_eval.tasks.base.training_log_fields`; the solar market: volume, V, artificial
+#: liquidity and cost).
+LEADING_COLUMNS = ("episode", "end_timestep", "episode_return", "episode_length")
+TRAILING_COLUMNS = ("wall_s",)
 STATE_FILE = "state.json"
 PROGRESS_EVERY_STEPS = 512  # how often the progress callback is told (a callback per step costs time)
 
 
-class EpisodeLog:
-    """Per-episode sums of the training env's ``info`` (reward, volume, V, artificial liquidity).
+def train_log_columns(fields: Sequence[TrainLogField] = ()) -> tuple[str, ...]:
+    """The columns of a training log with the task's ``fields``."""
+    return (*LEADING_COLUMNS, *(f.column for f in fields), *TRAILING_COLUMNS)
 
-    ``physics_violation_rate`` is the episode mean of the per-step V; ``artificial_liquidity_MWh``
-    and ``episode_volume`` are episode sums in MWh, as in the evaluation metrics.
+
+class EpisodeLog:
+    """Per-episode return and length, and the sums (or means) of the task's ``info`` fields.
+
+    Parameters
+    ----------
+    n_envs : int
+    rows : list of dict, optional
+        Rows logged before (a resumed training).
+    wall_offset_s : float
+    fields : sequence of TrainLogField
+        The task's log columns (the solar market's: ``physics_violation_rate`` is the episode mean
+        of the per-step V; ``artificial_liquidity_MWh`` and ``episode_volume`` are episode sums in
+        MWh, as in the evaluation metrics).
     """
 
-    def __init__(self, n_envs: int, rows: list[dict[str, float]] | None = None, wall_offset_s: float = 0.0) -> None:
+    def __init__(
+        self,
+        n_envs: int,
+        rows: list[dict[str, float]] | None = None,
+        wall_offset_s: float = 0.0,
+        fields: Sequence[TrainLogField] = (),
+    ) -> None:
         self.rows: list[dict[str, float]] = list(rows or [])
-        self._acc = [[0.0, 0.0, 0.0, 0.0, 0.0, 0] for _ in range(n_envs)]
+        self.fields = tuple(fields)
+        self._width = len(self.fields) + 1  # the return, then each field
+        self._acc = [[0.0] * self._width + [0] for _ in range(n_envs)]
         self._start = time.perf_counter() - wall_offset_s
 
     def add_step(
@@ -63,36 +78,27 @@ class EpisodeLog:
     ) -> dict[str, float] | None:
         acc = self._acc[env_index]
         acc[0] += reward
-        acc[1] += info["matched_energy_MWh"]
-        acc[2] += info["physics_violation_rate"]
-        acc[3] += info["artificial_liquidity_MWh"]
-        acc[4] += info["cost"]
-        acc[5] += 1
+        for i, field in enumerate(self.fields, start=1):
+            acc[i] += info[field.info_key]
+        acc[-1] += 1
         if not done:
             return None
-        n = acc[5]
-        row = {
-            "episode": len(self.rows),
-            "end_timestep": timestep,
-            "episode_return": acc[0],
-            "episode_length": n,
-            "episode_volume": acc[1],
-            "physics_violation_rate": acc[2] / n,
-            "artificial_liquidity_MWh": acc[3],
-            "episode_cost": acc[4],
-            "wall_s": round(time.perf_counter() - self._start, 3),
-        }
+        n = acc[-1]
+        row = {"episode": len(self.rows), "end_timestep": timestep, "episode_return": acc[0], "episode_length": n}
+        for i, field in enumerate(self.fields, start=1):
+            row[field.column] = acc[i] / n if field.mean else acc[i]
+        row["wall_s"] = round(time.perf_counter() - self._start, 3)
         self.rows.append(row)
-        self._acc[env_index] = [0.0, 0.0, 0.0, 0.0, 0.0, 0]
+        self._acc[env_index] = [0.0] * self._width + [0]
         return row
 
     def frame(self) -> pd.DataFrame:
-        return pd.DataFrame(self.rows, columns=list(TRAIN_LOG_COLUMNS))
+        return pd.DataFrame(self.rows, columns=list(train_log_columns(self.fields)))
 
     @staticmethod
-    def read(path: Path) -> list[dict[str, float]]:
+    def read(path: Path, fields: Sequence[TrainLogField] = ()) -> list[dict[str, float]]:
         frame = read_csv_exact(path)
-        missing = [c for c in TRAIN_LOG_COLUMNS if c not in frame.columns]
+        missing = [c for c in train_log_columns(fields) if c not in frame.columns]
         if missing:
             raise ValueError(f"{path}: training log lacks column(s) {', '.join(missing)}")
         return frame.to_dict("records")
@@ -248,7 +254,7 @@ class TrainingMonitor(BaseCallback):
             reward = float(info.get("reward_unpenalised", rewards[i]))
             row = self.log.add_step(i, info, reward, bool(dones[i]), steps)
             if row is not None and self._writer is not None:
-                for key in ("episode_return", "physics_violation_rate", "artificial_liquidity_MWh", "episode_volume"):
+                for key in ("episode_return", *(f.column for f in self.log.fields)):
                     self._writer.add_scalar(f"episode/{key}", row[key], steps)
         if steps >= self._next_report and self.on_progress is not None:
             self.on_progress(steps)

@@ -15,8 +15,8 @@ from typing import Any
 import jax
 import numpy as np
 
+from ..common.cache import cache_dir
 from ..config import BenchmarkConfig
-from ..envs.jax_env import EnvParams, SolarChainJaxEnv
 from .jax_alignment import sb3_variant
 from .sb3_trainer import dqn_learning_starts
 
@@ -102,10 +102,9 @@ def progress_chunks(iterations: int, most: int = 10) -> int:
     return max(k for k in range(1, min(most, iterations) + 1) if iterations % k == 0)
 
 
-def make_algo(
-    algo: str, params: EnvParams, config: BenchmarkConfig, timesteps: int, buffer_timesteps: int | None = None
-) -> Any:
-    """The rejax algorithm (SB3-aligned, :func:`~.jax_alignment.sb3_variant`) for ``timesteps`` steps.
+def make_algo(algo: str, env: Any, config: BenchmarkConfig, timesteps: int, buffer_timesteps: int | None = None) -> Any:
+    """The rejax algorithm (SB3-aligned, :func:`~.jax_alignment.sb3_variant`) for ``timesteps`` steps
+    on ``env``, a task's JAX env (:func:`~solarchain_eval.tasks.base.make_jax_env`) with its ``default_params``.
 
     rejax's own ``train`` runs ``ceil(total / eval_freq)`` blocks of ``ceil(eval_freq / iteration)``
     iterations with an evaluation callback after each; ``eval_freq`` is set to a whole number of
@@ -118,7 +117,7 @@ def make_algo(
     per_iteration = iteration_steps(algo, settings)
     iterations = -(-int(timesteps) // per_iteration)
     settings["eval_freq"] = iterations // progress_chunks(iterations) * per_iteration
-    instance = sb3_variant(algo).create(env=SolarChainJaxEnv(params), env_params=params, **settings)
+    instance = sb3_variant(algo).create(env=env, env_params=env.default_params, **settings)
     return instance.replace(eval_callback=lambda algo_instance, ts, rng: jnp.zeros(()))
 
 
@@ -129,8 +128,6 @@ def use_compilation_cache() -> None:
     keys are its arguments), so a grid's second train unit of a kind loads it instead of compiling.
     """
     if not jax.config.jax_compilation_cache_dir:
-        from ..data.default import cache_dir
-
         jax.config.update("jax_compilation_cache_dir", str(cache_dir() / "jax-compilation"))
 
 
@@ -138,7 +135,7 @@ def compile_training(
     algo: str,
     seeds: tuple[int, ...],
     timesteps: int,
-    params: EnvParams,
+    env: Any,
     config: BenchmarkConfig,
     buffer_timesteps: int | None = None,
 ) -> tuple[Any, float]:
@@ -146,7 +143,7 @@ def compile_training(
     returns (compiled function, compile s). ``bench-train`` times it; the trainer runs
     :class:`~.jax_chunks.ChunkedTraining`."""
     use_compilation_cache()
-    instance = make_algo(algo, params, config, timesteps, buffer_timesteps)
+    instance = make_algo(algo, env, config, timesteps, buffer_timesteps)
     keys = seed_keys(seeds)
     start = time.perf_counter()
     with warnings.catch_warnings():

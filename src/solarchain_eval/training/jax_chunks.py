@@ -93,8 +93,8 @@ class ChunkedTraining:
 
     Parameters
     ----------
-    algo, seeds, timesteps, params, config
-        As for :func:`~.jax_algorithm.compile_training`.
+    algo, seeds, timesteps, env, config
+        As for :func:`~.jax_algorithm.compile_training` (``env``: the task's JAX env).
     chunk_steps : int, optional
         Env steps per model in one chunk (default :data:`DEFAULT_CHUNK_STEPS`).
     buffer_timesteps : int, optional
@@ -106,13 +106,13 @@ class ChunkedTraining:
         algo: str,
         seeds: tuple[int, ...],
         timesteps: int,
-        params: Any,
+        env: Any,
         config: Any,
         chunk_steps: int | None = None,
         buffer_timesteps: int | None = None,
     ) -> None:
         self.algo, self.seeds = algo, tuple(int(s) for s in seeds)
-        self.instance = make_algo(algo, params, config, timesteps, buffer_timesteps=buffer_timesteps)
+        self.instance = make_algo(algo, env, config, timesteps, buffer_timesteps=buffer_timesteps)
         self.plan = plan_chunks(algo, rejax_config(algo, config, timesteps, buffer_timesteps), timesteps, chunk_steps)
         self.keys = seed_keys(self.seeds)
         self._treedef: Any = None

@@ -33,7 +33,8 @@ from ..common.atomic_files import atomic_write_bytes, atomic_write_json
 from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
 from ..config import BenchmarkConfig
-from ..envs.jax_env import make_env_params
+from ..tasks.base import has_jax_env, make_jax_env
+from ..tasks.registry import DEFAULT_TASK, get_task
 
 # The algorithm's pieces live in jax_algorithm (jax_chunks builds on them without importing this
 # module); the `x as x` imports keep their names importable from here.
@@ -70,6 +71,8 @@ class JaxTrainSpec:
         Env steps per model in one compiled chunk, between which progress is reported and the
         train state checkpointed (default per algorithm:
         :data:`~.jax_progress.DEFAULT_CHUNK_STEPS`). It does not change the trained models.
+    task : str
+        The task to train on; it needs a JAX env (:func:`~solarchain_eval.tasks.base.make_jax_env`).
     """
 
     algo: str
@@ -79,9 +82,12 @@ class JaxTrainSpec:
     data_dir: Path | None = None
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     chunk_steps: int | None = None
+    task: str = DEFAULT_TASK
 
     def seed_spec(self, seed: int) -> TrainSpec:
-        return TrainSpec(self.algo, seed, self.timesteps, self.no_physics_penalty, self.data_dir, self.config)
+        return TrainSpec(
+            self.algo, seed, self.timesteps, self.no_physics_penalty, self.data_dir, self.config, task=self.task
+        )
 
 
 @dataclass(frozen=True)
@@ -105,6 +111,11 @@ class JaxTrainOutcome:
         return self.steps_trained * len(self.seeds) / max(self.train_s, 1e-9)
 
 
+def no_jax_env(task: str) -> str:
+    """The one-line error for a JAX training of a task that has no JAX env."""
+    return f"task {task!r} has no JAX environment: train it with the sb3 backend"
+
+
 def seed_dirs(out_dir: Path, seeds: tuple[int, ...]) -> dict[int, Path]:
     """Where each seed's model goes: ``out_dir`` itself for one seed, ``out_dir/seed_<s>`` for several."""
     out_dir = Path(out_dir)
@@ -115,7 +126,10 @@ def seed_dirs(out_dir: Path, seeds: tuple[int, ...]) -> dict[int, Path]:
 
 def _identity(spec: JaxTrainSpec, seed: int, dataset: dict[str, Any]) -> dict[str, Any]:
     cfg = spec.seed_spec(seed).resolved_config()
+    # Only another task is named, so that the identity (and resumes) of solar trainings is unchanged.
+    named = {"task": spec.task} if spec.task != DEFAULT_TASK else {}
     return {
+        **named,
         "algo": spec.algo,
         "backend": "jax",
         "seed": int(seed),
@@ -190,19 +204,18 @@ def train_jax(
     TrainingError
         An unknown algorithm, a bad step count, or a directory holding a different training.
     """
-    from ..data.default import resolve_data_dir
-    from ..data.provenance import dataset_provenance
-    from ..data.table import load_table
-
     algo = check_algo(spec.algo)
     if algo not in ACTION_MODES or spec.timesteps < 1 or not spec.seeds or set(out_dirs) != set(spec.seeds):
         raise TrainingError(f"cannot train {algo} with the JAX backend for seeds {list(spec.seeds)}")
     if spec.chunk_steps is not None and spec.chunk_steps < 1:
         raise TrainingError(f"chunk_steps must be at least 1, got {spec.chunk_steps}")
+    task = get_task(spec.task)
+    if not has_jax_env(task):
+        raise TrainingError(no_jax_env(spec.task))
     cfg = spec.config
-    data_dir = resolve_data_dir(spec.data_dir, cfg.data_dir)
-    table = load_table(data_dir)
-    dataset = dataset_provenance(table)
+    data_dir = task.data_dir(spec.data_dir, cfg)
+    table = task.load_data(data_dir)
+    dataset = task.provenance(table)
     identities = {s: _identity(spec, s, dataset) for s in spec.seeds}
     if all(_finished(Path(out_dirs[s]), identities[s], overwrite) for s in spec.seeds):
         paths = tuple(Path(out_dirs[s]) / JAX_MODEL_FILE for s in spec.seeds)
@@ -217,12 +230,16 @@ def train_jax(
         directory = Path(out_dirs[seed])
         for name in (JAX_MODEL_FILE, TRAIN_METADATA_FILE):
             (directory / name).unlink(missing_ok=True)
-        record = {"identity": identities[seed], "rejax": settings, "data_dir": str(data_dir.resolve())}
+        record = {
+            "identity": identities[seed],
+            "rejax": settings,
+            "data_dir": None if data_dir is None else str(Path(data_dir).resolve()),
+        }
         write_train_config(directory, record)
-    params = make_env_params(
-        table=table, config=cfg, action_mode=ACTION_MODES[algo], no_physics_penalty=spec.no_physics_penalty
-    )
-    training = ChunkedTraining(algo, tuple(spec.seeds), spec.timesteps, params, cfg, spec.chunk_steps)
+    # The env's config carries the setting's reward switch; the algorithm reads only its training section.
+    env_config = cfg.with_updates(no_physics_penalty=spec.no_physics_penalty)
+    env = make_jax_env(task, env_config, table, action_mode=ACTION_MODES[algo])
+    training = ChunkedTraining(algo, tuple(spec.seeds), spec.timesteps, env, cfg, spec.chunk_steps)
     sha256 = config_sha256({"seeds": list(spec.seeds), "identities": [identities[s] for s in spec.seeds]})
     run = run_chunks(training, checkpoint, sha256, on_progress=on_progress, on_note=on_note)
     states, plan = run.states, training.plan

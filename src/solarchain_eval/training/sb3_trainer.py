@@ -45,7 +45,8 @@ from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
 from ..config import BenchmarkConfig
 from ..evaluation.settings import setting_name
-from ..tasks.registry import get_task
+from ..tasks.base import training_log_fields
+from ..tasks.registry import DEFAULT_TASK, get_task
 from .lagrangian import LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
 
 TRAIN_LOG_FILE = "training_log.csv"
@@ -113,6 +114,8 @@ class TrainSpec:
         Torch device for the networks ("cpu" unless you know a GPU helps these small MLPs).
     lagrangian : LagrangianSettings, optional
         The cost limit and dual ascent of "ppo-lag" (required there, ignored otherwise).
+    task : str
+        The task to train on (:func:`~solarchain_eval.tasks.registry.get_task`; default the solar market).
     """
 
     algo: str
@@ -126,6 +129,7 @@ class TrainSpec:
     torch_threads: int = 1
     device: str = "cpu"
     lagrangian: LagrangianSettings | None = None  # required by (and only used for) "ppo-lag"
+    task: str = DEFAULT_TASK
 
     def resolved_config(self) -> BenchmarkConfig:
         cfg = self.config.with_updates(
@@ -152,7 +156,10 @@ def _identity(spec: TrainSpec, dataset: dict[str, Any]) -> dict[str, Any]:
     """Everything that decides the trained model; a resume must match it exactly."""
     cfg = spec.resolved_config()
     extra = {"lagrangian": spec.lagrangian.describe()} if spec.algo == LAGRANGIAN_ALGO and spec.lagrangian else {}
+    # Only another task is named, so that the identity (and resumes) of solar trainings is unchanged.
+    named = {"task": spec.task} if spec.task != DEFAULT_TASK else {}
     return {
+        **named,
         **extra,
         "algo": check_algo(spec.algo),
         "seed": int(spec.seed),
@@ -179,12 +186,13 @@ def differences(old: dict[str, Any], new: dict[str, Any], prefix: str = "") -> l
     return diffs
 
 
-def _make_vec_env(cfg: BenchmarkConfig, table: Any, n_envs: int) -> Any:
+def _make_vec_env(cfg: BenchmarkConfig, table: Any, n_envs: int, task: str = DEFAULT_TASK) -> Any:
     from stable_baselines3.common.monitor import Monitor
     from stable_baselines3.common.vec_env import DummyVecEnv
 
-    task = get_task()
-    return DummyVecEnv([lambda: Monitor(task.make_env(cfg, table))] * n_envs)
+    # SB3 steps its own vector env; each sub-env is the task's single env (as in evaluation).
+    market = get_task(task)
+    return DummyVecEnv([lambda: Monitor(market.make_env(cfg, table, action_mode=cfg.action_mode))] * n_envs)
 
 
 def _resume_seed(seed: int, steps: int) -> int:
@@ -231,7 +239,7 @@ def train(
     if algo == LAGRANGIAN_ALGO and spec.lagrangian is None:
         raise TrainingError.about("ppo-lag needs a cost limit: pass {opt_lagrangian} (the limit D on the episode cost)")
     cfg = spec.resolved_config()
-    task = get_task()
+    task = get_task(spec.task)
     data_dir = task.data_dir(spec.data_dir, cfg)
     table = task.load_data(data_dir)
     dataset = task.provenance(table)
@@ -252,7 +260,12 @@ def train(
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     atomic_write_json(
         out_dir / TRAIN_CONFIG_FILE,
-        {"identity": identity, "data_dir": str(Path(data_dir).resolve()), "dataset": dataset, "written_at": started_at},
+        {
+            "identity": identity,
+            "data_dir": None if data_dir is None else str(Path(data_dir).resolve()),  # None: a task without a dataset
+            "dataset": dataset,
+            "written_at": started_at,
+        },
     )
     session = _TrainingSession.start(spec, cfg, table, out_dir, identity, metadata)
     learn_s = session.learn(spec, algo, on_progress)
@@ -314,7 +327,8 @@ class _TrainingSession:
         from .callbacks import CheckpointStore, EpisodeLog, load_replay_buffer
 
         algo_cls = algorithm_class(spec.algo)
-        env = _make_vec_env(cfg, table, cfg.training.n_envs)
+        env = _make_vec_env(cfg, table, cfg.training.n_envs, spec.task)
+        fields = training_log_fields(get_task(spec.task))
         store = CheckpointStore(out_dir / CHECKPOINT_DIR)
         checkpoint = store.latest()
         callbacks: list[Any] = []
@@ -333,14 +347,15 @@ class _TrainingSession:
                 device=spec.device,
                 **identity["hyperparameters"],
             )
-            log, wall_before = EpisodeLog(env.num_envs), 0.0
+            log, wall_before = EpisodeLog(env.num_envs, fields=fields), 0.0
         else:
             model = algo_cls.load(checkpoint.model, env=env, device=spec.device, tensorboard_log=tb_dir)
             if checkpoint.replay_buffer is not None:
                 load_replay_buffer(model.replay_buffer, checkpoint.replay_buffer)
             model.set_random_seed(_resume_seed(spec.seed, checkpoint.steps))
             wall_before = checkpoint.wall_s
-            log = EpisodeLog(env.num_envs, EpisodeLog.read(checkpoint.log), wall_offset_s=wall_before)
+            rows = EpisodeLog.read(checkpoint.log, fields)
+            log = EpisodeLog(env.num_envs, rows, wall_offset_s=wall_before, fields=fields)
             resumed_from.append(checkpoint.steps)
             # Record the resume now: a run killed again must still say it was resumed.
             atomic_write_json(out_dir / TRAIN_METADATA_FILE, {"complete": False, "resumed_from": resumed_from})
