@@ -15,7 +15,7 @@ from solarchain_eval.governance import AgenticOptions, Governance
 from solarchain_eval.governance.auditor import LLMAuditor
 from solarchain_eval.governance.calibrated import calibrated_thresholds
 from solarchain_eval.governance.llm_agent import LLMAgent
-from solarchain_eval.governance.planner import LLMPlanner, episode_context
+from solarchain_eval.governance.planner import LLMPlanner
 from solarchain_eval.governance.schemas import AuditPolicy
 from solarchain_eval.governance.wrapper import EXTRA_LOG_KEY
 from solarchain_eval.llm.client import LLMReply
@@ -151,7 +151,7 @@ def test_evaluate_governs_the_supply_market_with_the_rule_layer(supply_dir, tmp_
     assert merged["final_unsafe_backed_MWh"].tolist() == merged["unsafe_units"].tolist()
 
 
-def test_the_calibrated_planner_and_the_oracle_auditor_run_on_the_supply_market(supply_dir, supply_table, tmp_path):  # noqa: F811
+def test_the_calibrated_planner_and_the_oracle_auditor_run_on_the_supply_market(supply_dir, tmp_path):  # noqa: F811
     options = AgenticOptions(planner="calibrated-rule", auditor="oracle", target_audit_rate=0.25)
     out = tmp_path / "run"
     evaluation = solarchain_eval.evaluate(
@@ -159,15 +159,19 @@ def test_the_calibrated_planner_and_the_oracle_auditor_run_on_the_supply_market(
     )
     metrics = evaluation.metrics.set_index(["policy", "episode"])
     diagnostics = pd.read_csv(out / "governance_diagnostics.csv")
-    # the static policy sees exactly the forecast the planner calibrated on: its audit rate is the calibrated rate
-    env, view = _env(supply_table), _view()
-    for result in evaluation.episodes:
-        if result.policy != "static":
-            continue
-        env.reset(seed=result.episode_seed, options={"start_day": result.start_hour})
-        context = episode_context(env, result.start_hour, view)
-        _, rate = calibrated_thresholds(context.hourly_signals, 0.25)
-        assert metrics.loc[("static", result.episode), "audit_rate"] == rate
+    # the static policy sees exactly the forecast the planner calibrated on: its audit rate is the
+    # rate the calibration gives on the signals the run observed
+    logs = [json.loads(line) for line in (out / "agentic_logs.jsonl").read_text().splitlines()]
+    for episode in (0, 1):
+        rows = [row for row in logs if row["policy"] == "static" and row["episode"] == episode]
+        observed = tuple(
+            np.array([row[key] for row in rows], dtype=np.float32)
+            for key in ("raw_violation_rate", "supply_gap", "static_slippage")
+        )
+        thresholds, rate = calibrated_thresholds(observed, 0.25)
+        assert metrics.loc[("static", episode), "audit_rate"] == rate > 0
+        policy = rows[0]["plan"]["audit_policy"]
+        assert (policy["violation_threshold"], policy["gap_threshold"], policy["slippage_threshold"]) == thresholds
     # the oracle revises the greedy policy's audited steps to a lower cost, never a higher one
     audited = diagnostics[(diagnostics["policy"] == "release_all") & diagnostics["audited"]]
     assert len(audited) > 0
@@ -253,6 +257,10 @@ def test_the_llm_planner_auditor_and_agent_read_the_supply_text_and_levers(suppl
     assert auditor_client.messages[0][0]["content"] == SYSTEM and first.startswith(AUDITOR_INSTRUCTION)
     assert '"bounded_proposed_action":{"supplier_incentive":0.25,"release_ratio":0.75,"demand_damping":0.05}' in first
     assert '"on_hand_days":' in first and '"reported_stock_days":' in first
+    # the episode starts on a Monday: the auditor's "hour" is the day of the week
+    for row, messages in zip(audited, auditor_client.messages, strict=True):
+        assert f'"step":{row["step"]},"hour_of_day":{row["step"] % 7},' in messages[1]["content"]
+    assert max(row["step"] for row in audited) >= 7
     later = auditor_client.messages[-1][1]["content"]
     assert all(f'"{name}":' in later for name in ("phantom_fill_volume_units", "unsafe_units", "backlog_units"))
     # an audited day executes the auditor's revision; every audit was called by the phantom share
