@@ -282,3 +282,16 @@ def test_the_llm_planner_auditor_and_agent_read_the_supply_text_and_levers(suppl
     )
     on_hand = float(f"{obs[OBS['on_hand_days']]:.6g}")
     assert f'"on_hand_days":{on_hand}' in message
+
+
+def test_a_discrete_proposal_decodes_as_the_discrete_env_executes_it(supply_table):  # noqa: F811
+    view = _view()
+    discrete = _env(supply_table, action_mode="discrete")
+    decode = view.proposal_decoder(discrete, "discrete")
+    discrete.reset(seed=1)
+    for index in (0, 7, 62, 124, np.int64(93)):
+        info = discrete.step(index)[4]
+        assert decode(index) == tuple(info[name] for name in LEVERS)
+    assert view.codec.decode(view.codec.encode(*decode(93))) == decode(93)  # a grid point survives the round trip
+    with pytest.raises(ValueError, match="action mode"):
+        view.proposal_decoder(discrete, "binary")
