@@ -325,14 +325,22 @@ class SupplyChainEnv(gym.Env):
         """The executed (κ, ρ, δ), float32, for a policy action."""
         return decode_actions(action, self.action_mode, self.inputs.grid)
 
-    def step(self, action: Any):
+    def counterfactual_step(self, executed: tuple[float, float, float]) -> SupplyOutcome:
+        """The outcome of executing ``executed`` (κ, ρ, δ) now, without changing the env.
+
+        Same state, same day and the same price shock as the next :meth:`step`, so the
+        counterfactual of the action that ``step`` then executes equals its outcome exactly (the
+        governance layer's oracle, docs/tasks/supply_chain.md#governance). The caller passes the
+        levers as the env would execute them (float32 values in [0, 1]).
+        """
         if not self._open:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
-        executed = tuple(self.decode_action(action).tolist())
-        day = self._start + self._k
-        i = self.inputs
-        jitter = jitter_of(executed, self._prev)
-        out = supply_step(
+        return self._outcome(tuple(executed), jitter_of(executed, self._prev))
+
+    def _outcome(self, executed: tuple, jitter: Any) -> SupplyOutcome:
+        """:func:`~.dynamics.supply_step` of ``executed`` on the current day from the current state (pure)."""
+        i, day = self.inputs, self._start + self._k
+        return supply_step(
             SCALAR,
             i.params,
             i.weights,
@@ -348,6 +356,15 @@ class SupplyChainEnv(gym.Env):
             jitter,
             self._noise[self._k],
         )
+
+    def step(self, action: Any):
+        if not self._open:
+            raise RuntimeError("the episode is over (or was never started): call reset() first")
+        executed = tuple(self.decode_action(action).tolist())
+        day = self._start + self._k
+        i = self.inputs
+        jitter = jitter_of(executed, self._prev)
+        out = self._outcome(executed, jitter)
         self._on_hand, self._pipeline, self._backlog = out.on_hand_units, out.pipeline_units, out.backlog_units
         self._price, self._peak = out.price_index, out.peak_price_index
         self._filled = [a + b for a, b in zip(self._filled, out.region_filled_units, strict=True)]

@@ -22,6 +22,7 @@ from ..tasks.base import Lever, MetricSpec
 from ..tasks.benchmark_config import BenchmarkConfigMethods
 from .baselines import SUPPLY_BASELINES, make_supply_baseline
 from .env import OBSERVATION_NAMES, STEP_FIELDS, SupplyChainEnv
+from .governance_view import SupplyGovernanceView
 from .metrics import SUPPLY_METRICS, supply_episode_metrics
 from .registration import SUPPLY_ENV_ID
 from .table import SupplyTable, default_supply_dir, load_supply_table, supply_provenance
@@ -75,6 +76,13 @@ class SupplyChainTask(BenchmarkConfigMethods):
 
     def baselines(self) -> Mapping[str, Callable[..., Any]]:
         return {name: (lambda config, _name=name: make_supply_baseline(_name)) for name in SUPPLY_BASELINES}
+
+    # --- governance: the view the Planner/Auditor layer and the LLM agent read (tasks/governance_view.py)
+    def governance_view(self, config: Any = None) -> SupplyGovernanceView:
+        """The market as the governance layer sees it (docs/tasks/supply_chain.md#governance)."""
+        return SupplyGovernanceView.from_config(config)
+
+    # --- end governance
 
 
 #: The supply-chain task (registered as ``supply-chain`` in :mod:`solarchain_eval.tasks.registry`).
