@@ -101,12 +101,6 @@ def normalisation_rule(suite: Suite) -> str:
     return f"per entry: (score - mean score of {low}) / (mean score of {high} - mean score of {low})"
 
 
-def with_reference(policies: Sequence[Any], suite: Suite) -> list[Any]:
-    """``policies`` followed by the suite's reference baselines that are not among them already."""
-    named = {p for p in policies if isinstance(p, str)}
-    return [*policies, *(name for name in suite.reference if name not in named)]
-
-
 def run_suite(
     suite: str | Suite,
     policies: Sequence[Any],
@@ -139,7 +133,7 @@ def run_suite(
     started = time.perf_counter()
     started_at = datetime.now(UTC).isoformat(timespec="seconds")
     (out / SUITE_METADATA_FILE).unlink(missing_ok=True)  # an overwritten root is unfinished until the end
-    everyone = with_reference(policies, suite)
+    everyone = suite.with_reference(policies)
     runs: dict[str, EvaluationOutcome] = {}
     frames = []
     for entry in suite.entries:

@@ -15,9 +15,10 @@ from __future__ import annotations
 
 import importlib
 import re
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
 from pathlib import Path
+from typing import Any
 
 from ..common.errors import OptionsError
 
@@ -95,6 +96,11 @@ class Suite:
             raise ValueError(f"suite {self.name!r}: give one or more entries with distinct names")
         if len(set(self.reference)) != 2:
             raise ValueError(f"suite {self.name!r}: the reference names two different baselines")
+
+    def with_reference(self, policies: Sequence[Any]) -> list[Any]:
+        """``policies`` followed by the reference baselines not among them already (by name)."""
+        named = {p for p in policies if isinstance(p, str)}
+        return [*policies, *(name for name in self.reference if name not in named)]
 
     @property
     def splits(self) -> tuple[str, ...]:
