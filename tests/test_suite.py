@@ -72,6 +72,16 @@ def test_the_builtin_suites_name_the_splits():
     assert heldout.reference == ("random", "myopic")
 
 
+def test_the_train_suite_runs_the_papers_protocol(published_dir, tmp_path):
+    # the paper's seeds and episodes on the train entry: the paper's protocol id, and rliable's IQM of
+    # Static's 90 raw scores (the leaderboard's fractional-weight IQM gives -23.4085 on them)
+    result = solarchain_eval.evaluate("static", suite="train", out=tmp_path / "train")
+    assert result.runs["paper-2026-04"].protocol_id == "89e17532f325"
+    assert result.protocol["splits"] == ["train"] and result.protocol["protocol_ids"] == ["89e17532f325"]
+    static = result.scores[result.scores.policy == "static"]["score"].to_numpy()
+    assert len(static) == 90 and round(aggregate_iqm(static.reshape(-1, 1)), 4) == -23.4117
+
+
 def test_the_suite_root_holds_one_run_per_entry_and_its_files_last(evaluated):
     result, out = evaluated
     assert sorted(p.name for p in out.iterdir()) == sorted(

@@ -181,7 +181,7 @@ def matrices(scores: pd.DataFrame) -> dict[str, np.ndarray]:
     return out
 
 
-def suite_protocol(suite: Suite, scores: pd.DataFrame, runs: dict[str, EvaluationOutcome]) -> dict[str, Any]:
+def suite_protocol(suite: Suite, runs: dict[str, EvaluationOutcome]) -> dict[str, Any]:
     """What the suite protocol id hashes (see :class:`SuiteEvaluation`)."""
     return {
         "protocol_ids": sorted(outcome.protocol_id for outcome in runs.values()),
@@ -196,7 +196,7 @@ def summarise(
 ) -> SuiteEvaluation:
     """The per-entry means, aggregates and probabilities of improvement of a suite's scores."""
     per_policy = matrices(scores)
-    protocol = suite_protocol(suite, scores, runs)
+    protocol = suite_protocol(suite, runs)
     tasks = scores.groupby(["entry", "split", "policy"], sort=False)[["score", "normalised"]].mean().reset_index()
     return SuiteEvaluation(
         suite=suite.name,
