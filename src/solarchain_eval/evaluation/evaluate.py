@@ -201,13 +201,25 @@ def evaluate(
         agents = [as_agent(agents[0], name=name) if not isinstance(agents[0], str) else f"{name}={agents[0]}"]
     if suite is not None:
         return _evaluate_suite(
-            suite, agents, data=data, task=task, out=out, overwrite=overwrite, on_episode=on_episode,
+            suite,
+            agents,
+            data=data,
+            task=task,
+            out=out,
+            overwrite=overwrite,
+            on_episode=on_episode,
             spec_options=dict(
-                run_seeds=tuple(int(s) for s in seeds), episodes=int(episodes), config=config,
-                models=dict(models or {}), agentic=agentic, setting=setting, agent_args=dict(agent_args or {}),
-                llm=llm, isolate=isolate,
+                run_seeds=tuple(int(s) for s in seeds),
+                episodes=int(episodes),
+                config=config,
+                models=dict(models or {}),
+                agentic=agentic,
+                setting=setting,
+                agent_args=dict(agent_args or {}),
+                llm=llm,
+                isolate=isolate,
             ),
-        )  # fmt: skip
+        )
     spec = EvaluationSpec(
         policies=agents,
         run_seeds=tuple(int(s) for s in seeds),
