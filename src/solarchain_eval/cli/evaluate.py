@@ -20,6 +20,7 @@ from ..evaluation.settings_file import load_settings
 from ..governance.request import GovernanceRequest
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
 from ..tasks.registry import DEFAULT_TASK, get_task
+from ..tasks.suites import get_suite, suite_names
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
@@ -38,6 +39,7 @@ from .common import (
     show_files,
 )
 from .progress import count_progress
+from .suite import evaluate_suite
 
 register_user_error(RunDirError, AgentError)
 OVERWRITE = typer.Option(
@@ -178,6 +180,13 @@ def evaluate(
     isolate: bool = ISOLATE,
     step_format: StepFormat = STEP_FORMAT,
     task: str = TASK,
+    suite: str | None = typer.Option(
+        None,
+        "--suite",
+        metavar="NAME",
+        help=f"Evaluate over every entry of a suite ({', '.join(suite_names())}): one run per entry under --out, "
+        "with the suite's reference baselines, normalised scores and aggregates. See docs/suites.md.",
+    ),
 ) -> None:
     """Evaluate policies over run seeds × episodes.
 
@@ -192,7 +201,14 @@ def evaluate(
 
     With --task NAME another installed market is evaluated: its environment, its metrics (the
     metrics.csv columns) and its baselines (the default policies); --config is the solar market's.
+
+    With --suite NAME every entry of the suite (a task on one dataset of one split) is evaluated
+    into a run directory of its own under --out, beside suite_scores.csv, performance_profile.png
+    and suite_metadata.json (written last).
     """
+    chosen = get_suite(suite) if suite is not None else None  # an unknown name: one line, nothing written
+    if chosen is not None and (data is not None or task != DEFAULT_TASK):
+        raise CliError(f"--suite {suite} names its tasks and datasets; give neither --data nor --task")
     market = get_task(task)  # an unknown name: one line listing the installed tasks
     if config is not None and task != DEFAULT_TASK:
         raise CliError(f"--config is the solar market's configuration; task {task!r} takes its own defaults")
@@ -215,11 +231,9 @@ def evaluate(
     llm_agent = any(s.kind == "llm" for s in specs)
     if llm_concurrency > 1 and options is None and not llm_agent:
         raise CliError("--llm-concurrency needs --agentic planner_auditor or the llm-agent")
-    spec = EvaluationSpec(
-        policies=[s.text for s in specs],
+    spec_options = dict(
         run_seeds=parse_seeds(seeds),
         episodes=episodes if episodes is not None else cfg.evaluation.episodes,
-        data_dir=data,
         no_physics_penalty=no_physics_penalty or None,  # unset: the setting's reward
         config=cfg if task == DEFAULT_TASK else None,  # None: the task's default configuration
         models=parse_models(models or []),
@@ -231,8 +245,25 @@ def evaluate(
         # llm-agent: the model endpoint of the same --llm-* options as an LLM planner's
         llm=agentic_cli.llm_agent_options(governance) if llm_agent else None,
         isolate=isolate,
-        task=task,
     )
+    if chosen is not None:
+        with agentic_cli.serving(governance, options, parallel=llm_concurrency, needs_llm=llm_agent):
+            evaluate_suite(
+                chosen,
+                lambda entry, data_dir, policies: EvaluationSpec(
+                    policies=policies,
+                    data_dir=data_dir,
+                    task=entry.task,
+                    # --config is the solar market's: another task's entry takes its own defaults
+                    **{**spec_options, "config": cfg if entry.task == DEFAULT_TASK else None},
+                ),
+                [s.text for s in specs],
+                out or _default_run_dir(cfg, f"suite-{chosen.name}"),
+                overwrite=overwrite,
+                step_format=step_format.value,
+            )
+        return
+    spec = EvaluationSpec(policies=[s.text for s in specs], data_dir=data, task=task, **spec_options)
     try:
         check_agents(spec)  # unknown names, imports, models, names used twice, action shapes: before any work
     except (ValueError, FileNotFoundError) as error:

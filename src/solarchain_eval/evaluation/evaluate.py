@@ -31,10 +31,12 @@ from ..agents.specs import AgentSpecError
 from ..governance.factory import AgenticOptions, LLMOptions
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
 from ..tasks.registry import DEFAULT_TASK, get_task
+from ..tasks.suites import SuiteEntry, SuiteError, get_suite
 from .records import metrics_frame, summarize
 from .rollout import EpisodeResult
 from .runner import EvaluationSpec, run_evaluation
 from .settings import SETTING_MAIN, Setting
+from .suite_run import SuiteEvaluation, run_suite
 
 
 @dataclass
@@ -102,7 +104,8 @@ def evaluate(
     on_episode: Callable[[EpisodeResult], None] | None = None,
     isolate: bool = False,
     task: str = DEFAULT_TASK,
-) -> Evaluation:
+    suite: str | None = None,
+) -> Evaluation | SuiteEvaluation:
     """Evaluate one agent, or several beside built-in ones, over run seeds × episodes.
 
     Parameters
@@ -156,16 +159,23 @@ def evaluate(
         The market to evaluate in, by name (:func:`~solarchain_eval.tasks.registry.get_task`;
         default ``"solar"``): its environment, dataset, metrics (the ``metrics.csv`` columns) and
         baselines (spec strings naming them).
+    suite : str, optional
+        Evaluate over every entry of this suite instead (:mod:`solarchain_eval.tasks.suites`, e.g.
+        ``"heldout"``; docs/suites.md): one run per entry on the entry's task and dataset, with the
+        suite's reference baselines added, under ``out`` (the suite root); ``data`` and ``task`` are
+        the suite's and cannot be given.
 
     Returns
     -------
-    Evaluation
+    Evaluation, or SuiteEvaluation with ``suite``
 
     Raises
     ------
     AgentSpecError
         An agent that cannot be used (with ``isolate``: one that cannot be pickled), a name against
         the rule, or two agents with one name.
+    UnknownSuiteError
+        An unknown ``suite`` (nothing is run or written).
     SettingError
         An unknown setting, or ``agentic`` with a setting that has no governed counterpart.
     AgentFailure
@@ -189,6 +199,27 @@ def evaluate(
         from ..agents.adapters import as_agent
 
         agents = [as_agent(agents[0], name=name) if not isinstance(agents[0], str) else f"{name}={agents[0]}"]
+    if suite is not None:
+        return _evaluate_suite(
+            suite,
+            agents,
+            data=data,
+            task=task,
+            out=out,
+            overwrite=overwrite,
+            on_episode=on_episode,
+            spec_options=dict(
+                run_seeds=tuple(int(s) for s in seeds),
+                episodes=int(episodes),
+                config=config,
+                models=dict(models or {}),
+                agentic=agentic,
+                setting=setting,
+                agent_args=dict(agent_args or {}),
+                llm=llm,
+                isolate=isolate,
+            ),
+        )
     spec = EvaluationSpec(
         policies=agents,
         run_seeds=tuple(int(s) for s in seeds),
@@ -223,3 +254,40 @@ def evaluate(
         wall_s=outcome.wall_s,
         episodes=outcome.results,
     )
+
+
+def _evaluate_suite(
+    suite: str,
+    agents: list[Any],
+    *,
+    data: str | Path | None,
+    task: str,
+    out: str | Path | None,
+    overwrite: bool,
+    on_episode: Callable[[EpisodeResult], None] | None,
+    spec_options: dict[str, Any],
+) -> SuiteEvaluation:
+    """:func:`evaluate` with ``suite``: one run per entry (docs/suites.md)."""
+    chosen = get_suite(suite)  # an unknown name: one line, before anything is run
+    if data is not None or task != DEFAULT_TASK:
+        raise SuiteError(f"suite={suite!r} names its tasks and datasets; give neither data= nor task=")
+
+    def make_spec(entry: SuiteEntry, data_dir: Path, policies: list[Any]) -> EvaluationSpec:
+        return EvaluationSpec(policies=policies, data_dir=data_dir, task=entry.task, **spec_options)
+
+    def run(spec: EvaluationSpec, run_dir: Path):
+        command = ["solarchain_eval.evaluate", f"suite={suite}"]
+        return run_evaluation(spec, run_dir, on_episode=on_episode, command=command, overwrite=overwrite)
+
+    scratch = None if out is not None else Path(tempfile.mkdtemp(prefix="solarchain-suite-"))
+    target = Path(out) if out is not None else scratch / "suite"  # type: ignore[operator]
+    try:
+        result = run_suite(
+            chosen, agents, make_spec, run, target, overwrite=overwrite, command=["solarchain_eval.evaluate"]
+        )
+    finally:
+        if scratch is not None:
+            shutil.rmtree(scratch, ignore_errors=True)
+    if out is None:
+        result.root = None
+    return result
