@@ -221,7 +221,6 @@ KNOWN_TASK_DEBT = {
     "",
     "agents.jax_network",
     "cli.data",
-    "experiments.ray_executor",
     "experiments.sweep",
     "experiments.sweep_spec",
     "jax",

@@ -25,7 +25,6 @@ from typing import Any
 
 from ..common.atomic_files import atomic_write_bytes
 from ..common.errors import NamesOptions, ServiceError
-from ..data.files import DATASET_FILES, MANIFEST_FILE
 from .units import UnitResult, UnitTask, collect_files, execute_unit, write_done
 
 TOKEN_FILE = ".grid-token"
@@ -46,18 +45,15 @@ def _import_ray() -> Any:
 
 
 def dataset_bundle(data_dir: Path) -> dict[str, bytes]:
-    files = {name: (Path(data_dir) / name).read_bytes() for name in DATASET_FILES}
-    manifest = Path(data_dir) / MANIFEST_FILE
-    if manifest.is_file():
-        files[MANIFEST_FILE] = manifest.read_bytes()
-    return files
+    """Every file of a dataset directory (any task's: its CSVs and manifest), to ship to Ray nodes."""
+    return {path.name: path.read_bytes() for path in sorted(Path(data_dir).iterdir()) if path.is_file()}
 
 
 def _materialize_dataset(bundle: dict[str, bytes]) -> Path:
     """Write a shipped dataset once per node into the temp dir (keyed by its content)."""
     digest = hashlib.sha256(b"".join(hashlib.sha256(bundle[k]).digest() for k in sorted(bundle))).hexdigest()[:16]
     target = Path(tempfile.gettempdir()) / "solarchain-eval-ray-data" / digest
-    if (target / DATASET_FILES[0]).is_file():
+    if target.is_dir():  # published whole by the rename below
         return target
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{digest}.", dir=target.parent))
