@@ -219,7 +219,6 @@ GENERIC_WINGS = (
 #: only the task interface.
 KNOWN_TASK_DEBT = {
     "",
-    "agents.jax_network",
     "cli.data",
     "experiments.sweep",
     "experiments.sweep_spec",

@@ -24,6 +24,7 @@ from typing import Any
 import numpy as np
 
 from ..config import BenchmarkConfig
+from ..tasks.registry import get_task
 from .checkpoints import ACTION_MODES, TRAIN_CONFIG_FILE, read_train_config, trained_algo
 
 JAX_MODEL_FILE = "jax_model.msgpack"
@@ -68,6 +69,8 @@ class JaxPolicy:
     model_path: Path
     config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
     action_mode: str = ""
+    #: The task whose env the network acts in (None: the solar market).
+    task: str | None = None
 
     def __post_init__(self) -> None:
         self.action_mode = ACTION_MODES[self.name]
@@ -85,8 +88,14 @@ class JaxPolicy:
             from .jax_network import JaxActor
         except ImportError as error:
             raise ValueError(f"{self.model_path} is a JAX checkpoint: {error}") from None
+        n_levers = len(get_task(self.task).levers)
         self.actor = JaxActor(
-            self.name, self.model_path, meta["rejax"], self.action_mode, self.config.discrete_levels**3
+            self.name,
+            self.model_path,
+            meta["rejax"],
+            self.action_mode,
+            self.config.discrete_levels**n_levers,
+            self.task,
         )
 
     def begin_run(self, run_seed: int) -> None:
@@ -120,7 +129,7 @@ def register_jax_policies(registry: dict[str, Callable[[BenchmarkConfig, dict[st
                         f"policy '{name}': {models['*']} holds both an SB3 model ({sb3[0]}) and a JAX "
                         f"checkpoint ({path}); choose one with --models {name}=PATH"
                     )
-            return JaxPolicy(name, path, config)
+            return JaxPolicy(name, path, config, task=task)
 
         build.__name__ = f"make_{name}_policy"
         build.takes_task = True  # type: ignore[attr-defined]
