@@ -17,11 +17,9 @@ from __future__ import annotations
 
 __version__ = "0.2.0"
 
-from .envs.registration import register_envs
-from .supply.registration import register_supply_envs
+from .tasks.registry import BUILTIN_ENV_REGISTRATIONS, load_target, register_builtin_envs
 
-register_envs()
-register_supply_envs()
+register_builtin_envs()  # SolarChainEval-v0 and SupplyChainEval-v0 (the registry names their modules)
 
 __all__ = ["Evaluation", "__version__", "evaluate", "register_envs"]
 
@@ -32,4 +30,6 @@ def __getattr__(name: str):
         from .evaluation import evaluate as module
 
         return getattr(module, name)
+    if name == "register_envs":  # the solar market's registration, kept public under its old name
+        return load_target(BUILTIN_ENV_REGISTRATIONS[0])
     raise AttributeError(f"module 'solarchain_eval' has no attribute {name!r}")

@@ -12,6 +12,7 @@ from __future__ import annotations
 import importlib
 import re
 from importlib.metadata import entry_points
+from typing import Any
 
 from ..common.errors import OptionsError
 from .base import Task
@@ -24,6 +25,12 @@ BUILTIN_TASKS = {
     "supply-chain": "solarchain_eval.supply.task:SUPPLY_TASK",
 }
 ENTRY_POINT_GROUP = "solarchain_eval.tasks"
+#: The built-in tasks' Gymnasium registrations ("module:function"), run when the package is imported
+#: so that ``gym.make("SolarChainEval-v0")`` works after ``import solarchain_eval``.
+BUILTIN_ENV_REGISTRATIONS = (
+    "solarchain_eval.envs.registration:register_envs",
+    "solarchain_eval.supply.registration:register_supply_envs",
+)
 _NAME = re.compile(r"^[a-z][a-z0-9-]{0,39}$")
 
 _registered: dict[str, Task] = {}
@@ -47,9 +54,16 @@ def unregister_task(name: str) -> None:
     _registered.pop(name, None)
 
 
-def _load(target: str) -> Task:
+def load_target(target: str) -> Any:
+    """The object a ``"module:attribute"`` string names (the module imported now)."""
     module, _, attribute = target.partition(":")
     return getattr(importlib.import_module(module), attribute)
+
+
+def register_builtin_envs() -> None:
+    """Register the built-in tasks' environment ids with Gymnasium (idempotent)."""
+    for target in BUILTIN_ENV_REGISTRATIONS:
+        load_target(target)()
 
 
 def _plugins() -> dict[str, str]:
@@ -75,7 +89,7 @@ def get_task(name: str | None = None) -> Task:
     target = BUILTIN_TASKS.get(name) or _plugins().get(name)
     if target is None:
         raise UnknownTaskError(f"unknown task {name!r} (available: {', '.join(task_names())})")
-    task = _load(target)
+    task = load_target(target)
     if not isinstance(task, Task) or task.name != name:
         raise UnknownTaskError(f"task {name!r} ({target}) is not a Task named {name!r}")
     _registered[name] = task
