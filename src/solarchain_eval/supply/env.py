@@ -154,16 +154,11 @@ class SupplyInputs:
     ) -> np.ndarray:
         """The observation(s) at the start of ``day`` (an int, or an (N,) array with per-env arrays).
 
-        ``spoofed`` and ``levels`` are the day's reports per region; the totals are summed over
-        regions left to right, the same operations on floats and arrays.
+        ``spoofed`` and ``levels`` are the day's reports per region (see :func:`observation_totals`).
         """
-        on_hand_t = reported_t = backlog_t = transit_t = 0.0
-        for r, stock in enumerate(on_hand):
-            on_hand_t = on_hand_t + stock
-            reported_t = reported_t + ops.where(spoofed[r], levels[r], stock)
-            backlog_t = backlog_t + backlog[r]
-            for slot in pipeline[r]:
-                transit_t = transit_t + slot
+        on_hand_t, reported_t, backlog_t, transit_t = observation_totals(
+            ops, spoofed, levels, on_hand, pipeline, backlog
+        )
         scale = self.params.scale_units
         obs = self.template[day].copy()
         obs[..., _ON_HAND] = on_hand_t / scale
@@ -173,6 +168,21 @@ class SupplyInputs:
         obs[..., _PRICE] = price
         obs[..., _PREV:] = prev
         return np.minimum(np.maximum(obs, -OBS_LIMIT), OBS_LIMIT).astype(np.float32)
+
+
+def observation_totals(ops: Any, spoofed: list, levels: list, on_hand: list, pipeline: list, backlog: list) -> tuple:
+    """Network totals the observation shows: (on hand, reported, backlog, in transit) units.
+
+    Summed over regions left to right, the same operations on floats, numpy arrays and JAX values.
+    """
+    on_hand_t = reported_t = backlog_t = transit_t = 0.0
+    for r, stock in enumerate(on_hand):
+        on_hand_t = on_hand_t + stock
+        reported_t = reported_t + ops.where(spoofed[r], levels[r], stock)
+        backlog_t = backlog_t + backlog[r]
+        for slot in pipeline[r]:
+            transit_t = transit_t + slot
+    return on_hand_t, reported_t, backlog_t, transit_t
 
 
 def jitter_of(executed: tuple, previous: tuple) -> Any:
