@@ -94,7 +94,7 @@ class SupplyEnvParams:
     grid: jax.Array  # (levels**3, 3) float32 discrete actions; (0, 3) in continuous mode
     initial_action: jax.Array  # (3,) float32
     initial_on_hand: jax.Array  # (R,)
-    initial_pipeline: jax.Array  # (R, S)
+    initial_pipeline: jax.Array  # (R, S): region r's first lead-time slots are its initial stock in transit
     network: SupplyParams = struct.field(pytree_node=False, default=None)
     weights: SupplyRewardWeights = struct.field(pytree_node=False, default=None)
     action_mode: str = struct.field(pytree_node=False, default="continuous")
@@ -117,6 +117,7 @@ def make_supply_env_params(
     cfg, table = resolve(None, config, table, no_physics_penalty=no_physics_penalty, action_mode=action_mode)
     inputs = SupplyInputs(table, cfg)
     f = float_dtype()
+    slots_max = inputs.params.pipeline_slots
     grid = inputs.grid if inputs.grid is not None else np.zeros((0, 3), np.float32)
     return SupplyEnvParams(
         orders=jnp.asarray(inputs.orders_by_region, f),
@@ -128,7 +129,9 @@ def make_supply_env_params(
         grid=jnp.asarray(grid, jnp.float32),
         initial_action=jnp.asarray(np.array(INITIAL_ACTION, dtype=np.float32)),
         initial_on_hand=jnp.asarray(table.initial_stock_units, f),
-        initial_pipeline=jnp.asarray(inputs.initial_pipeline, f),
+        initial_pipeline=jnp.asarray(
+            np.stack([np.pad(s, (0, slots_max - len(s))) for s in inputs.initial_pipeline]), f
+        ),
         network=inputs.params,
         weights=inputs.weights,
         action_mode=cfg.action_mode,
@@ -194,8 +197,8 @@ class SupplyChainJaxEnv(environment.Environment[SupplyEnvState, SupplyEnvParams]
             noise=jnp.asarray(noise, f),
             on_hand=tuple(params.initial_on_hand[r] for r in range(regions)),
             pipeline=tuple(
-                tuple(params.initial_pipeline[r, s] for s in range(params.initial_pipeline.shape[1]))
-                for r in range(regions)
+                tuple(params.initial_pipeline[r, s] for s in range(lead))
+                for r, lead in enumerate(params.network.lead_time_days)
             ),
             backlog=(jnp.zeros((), f),) * regions,
             price=one,
@@ -277,9 +280,7 @@ class SupplyChainJaxEnv(environment.Environment[SupplyEnvState, SupplyEnvParams]
         scale = params.network.scale_units
         info = step_record(out, executed, day, state.start, params.check_rate[day], jitter, scale)
         info["step"] = k
-        info["region_fill_rates"] = jnp.stack(
-            [a / jnp.maximum(b, 1e-9) for a, b in zip(out.region_filled_units, out.region_effective_units, strict=True)]
-        )
+        info["region_fill_rates"] = jnp.stack(out.region_fill_rates)
         done = self.is_terminal(state, params)
         obs = self.get_obs(state, params)
         info["terminal_obs"] = obs
