@@ -5,7 +5,8 @@ allocation of retailer orders from *reported* stock, the feasibility oracle (sto
 stock arriving by tomorrow, within the outbound lane's capacity), the price index and the reward.
 It is written per region against an arithmetic back-end, as the solar market's ``market_step``
 is: :data:`SCALAR` runs it on Python floats (the single env: no per-step numpy overhead),
-:class:`BatchOps` on (N,) float64 arrays, one element per sub-env (the vector env). A region
+:class:`BatchOps` on (N,) float64 arrays, one element per sub-env (the vector env), and
+:class:`~.jax_env.SupplyJaxOps` on JAX values (the JAX twin). A region
 quantity is a list with one such value per region (regions in the table's order); both back-ends
 evaluate the same IEEE double operations in the same order (sums left to right over regions), so
 a sub-env of the vector env reproduces the single env bit for bit. Quantities are units of
@@ -185,7 +186,9 @@ def supply_step(
     on_hand_units, backlog_units : list over regions
         True stock in each warehouse and orders carried from earlier days, before the step.
     pipeline_units : list over regions of lists over slots
-        Stock in transit; slot k arrives at the start of the step k + 1 days from now.
+        Stock in transit; slot k arrives at the start of the step k + 1 days from now. A region
+        needs at least its lead time's slots; the envs keep exactly those (production enters the
+        last of them, so any later slot would stay empty).
     price_index, peak_price_index : float or ndarray
         The wholesale price index before the step and its running peak.
     orders_units, spoofed, reported_level_units : lists over regions
