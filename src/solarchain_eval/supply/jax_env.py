@@ -282,7 +282,9 @@ class SupplyChainJaxEnv(environment.Environment[SupplyEnvState, SupplyEnvParams]
         info["step"] = k
         info["region_fill_rates"] = jnp.stack(out.region_fill_rates)
         done = self.is_terminal(state, params)
-        obs = self.get_obs(state, params)
+        # The barrier makes the observation read the new state from memory instead of XLA recomputing
+        # the step inside the observation's fusions (as in the solar twin; measured here: 1.3-1.5x).
+        obs = self.get_obs(jax.lax.optimization_barrier(state), params)
         info["terminal_obs"] = obs
         info["truncated"] = done
         return obs, state, out.reward, done, info
