@@ -189,3 +189,34 @@ if __name__ == "__main__":
             }
         )
     )
+
+
+def test_the_task_builds_the_twin_which_resets_and_autoresets_under_jit_and_vmap(supply_table):  # noqa: F811
+    import jax
+
+    from solarchain_eval.config import BenchmarkConfig
+    from solarchain_eval.supply.env import SupplyInputs
+    from solarchain_eval.supply.jax_env import SupplyChainJaxEnv
+    from solarchain_eval.supply.task import SUPPLY_TASK
+
+    config = BenchmarkConfig().with_updates(episode_steps=5)
+    env = SUPPLY_TASK.make_jax_env(config, supply_table)
+    assert isinstance(env, SupplyChainJaxEnv)
+    params = env.default_params
+    steps = params.episode_steps
+    assert steps == 5
+    n = 256
+    obs, state = jax.jit(jax.vmap(env.reset, in_axes=(0, None)))(jax.random.split(jax.random.key(1), n), params)
+    assert obs.shape == (n, 15) and obs.dtype == np.float32
+    admissible = SupplyInputs(supply_table, config).starts.tolist()
+    assert set(np.asarray(state.start).tolist()) == set(admissible)  # every admissible Monday is drawn
+    assert abs(float(np.std(np.asarray(state.noise))) - 0.004) < 0.0004
+    step = jax.jit(jax.vmap(env.step, in_axes=(0, 0, 0, None)))
+    actions = np.full((n, 3), 0.5, np.float32)
+    for k in range(steps):
+        keys = jax.random.split(jax.random.key(10 + k), n)
+        obs, state, reward, done, info = step(keys, state, actions, params)
+        assert bool(np.all(np.asarray(done))) == (k == steps - 1)
+    # gymnax's step started every env's next episode; the last day's observation is kept in info.
+    assert not np.asarray(state.time).any() and not np.array_equal(np.asarray(info["terminal_obs"]), np.asarray(obs))
+    assert np.asarray(info["region_fill_rates"]).shape == (n, 5)
