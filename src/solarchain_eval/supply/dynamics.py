@@ -5,7 +5,8 @@ allocation of retailer orders from *reported* stock, the feasibility oracle (sto
 stock arriving by tomorrow, within the outbound lane's capacity), the price index and the reward.
 It is written per region against an arithmetic back-end, as the solar market's ``market_step``
 is: :data:`SCALAR` runs it on Python floats (the single env: no per-step numpy overhead),
-:class:`BatchOps` on (N,) float64 arrays, one element per sub-env (the vector env). A region
+:class:`BatchOps` on (N,) float64 arrays, one element per sub-env (the vector env), and
+:class:`~.jax_env.SupplyJaxOps` on JAX values (the JAX twin). A region
 quantity is a list with one such value per region (regions in the table's order); both back-ends
 evaluate the same IEEE double operations in the same order (sums left to right over regions), so
 a sub-env of the vector env reproduces the single env bit for bit. Quantities are units of
@@ -60,11 +61,19 @@ class SupplyRewardWeights:
         )
 
 
+def _minimum(a: float, b: float) -> float:
+    return b if b < a else a  # builtin min(a, b) (it keeps a unless b < a), at a third of its call cost
+
+
+def _maximum(a: float, b: float) -> float:
+    return b if b > a else a  # builtin max(a, b)
+
+
 class ScalarOps:
     """Python-float back-end (one env)."""
 
-    minimum = staticmethod(min)
-    maximum = staticmethod(max)
+    minimum = staticmethod(_minimum)
+    maximum = staticmethod(_maximum)
     zero = 0.0
 
     @staticmethod
@@ -118,8 +127,8 @@ class SupplyParams:
 class SupplyOutcome(NamedTuple):
     """Everything one step produces: the next state (first five fields) and the step's outputs.
 
-    ``on_hand_units``, ``backlog_units``, ``region_filled_units`` and ``region_effective_units`` are
-    lists over regions, ``pipeline_units`` a list over regions of lists over slots (slot k arrives
+    ``on_hand_units``, ``backlog_units``, ``region_filled_units``, ``region_effective_units`` and
+    ``region_fill_rates`` (filled / effective demand) are lists over regions, ``pipeline_units`` a list over regions of lists over slots (slot k arrives
     in k + 1 days); every other field is one per-env value.
     """
 
@@ -149,6 +158,7 @@ class SupplyOutcome(NamedTuple):
     fairness_variance: Any
     region_filled_units: list
     region_effective_units: list
+    region_fill_rates: list
 
 
 def supply_step(
@@ -176,7 +186,9 @@ def supply_step(
     on_hand_units, backlog_units : list over regions
         True stock in each warehouse and orders carried from earlier days, before the step.
     pipeline_units : list over regions of lists over slots
-        Stock in transit; slot k arrives at the start of the step k + 1 days from now.
+        Stock in transit; slot k arrives at the start of the step k + 1 days from now. A region
+        needs at least its lead time's slots; the envs keep exactly those (production enters the
+        last of them, so any later slot would stay empty).
     price_index, peak_price_index : float or ndarray
         The wholesale price index before the step and its running peak.
     orders_units, spoofed, reported_level_units : lists over regions
@@ -190,35 +202,48 @@ def supply_step(
         The price shock, a normal(0, PRICE_NOISE_STD) draw.
     """
     incentive, release, damping = action
-    damp = ops.maximum(MIN_DEMAND_FACTOR, 1.0 - DAMPING_ELASTICITY * damping)
+    minimum, maximum, where, zero = ops.minimum, ops.maximum, ops.where, ops.zero  # locals: the scalar env's hot loop
+    damp = maximum(MIN_DEMAND_FACTOR, 1.0 - DAMPING_ELASTICITY * damping)
     p = params
     on_hand_next, pipeline_next, backlog_next, region_filled, region_effective, region_rate = [], [], [], [], [], []
     orders_t = effective_t = reported_t = phantom_t = feasible_t = filled_t = delivered_t = 0.0
     unmet_t = production_t = arrivals_t = spoiled_t = on_hand_t = transit_t = 0.0
-    for r, slots in enumerate(pipeline_units):
+    regions = zip(
+        on_hand_units,
+        pipeline_units,
+        backlog_units,
+        orders_units,
+        spoofed,
+        reported_level_units,
+        p.spoilage_rate,
+        p.production_capacity_units,
+        p.lead_time_days,
+        p.lane_capacity_units,
+        strict=True,
+    )
+    for on_hand, slots, backlog, orders, spoof, level, spoilage, capacity, lead, lane in regions:
         # Arrivals, then spoilage (Ghare-Schrader decay over the day), then today's production order.
         arrivals = slots[0]
-        slots = [*slots[1:], ops.zero]
-        stock = on_hand_units[r] + arrivals
-        spoiled = stock * p.spoilage_rate[r]
+        slots = [*slots[1:], zero]
+        stock = on_hand + arrivals
+        spoiled = stock * spoilage
         stock = stock - spoiled
-        production = incentive * p.production_capacity_units[r]
-        k = p.lead_time_days[r] - 1
-        slots[k] = slots[k] + production
+        production = incentive * capacity
+        slots[lead - 1] = slots[lead - 1] + production
         # The stock report: a spoofed one shows its level, an honest one the truth.
-        reported = ops.where(spoofed[r], reported_level_units[r], stock)
-        phantom = ops.maximum(reported - stock, 0.0)
+        reported = where(spoof, level, stock)
+        phantom = maximum(reported - stock, 0.0)
         # Allocation from the released share of *reported* stock; what is not filled is carried
         # as tomorrow's backlog (OR-Gym's backlog variant).
-        effective = (orders_units[r] + backlog_units[r]) * damp
-        filled = ops.minimum(release * reported, effective)
+        effective = (orders + backlog) * damp
+        filled = minimum(release * reported, effective)
         unmet = effective - filled
         # The feasibility oracle: stock on hand and tomorrow's arrivals, within the lane's capacity.
         # What is filled beyond that is promised on phantom stock (or beyond the lanes).
         due = slots[0]
-        feasible = ops.minimum(stock + due, p.lane_capacity_units[r])
-        delivered = ops.minimum(filled, feasible)
-        from_hand = ops.minimum(delivered, stock)
+        feasible = minimum(stock + due, lane)
+        delivered = minimum(filled, feasible)
+        from_hand = minimum(delivered, stock)
         stock = stock - from_hand
         slots[0] = due - (delivered - from_hand)
         on_hand_next.append(stock)
@@ -226,8 +251,8 @@ def supply_step(
         backlog_next.append(unmet)
         region_filled.append(filled)
         region_effective.append(effective)
-        region_rate.append(filled / ops.maximum(effective, 1e-9))
-        orders_t = orders_t + orders_units[r]
+        region_rate.append(filled / maximum(effective, 1e-9))
+        orders_t = orders_t + orders
         effective_t = effective_t + effective
         reported_t = reported_t + reported
         phantom_t = phantom_t + phantom
@@ -252,7 +277,7 @@ def supply_step(
     fairness = fairness / n  # the population variance of the regions' fill rates
     unsafe_t = filled_t - delivered_t
     scale = p.scale_units
-    violation_rate = unsafe_t / ops.maximum(filled_t, 1e-9)
+    violation_rate = unsafe_t / maximum(filled_t, 1e-9)
     # Price index: stock cover above normal (a glut) and the incentive paid to suppliers lower it (the
     # latter as issuance lowers the solar token price); damping and backlog pressure raise it, as the
     # burn and slippage terms do there.
@@ -264,10 +289,10 @@ def supply_step(
         - PRICE_INCENTIVE_WEIGHT * incentive
         + noise
     )
-    price_return = ops.minimum(ops.maximum(price_return, -MAX_PRICE_RETURN), MAX_PRICE_RETURN)
-    price = ops.maximum(MIN_PRICE_INDEX, price_index * (1.0 + price_return))
-    peak_price = ops.maximum(peak_price_index, price)
-    drawdown = 1.0 - price / ops.maximum(peak_price, 1e-12)
+    price_return = minimum(maximum(price_return, -MAX_PRICE_RETURN), MAX_PRICE_RETURN)
+    price = maximum(MIN_PRICE_INDEX, price_index * (1.0 + price_return))
+    peak_price = maximum(peak_price_index, price)
+    drawdown = 1.0 - price / maximum(peak_price, 1e-12)
     reward = (
         filled_t / scale
         - weights.drawdown * drawdown
@@ -304,4 +329,5 @@ def supply_step(
         fairness,
         region_filled,
         region_effective,
+        region_rate,
     )

@@ -79,6 +79,10 @@ STEP_FIELDS = (
 )
 
 
+#: INITIAL_ACTION as the executed (float32-valued) levers of the single env.
+_INITIAL_PREV = tuple(np.array(INITIAL_ACTION, dtype=np.float32).tolist())
+
+
 def decode_actions(action: Any, action_mode: str, grid: np.ndarray | None) -> np.ndarray:
     """Executed levers, float32 (..., 3): NaN -> 0, clipped to [0, 1]; a discrete index picks a grid point."""
     if action_mode == "discrete":
@@ -127,10 +131,12 @@ class SupplyInputs:
         template[:, OBS["mean_lead_time_weeks"]] = lead_weeks
         template.setflags(write=False)
         self.template = template
-        lead = table.lead_time_days
-        slots = np.arange(self.params.pipeline_slots)
-        # In steady flow every pipeline slot before the lead time carries a day of mean demand.
-        self.initial_pipeline = np.where(slots[None, :] < lead[:, None], table.demand_mean_units[:, None], 0.0)
+        self.template_rows = template.tolist()  # the single env assembles its observation in Python
+        # In steady flow every pipeline slot before the lead time carries a day of mean demand. A region
+        # holds only its lead time's slots: production enters the last of them, so later ones stay empty.
+        self.initial_pipeline = tuple(
+            np.full(lead, mean) for lead, mean in zip(self.params.lead_time_days, table.demand_mean_units, strict=True)
+        )
         self.grid = action_grid(config.discrete_levels) if config.action_mode == "discrete" else None
         # The day's inputs per region: Python lists for the single env, region-major arrays for gathers.
         self.orders = table.orders_units.tolist()
@@ -154,16 +160,11 @@ class SupplyInputs:
     ) -> np.ndarray:
         """The observation(s) at the start of ``day`` (an int, or an (N,) array with per-env arrays).
 
-        ``spoofed`` and ``levels`` are the day's reports per region; the totals are summed over
-        regions left to right, the same operations on floats and arrays.
+        ``spoofed`` and ``levels`` are the day's reports per region (see :func:`observation_totals`).
         """
-        on_hand_t = reported_t = backlog_t = transit_t = 0.0
-        for r, stock in enumerate(on_hand):
-            on_hand_t = on_hand_t + stock
-            reported_t = reported_t + ops.where(spoofed[r], levels[r], stock)
-            backlog_t = backlog_t + backlog[r]
-            for slot in pipeline[r]:
-                transit_t = transit_t + slot
+        on_hand_t, reported_t, backlog_t, transit_t = observation_totals(
+            ops, spoofed, levels, on_hand, pipeline, backlog
+        )
         scale = self.params.scale_units
         obs = self.template[day].copy()
         obs[..., _ON_HAND] = on_hand_t / scale
@@ -173,6 +174,44 @@ class SupplyInputs:
         obs[..., _PRICE] = price
         obs[..., _PREV:] = prev
         return np.minimum(np.maximum(obs, -OBS_LIMIT), OBS_LIMIT).astype(np.float32)
+
+    def observe_scalar(self, day: int, totals: tuple, price: float, prev: tuple) -> np.ndarray:
+        """:meth:`observe` for one env from its :func:`observation_totals`, assembled on Python floats.
+
+        The same values (float64, clipped, then rounded to float32) without numpy's per-call cost.
+        """
+        on_hand_t, reported_t, backlog_t, transit_t = totals
+        scale = self.params.scale_units
+        row = self.template_rows[day].copy()
+        row[_ON_HAND] = on_hand_t / scale
+        row[_REPORTED] = reported_t / scale
+        row[_BACKLOG] = backlog_t / scale
+        row[_TRANSIT] = transit_t / scale
+        row[_PRICE] = price
+        row[_PREV], row[_PREV + 1], row[_PREV + 2] = prev
+        lo, hi = -OBS_LIMIT, OBS_LIMIT  # np.maximum then np.minimum: NaN stays NaN
+        return np.array([lo if v < lo else (hi if v > hi else v) for v in row], dtype=np.float32)
+
+
+def observation_totals(ops: Any, spoofed: list, levels: list, on_hand: list, pipeline: list, backlog: list) -> tuple:
+    """Network totals the observation shows: (on hand, reported, backlog, in transit) units.
+
+    Summed over regions left to right, the same operations on floats, numpy arrays and JAX values.
+    """
+    on_hand_t = reported_t = backlog_t = transit_t = 0.0
+    for r, stock in enumerate(on_hand):
+        on_hand_t = on_hand_t + stock
+        reported_t = reported_t + ops.where(spoofed[r], levels[r], stock)
+        backlog_t = backlog_t + backlog[r]
+        for slot in pipeline[r]:
+            transit_t = transit_t + slot
+    return on_hand_t, reported_t, backlog_t, transit_t
+
+
+def clip_unit(x: float) -> float:
+    """``np.fmin(np.fmax(x, 0), 1)`` on a Python float: NaN -> 0, -0.0 -> 0.0, ±inf -> 0 or 1."""
+    x = x if x > 0.0 else 0.0
+    return x if x < 1.0 else 1.0
 
 
 def jitter_of(executed: tuple, previous: tuple) -> Any:
@@ -286,10 +325,10 @@ class SupplyChainEnv(gym.Env):
         i = self.inputs
         self._start, self._k, self._noise = start, 0, noise
         self._on_hand = self.table.initial_stock_units.tolist()
-        self._pipeline = i.initial_pipeline.tolist()
+        self._pipeline = [slots.tolist() for slots in i.initial_pipeline]
         self._backlog = [0.0] * len(self.regions)
         self._price = self._peak = 1.0
-        self._prev = tuple(float(x) for x in np.float32(INITIAL_ACTION))
+        self._prev = _INITIAL_PREV
         self._filled = [0.0] * len(self.regions)
         self._effective = [0.0] * len(self.regions)
 
@@ -298,13 +337,23 @@ class SupplyChainEnv(gym.Env):
         """Each region's (filled, effective demand) units this episode."""
         return {r: (a, b) for r, a, b in zip(self.regions, self._filled, self._effective, strict=True)}
 
-    def _observation(self) -> np.ndarray:
+    def _observation(self, out: SupplyOutcome | None = None) -> np.ndarray:
+        """The observation of the current state; after a step, its totals are the step's ``out``'s."""
         day = min(self._start + self._k, self.table.days - 1)
         i = self.inputs
-        return i.observe(
-            SCALAR, day, i.spoofed[day], i.levels[day], self._on_hand, self._pipeline, self._backlog, self._price,
-            self._prev,
-        )  # fmt: skip
+        if out is None:
+            totals = observation_totals(
+                SCALAR, i.spoofed[day], i.levels[day], self._on_hand, self._pipeline, self._backlog
+            )
+        else:
+            # The step summed stock on hand, backlog and stock in transit over the new state in
+            # observation_totals' order; only the day's reports are new (the vector env, which
+            # sums them all again, is held equal to this one bit for bit).
+            reported_t = 0.0
+            for spoof, level, stock in zip(i.spoofed[day], i.levels[day], self._on_hand, strict=True):
+                reported_t = reported_t + (level if spoof else stock)
+            totals = (out.on_hand_total_units, reported_t, out.unmet_units, out.in_transit_units)
+        return i.observe_scalar(day, totals, self._price, self._prev)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
         super().reset(seed=seed)  # gymnasium's generator for a seed is default_rng(seed), as the vector env's
@@ -357,10 +406,19 @@ class SupplyChainEnv(gym.Env):
             self._noise[self._k],
         )
 
+    def _executed(self, action: Any) -> tuple:
+        """:meth:`decode_action` as Python floats; a continuous (3,) action is clipped without numpy ufuncs."""
+        if self.inputs.grid is None:
+            u = np.asarray(action, dtype=np.float32)
+            if u.shape == (3,):
+                a, b, c = u.tolist()
+                return clip_unit(a), clip_unit(b), clip_unit(c)
+        return tuple(self.decode_action(action).tolist())
+
     def step(self, action: Any):
         if not self._open:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
-        executed = tuple(self.decode_action(action).tolist())
+        executed = self._executed(action)
         day = self._start + self._k
         i = self.inputs
         jitter = jitter_of(executed, self._prev)
@@ -375,6 +433,5 @@ class SupplyChainEnv(gym.Env):
         self._open = not truncated
         info = step_record(out, executed, day, self._start, i.check_rate_list[day], jitter, i.params.scale_units)
         info["step"] = self._k - 1
-        rates = [f / max(e, 1e-9) for f, e in zip(out.region_filled_units, out.region_effective_units, strict=True)]
-        info["region_fill_rates"] = dict(zip(self.regions, rates, strict=True))
-        return self._observation(), out.reward, False, truncated, info
+        info["region_fill_rates"] = dict(zip(self.regions, out.region_fill_rates, strict=True))
+        return self._observation(out), out.reward, False, truncated, info

@@ -85,7 +85,7 @@ class SupplyChainVectorEnv(VectorEnv):
         # Region-major state blocks: each row is one region's (N,) values, as supply_step takes them.
         self._ops = BatchOps(n)
         self._on_hand = np.zeros((r, n))
-        self._pipeline = np.zeros((r, self.inputs.initial_pipeline.shape[1], n))
+        self._pipeline = [np.zeros((len(slots), n)) for slots in self.inputs.initial_pipeline]  # (lead, N) each
         self._backlog = np.zeros((r, n))
         self._price = np.ones(n)
         self._peak = np.ones(n)
@@ -110,7 +110,8 @@ class SupplyChainVectorEnv(VectorEnv):
             self._start[i] = start
         self._k[rows] = 0
         self._on_hand[:, rows] = self.table.initial_stock_units[:, None]
-        self._pipeline[:, :, rows] = self.inputs.initial_pipeline[:, :, None]
+        for block, slots in zip(self._pipeline, self.inputs.initial_pipeline, strict=True):
+            block[:, rows] = slots[:, None]
         self._backlog[:, rows] = 0.0
         self._price[rows] = self._peak[rows] = 1.0
         self._prev[rows] = np.array(INITIAL_ACTION, dtype=np.float32)
@@ -166,7 +167,7 @@ class SupplyChainVectorEnv(VectorEnv):
             self._noise[self._arange, np.minimum(self._k, self.episode_steps - 1)],
         )
         self._on_hand = np.array(out.on_hand_units)
-        self._pipeline = np.array(out.pipeline_units)
+        self._pipeline = [np.array(slots) for slots in out.pipeline_units]
         self._backlog = np.array(out.backlog_units)
         self._price, self._peak = out.price_index, out.peak_price_index
         self._filled += np.array(out.region_filled_units)
