@@ -220,3 +220,16 @@ def test_the_task_builds_the_twin_which_resets_and_autoresets_under_jit_and_vmap
     # gymnax's step started every env's next episode; the last day's observation is kept in info.
     assert not np.asarray(state.time).any() and not np.array_equal(np.asarray(info["terminal_obs"]), np.asarray(obs))
     assert np.asarray(info["region_fill_rates"]).shape == (n, 5)
+
+
+def test_the_generic_jax_factory_builds_the_twin_in_either_action_mode(supply_table):  # noqa: F811
+    """``tasks.base.make_jax_env`` (what the JAX trainer and the benches call) passes the action mode on."""
+    from solarchain_eval.config import BenchmarkConfig
+    from solarchain_eval.tasks import get_task
+    from solarchain_eval.tasks.base import make_jax_env
+
+    task = get_task("supply-chain")
+    discrete = make_jax_env(task, BenchmarkConfig(), supply_table, action_mode="discrete")
+    assert discrete.action_space(discrete.default_params).n == 125
+    continuous = make_jax_env(task, BenchmarkConfig(), supply_table, action_mode="continuous")
+    assert continuous.action_space(continuous.default_params).shape == (3,)

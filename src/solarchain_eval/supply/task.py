@@ -62,14 +62,14 @@ class SupplyChainTask(BenchmarkConfigMethods):
     ) -> SupplyChainEnv:
         return SupplyChainEnv(config=config, table=data, action_mode=action_mode)
 
-    def make_jax_env(self, config: BenchmarkConfig | None, data: SupplyTable) -> Any:
+    def make_jax_env(self, config: BenchmarkConfig | None, data: SupplyTable, *, action_mode: str | None = None) -> Any:
         """The env's JAX twin (a gymnax :class:`~.jax_env.SupplyChainJaxEnv`; its params are ``default_params``).
 
         Needs the optional JAX dependencies; imported here so that the task loads without them.
         """
         from .jax_env import make_supply_jax_env
 
-        return make_supply_jax_env(config, data)
+        return make_supply_jax_env(config, data, action_mode=action_mode)
 
     def episode_metrics(self, steps: Mapping[str, list], env: SupplyChainEnv) -> dict[str, float]:
         return supply_episode_metrics(steps, np.asarray(list(env.region_totals.values())))
