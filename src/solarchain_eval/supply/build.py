@@ -222,16 +222,7 @@ def build_supply_dataset(
     dates = [(first + dt.timedelta(days=d)).isoformat() for d in range(days)]
     texts = {
         f.REGIONS_FILE: _csv(
-            (
-                "region",
-                "demand_mean_units",
-                "production_capacity_units",
-                "initial_stock_units",
-                "lead_time_days",
-                "spoilage_rate_per_day",
-                "warehouse_capacity_units",
-                "lane_capacity_units",
-            ),
+            f.REGION_COLUMNS,
             [
                 (name, _num(mean[r]), _num(f.PRODUCTION_CAPACITY_UNITS[r]), _num(f.INITIAL_STOCK_UNITS[r]))
                 + (f.LEAD_TIME_DAYS[r], _num(f.SPOILAGE_RATE_PER_DAY[r]), _num(warehouse[r]))

@@ -15,6 +15,17 @@ DEMAND_FILE = "demand.csv"
 REPORTS_FILE = "inventory_reports.csv"
 MANIFEST_FILE = "manifest.json"
 SUPPLY_FILES = (REGIONS_FILE, DEMAND_FILE, REPORTS_FILE)
+#: ``regions.csv``'s columns, in order (the builder writes them, the loader requires them).
+REGION_COLUMNS = (
+    "region",
+    "demand_mean_units",
+    "production_capacity_units",
+    "initial_stock_units",
+    "lead_time_days",
+    "spoilage_rate_per_day",
+    "warehouse_capacity_units",
+    "lane_capacity_units",
+)
 
 #: The regions, each one warehouse fed by one supplier (alphabetical: the order of every array).
 REGIONS = ("central", "east", "north", "south", "west")

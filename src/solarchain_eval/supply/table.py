@@ -26,16 +26,6 @@ from . import files as f
 #: The cache key names the builder's seed and layout, so a changed default is a new directory.
 DEFAULT_DATASET_NAME = f"supply-chain-v0-seed{f.DEFAULT_SEED}"
 
-_REGION_COLUMNS = (
-    "region",
-    "demand_mean_units",
-    "production_capacity_units",
-    "initial_stock_units",
-    "lead_time_days",
-    "spoilage_rate_per_day",
-    "warehouse_capacity_units",
-    "lane_capacity_units",
-)
 _MAX_UNITS = 1e9
 _MAX_LEAD_DAYS = 60
 
@@ -117,7 +107,7 @@ def load_supply_table(data_dir: Path | str) -> SupplyTable:
     if not root.is_dir():
         raise DatasetError(root, "is not a dataset directory")
     path = root / f.REGIONS_FILE
-    region_rows = _rows(path, _REGION_COLUMNS)
+    region_rows = _rows(path, f.REGION_COLUMNS)
     regions = tuple(row["region"].strip() for row in region_rows)
     if regions != f.REGIONS:
         raise DatasetError(path, f"regions must be {', '.join(f.REGIONS)} in this order", column="region")
