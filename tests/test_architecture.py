@@ -211,8 +211,10 @@ GENERIC_WINGS = (
     "report",
     "perf",
     "cli",
-    "jax",
 )
+#: Public faces of one task kept at the package's top for users (``from solarchain_eval.jax import
+#: SolarChainJaxEnv``): they re-export that task's internals and hold no code of their own.
+TASK_FACES = {"jax": "solar"}
 #: Generic modules that still import the solar market's internals directly, at module level or in a
 #: function: the seam's remaining work. The list may only shrink; a module leaves it when it speaks
 #: only the task interface.
@@ -220,7 +222,6 @@ KNOWN_TASK_DEBT = {
     "cli.data",
     "experiments.sweep",
     "experiments.sweep_spec",
-    "jax",
     "perf.llm_bench",
     "perf.scale_bench",
 }
@@ -238,3 +239,22 @@ def test_generic_wings_reach_a_market_only_through_the_task_interface():
     )
     paid = sorted(KNOWN_TASK_DEBT - offenders)
     assert not paid, f"no longer importing a task's internals, remove from KNOWN_TASK_DEBT: {', '.join(paid)}"
+
+
+@pytest.mark.parametrize("face", sorted(TASK_FACES))
+def test_a_task_face_only_re_exports(face):
+    """A task's face holds imports, ``__all__`` and its docstring only: no function, class or logic."""
+    tree = ast.parse(MODULES[face].read_text(encoding="utf-8"))
+    for node in tree.body:
+        if isinstance(node, ast.Expr) and isinstance(node.value, ast.Constant):
+            continue  # the docstring
+        if isinstance(node, (ast.Import, ast.ImportFrom)):
+            continue
+        if isinstance(node, ast.Try):  # the optional extra's import guard
+            continue
+        if isinstance(node, ast.Assign) and [getattr(t, "id", None) for t in node.targets] == ["__all__"]:
+            continue
+        raise AssertionError(f"{face} holds {type(node).__name__} at line {node.lineno}: a task face only re-exports")
+    internals = {t for t in _imports(MODULES[face], top_level_only=False) if _wing(t) in TASK_INTERNALS}
+    assert {m for m in MODULES if _wing(m) == _wing(face)} == {face}, f"the {face} wing is one face module"
+    assert internals, f"{face} re-exports nothing of task {TASK_FACES[face]!r}: drop it from TASK_FACES"
