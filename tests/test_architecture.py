@@ -221,7 +221,6 @@ KNOWN_TASK_DEBT = {
     "experiments.sweep",
     "experiments.sweep_spec",
     "jax",
-    "perf.llm_bench",
     "perf.scale_bench",
 }
 
