@@ -222,7 +222,6 @@ KNOWN_TASK_DEBT = {
     "cli.data",
     "experiments.sweep",
     "experiments.sweep_spec",
-    "perf.llm_bench",
     "perf.scale_bench",
 }
 

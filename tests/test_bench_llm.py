@@ -34,6 +34,10 @@ def test_calls_come_in_episode_order_with_distinct_requests(key):
     assert len({repr(c) for c in contexts}) == len(contexts)  # no request repeats another (no cache hits)
     planner_risk = [c["episode_statistics"]["max_violation_rate"] for c in contexts[::4]]
     assert planner_risk == [0.0, 0.3]  # calm, then risky
+    # the situations are the solar market's, reached through the task: its lever ranges, its features
+    solar_ranges = {"reward_ratio": [0.05, 0.65], "liquidity_ratio": [0.2, 0.95], "burn_rate": [0.0, 0.2]}
+    assert all(c["benchmark_ranges"] == {**solar_ranges, "max_total_allocation": 0.98} for c in contexts)
+    assert {"verified_supply_MWh", "raw_physics_record_rate", "static_slippage"} <= set(contexts[1]["observation"])
     auditor_steps = [c["step"] for c in contexts if "step" in c]
     assert auditor_steps == [1, 2, 3, 1, 2, 3]
     planner, auditor = figures["planner"].summary(), figures["auditor"].summary()

@@ -110,6 +110,7 @@ def test_governance_command_writes_a_ranked_leaderboard(tiny_dataset, tmp_path):
         assert (out / name).is_file(), name
     metadata = json.loads((out / "governance_metadata.json").read_text())
     assert set(metadata["files"]) >= {"leaderboard.csv", "leaderboard.md"}
+    assert "task" not in metadata  # a solar root's metadata is the one before tasks
     run = out / "runs" / "llm" / "calibrated-rule--oracle"
     assert (run / "governance_diagnostics.csv").is_file()
     assert json.loads((run / "run_metadata.json").read_text())["agentic"]["auditor"] == "oracle"

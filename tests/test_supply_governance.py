@@ -107,10 +107,10 @@ def test_the_oracle_replays_the_executed_step_exactly(supply_table, penalty):  #
             assert outcome.outcome.unsafe_units == info["unsafe_units"]
             assert view.outcome_cost(outcome) == info["cost"]
             values = view.outcome_values(outcome)
-            assert values["unsafe_backed_MWh"] == info["unsafe_units"]
-            assert values["artificial_liquidity_MWh"] == info["phantom_fill_volume_units"]
-            assert values["matched_energy_MWh"] == info["filled_units"]
-            assert values["token_price"] == info["price_index"]
+            assert values["unsafe_units"] == info["unsafe_units"]
+            assert values["phantom_fill_volume_units"] == info["phantom_fill_volume_units"]
+            assert values["filled_units"] == info["filled_units"]
+            assert values["price_index"] == info["price_index"]
             assert other.outcome.filled_units >= outcome.outcome.filled_units
             unsafe_steps += info["unsafe_units"] > 0
     assert unsafe_steps >= 3  # the replay is checked on steps that ship on phantom stock
@@ -148,7 +148,7 @@ def test_evaluate_governs_the_supply_market_with_the_rule_layer(supply_dir, tmp_
     assert len(merged) == len(actions) == 4 * 24
     assert merged["final_reward"].tolist() == merged["reward"].tolist()
     assert merged["final_cost"].tolist() == merged["cost"].tolist()
-    assert merged["final_unsafe_backed_MWh"].tolist() == merged["unsafe_units"].tolist()
+    assert merged["final_unsafe_units"].tolist() == merged["unsafe_units"].tolist()
 
 
 def test_the_calibrated_planner_and_the_oracle_auditor_run_on_the_supply_market(supply_dir, tmp_path):  # noqa: F811

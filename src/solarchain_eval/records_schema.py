@@ -174,16 +174,30 @@ DIAGNOSTIC_OUTCOMES = (
     Column("artificial_liquidity_MWh", "MWh", "ℓ A, the liquidity backed by invalid supply"),
     Column("token_price", "–", "p after the step (the only outcome the price shock moves)"),
 )
-DIAGNOSTIC_COLUMNS = (
-    *DIAGNOSTIC_STEP_COLUMNS,
-    *(
-        Column(f"{role}_{c.name}", c.unit, f"{c.meaning}, of {action}")
-        for role, action in DIAGNOSTIC_ROLES.items()
-        for c in DIAGNOSTIC_OUTCOMES
-    ),
-    Column("least_cost", "–", "the cost of the least-backing action (no action costs less at the step)"),
-)
-#: The ``governance_diagnostics.csv`` columns after the episode keys, ``planner`` and ``auditor``.
+#: The outcome suffixes every market's diagnostics hold: the oracle's cost (the ground truth's
+#: "unsafe" rests on it) and the step reward (the leaderboard's Δreward).
+REQUIRED_DIAGNOSTIC_OUTCOMES = ("cost", "reward")
+
+
+def diagnostic_columns(outcomes: tuple[Column, ...] = DIAGNOSTIC_OUTCOMES) -> tuple[Column, ...]:
+    """The ``governance_diagnostics.csv`` columns after the episode keys, ``planner`` and ``auditor``,
+    for a market whose counterfactual outcomes are ``outcomes`` (the solar market's by default):
+    the step columns, each outcome of each action of :data:`DIAGNOSTIC_ROLES`, then ``least_cost``."""
+    return (
+        *DIAGNOSTIC_STEP_COLUMNS,
+        *(
+            Column(f"{role}_{c.name}", c.unit, f"{c.meaning}, of {action}")
+            for role, action in DIAGNOSTIC_ROLES.items()
+            for c in outcomes
+        ),
+        Column("least_cost", "–", "the cost of the least-backing action (no action costs less at the step)"),
+    )
+
+
+#: The solar market's diagnostics columns (:func:`diagnostic_columns` of :data:`DIAGNOSTIC_OUTCOMES`).
+DIAGNOSTIC_COLUMNS = diagnostic_columns(DIAGNOSTIC_OUTCOMES)
+#: The ``governance_diagnostics.csv`` columns of the solar market after the episode keys, ``planner``
+#: and ``auditor`` (another market's come from its governance view's ``diagnostic_outcomes``).
 DIAGNOSTIC_NAMES = names(DIAGNOSTIC_COLUMNS)
 
 

@@ -9,6 +9,7 @@ import typer
 from rich.table import Table
 
 from ..tasks.base import has_jax_env
+from ..tasks.governance_view import governance_view_of
 from ..tasks.registry import DEFAULT_TASK, get_task
 from . import app
 from .common import CliError, console, err_console, reports_errors
@@ -45,8 +46,8 @@ def bench(
     task: str = typer.Option(
         DEFAULT_TASK,
         "--task",
-        help="The task whose environments are measured (the evaluation and diagnostics timings are the solar "
-        "market's).",
+        help="The task whose environments are measured, and with --diagnostics governed (the evaluation timing "
+        "is the solar market's).",
     ),
 ) -> None:
     """Throughput of the single env, the vector env and the evaluation runner.
@@ -61,14 +62,14 @@ def bench(
     if backend not in ("numpy", "jax"):
         raise typer.BadParameter(f"--backend must be numpy or jax, not {backend!r}")
     market = get_task(task)
-    if diagnostics and task != DEFAULT_TASK:
-        raise CliError(f"--diagnostics times the solar market's governance layer, not task {task!r}")
+    if diagnostics:
+        governance_view_of(market)  # a task without a governance view: one line
     if backend == "jax" and not has_jax_env(market):
         raise CliError(f"--backend jax: task {task!r} has no JAX environment")
     data_dir = market.data_dir(data, None)
     measure.warm_table(data_dir, task)
     if diagnostics:
-        _bench_diagnostics(data_dir, repeats)
+        _bench_diagnostics(data_dir, repeats, task)
         return
     results = []
     if backend == "jax":
@@ -95,13 +96,13 @@ def bench(
     console.print(table)
 
 
-def _bench_diagnostics(data_dir: Path, repeats: int) -> None:
-    """Median seconds of the same agentic evaluation without and with diagnostics, and their ratio."""
+def _bench_diagnostics(data_dir: Path | None, repeats: int, task: str = DEFAULT_TASK) -> None:
+    """Median seconds of the same agentic evaluation of ``task`` without and with diagnostics, and their ratio."""
     from ..experiments.governance import diagnostics_overhead
 
     err_console.print("timing an agentic evaluation without and with diagnostics (alternating)...")
-    overhead = diagnostics_overhead(data_dir, repeats=repeats)
-    table = Table(title=f"governance diagnostics overhead on {data_dir}", title_justify="left")
+    overhead = diagnostics_overhead(data_dir, repeats=repeats, task=task)
+    table = Table(title=f"governance diagnostics overhead on {data_dir or task}", title_justify="left")
     for column in ("measurement", "median s", "best s"):
         table.add_column(column, justify="left" if column == "measurement" else "right")
     for name, samples in (("without diagnostics", overhead.without_s), ("with diagnostics", overhead.with_s)):

@@ -13,8 +13,8 @@ from rich.table import Table
 from ..agents.registry import known_policies, parse_agents
 from ..agents.request import AgentContext, agent_requests
 from ..agents.sb3 import parse_models
-from ..agents.specs import parse_agent_args, parse_vecnormalize
-from ..config import BenchmarkConfig, load_config
+from ..agents.specs import parse_agent_args, parse_agent_list, parse_vecnormalize
+from ..config import load_config
 from ..evaluation.rundir import RunDirWriter, check_target
 from ..evaluation.settings import AGENTIC_SETTINGS
 from ..experiments.governance import (
@@ -31,10 +31,13 @@ from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from ..governance.errors import GovernanceConfigError
 from ..governance.request import GovernanceRequest
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
+from ..tasks.governance_view import governance_view_of
+from ..tasks.registry import DEFAULT_TASK, get_task
 from . import agentic as agentic_cli
 from . import app
 from .agentic import GOVERNANCE
 from .common import (
+    TASK,
     CliError,
     cli_error,
     console,
@@ -148,8 +151,10 @@ def governance(
     planner: str = typer.Option(
         "rule", "--planner", help="Comma-separated planners: rule, calibrated-rule, default, llm:MODEL."
     ),
-    policies: str = typer.Option(
-        "static,random,myopic", help=f"Comma-separated policies ({', '.join(known_policies())}) or {USER_AGENTS_HELP}"
+    policies: str | None = typer.Option(
+        None,
+        help=f"Comma-separated policies ({', '.join(known_policies())}) or {USER_AGENTS_HELP} "
+        "Default: static,random,myopic (with --task, the task's baselines).",
     ),
     agent_arg: list[str] | None = AGENT_ARG,
     vecnormalize: list[str] | None = VECNORMALIZE,
@@ -182,6 +187,7 @@ def governance(
     config: Path | None = typer.Option(None, "--config", help="YAML config in the paper's layout."),
     governance: GovernanceRequest = GOVERNANCE,
     overwrite: bool = OVERWRITE,
+    task: str = TASK,
 ) -> None:
     """Score planners and auditors against counterfactual ground truth.
 
@@ -195,11 +201,23 @@ def governance(
     --policies also takes your own agents (package.module:attr, path/to/file.py:attr, plugins,
     NAME=sb3:ALGO:PATH.zip, NAME=http://...; with --agent-arg, --vecnormalize and --isolate as in
     evaluate).
+
+    With --task NAME another installed market is governed through its governance view: its
+    environment, its baselines (the default policies) and its own diagnostics columns; the
+    leaderboard's metadata records the task. --config is the solar market's.
     """
-    cfg = load_config(config) if config else BenchmarkConfig()
+    market = get_task(task)  # an unknown name: one line listing the installed tasks
+    governance_view_of(market)  # no governance view: one line, nothing written
+    if config is not None and task != DEFAULT_TASK:
+        raise CliError(f"--config is the solar market's configuration; task {task!r} takes its own defaults")
+    cfg = load_config(config) if config else market.default_config()  # the solar market's: BenchmarkConfig()
     check_target(out, overwrite=overwrite)
     try:
-        specs = parse_agents(policies)
+        if task == DEFAULT_TASK:
+            specs = parse_agents(policies if policies is not None else "static,random,myopic")
+        else:  # the task's baselines are its built-in names (the solar market's are refused by the runner)
+            names = tuple(market.baselines())
+            specs = parse_agent_list(policies if policies is not None else ",".join(names), (*names, *known_policies()))
         named = [s.name for s in specs if s.name is not None]
         agent_args = parse_agent_args(agent_arg or [], named)
         stats = parse_vecnormalize(vecnormalize or [], named)
@@ -246,6 +264,7 @@ def governance(
         vecnormalize=stats,
         isolate=isolate,
         unsafe_threshold=unsafe_threshold,
+        task=task,
     )
     names = _check_agents(spec)
     total = len(combinations) * len(chosen_settings) * len(names) * len(spec.run_seeds) * episodes
@@ -295,9 +314,10 @@ def _check_agents(spec: GovernanceSpec) -> list[str]:
             agent_args=spec.agent_args,
             vecnormalize=spec.vecnormalize,
             isolate=spec.isolate,
+            task=spec.task,
         )
         return check_agent_requests(
-            requests, AgentContext(spec.config), data_dir=spec.data_dir, run_seed=spec.run_seeds[0]
+            requests, AgentContext(spec.config, spec.task), data_dir=spec.data_dir, run_seed=spec.run_seeds[0]
         )
     except (ValueError, FileNotFoundError) as error:
         raise cli_error(error) from None

@@ -123,7 +123,7 @@ class RecordStream:
         log = agentic_log_text(batch)
         if log is not None:
             self._file(AGENTIC_LOG_FILE).handle.write(log)
-        diagnostics = diagnostics_csv(batch)
+        diagnostics = diagnostics_csv(batch, self.task)
         if diagnostics is not None:
             first = DIAGNOSTICS_FILE not in self._files
             self._file(DIAGNOSTICS_FILE).handle.write(diagnostics if first else diagnostics.split("\n", 1)[1])

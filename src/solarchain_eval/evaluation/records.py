@@ -14,10 +14,10 @@ import pandas as pd
 
 from ..agents.validation import AGENT_EXTRAS_KEY
 from ..common.atomic_files import atomic_write_csv, atomic_write_json, atomic_write_text
-from ..governance.counterfactual import DIAGNOSTIC_COLUMNS
 from ..governance.wrapper import EXTRA_DIAGNOSTICS_KEY, EXTRA_LOG_KEY, EXTRA_METRICS_KEY
-from ..records_schema import EPISODE_KEYS
+from ..records_schema import DIAGNOSTIC_NAMES, EPISODE_KEYS
 from ..tasks.base import Task, metric_names
+from ..tasks.governance_view import diagnostic_names_of, governance_view_of
 from ..tasks.registry import get_task
 from .rollout import EpisodeResult
 
@@ -124,26 +124,35 @@ def agentic_log_text(results: Sequence[EpisodeResult]) -> str | None:
     return "".join(line + "\n" for line in lines)
 
 
-def diagnostics_csv(results: Sequence[EpisodeResult]) -> str | None:
+def diagnostic_names(task: Task | None = None) -> tuple[str, ...]:
+    """The ``governance_diagnostics.csv`` columns after the episode keys, ``planner`` and
+    ``auditor`` for ``task``'s market: its governance view's outcome names
+    (:func:`~solarchain_eval.tasks.governance_view.diagnostic_names_of`; None: the solar market's)."""
+    return DIAGNOSTIC_NAMES if task is None else diagnostic_names_of(governance_view_of(task))
+
+
+def diagnostics_csv(results: Sequence[EpisodeResult], task: Task | None = None) -> str | None:
     """:func:`diagnostics_frame` as CSV text, written row by row with the csv module (what pandas
     writes for these columns: floats as ``repr``, None empty; several times faster)."""
     if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
         return None
     ids = EPISODE_KEYS
+    columns = diagnostic_names(task)
     buffer = io.StringIO()
     writer = csv.writer(buffer, lineterminator="\n")
-    writer.writerow([*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
+    writer.writerow([*ids, "planner", "auditor", *columns])
     for r in results:
         metrics = r.extras.get(EXTRA_METRICS_KEY, {})
         head = [*(getattr(r, k) for k in ids), metrics.get("planner"), metrics.get("auditor")]
         for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ()):
-            writer.writerow([*head, *(row[c] for c in DIAGNOSTIC_COLUMNS)])
+            writer.writerow([*head, *(row[c] for c in columns)])
     return buffer.getvalue()
 
 
-def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
-    """One row per governed step with its counterfactual outcomes (docs/governance.md), or None
-    when no episode recorded diagnostics."""
+def diagnostics_frame(results: Sequence[EpisodeResult], task: Task | None = None) -> pd.DataFrame | None:
+    """One row per governed step with its counterfactual outcomes (docs/governance.md), columns
+    named by ``task``'s governance view (None: the solar market's), or None when no episode
+    recorded diagnostics."""
     if not any(EXTRA_DIAGNOSTICS_KEY in r.extras for r in results):
         return None
     ids = EPISODE_KEYS
@@ -152,7 +161,7 @@ def diagnostics_frame(results: Sequence[EpisodeResult]) -> pd.DataFrame | None:
         metrics = r.extras.get(EXTRA_METRICS_KEY, {})
         head = {**{k: getattr(r, k) for k in ids}, "planner": metrics.get("planner"), "auditor": metrics.get("auditor")}
         rows.extend({**head, **row} for row in r.extras.get(EXTRA_DIAGNOSTICS_KEY, ()))
-    return pd.DataFrame(rows, columns=[*ids, "planner", "auditor", *DIAGNOSTIC_COLUMNS])
+    return pd.DataFrame(rows, columns=[*ids, "planner", "auditor", *diagnostic_names(task)])
 
 
 def _finite_or_none(value: float) -> float | None:
@@ -217,7 +226,7 @@ def write_records(
     log = agentic_log_text(results)
     if log is not None:
         paths[AGENTIC_LOG_FILE] = atomic_write_text(run_dir / AGENTIC_LOG_FILE, log)
-    diagnostics = diagnostics_csv(results)
+    diagnostics = diagnostics_csv(results, task)
     if diagnostics is not None:
         paths[DIAGNOSTICS_FILE] = atomic_write_text(run_dir / DIAGNOSTICS_FILE, diagnostics)
     paths[SUMMARY_FILE] = atomic_write_json(run_dir / SUMMARY_FILE, summarize(metrics))

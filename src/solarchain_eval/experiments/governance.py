@@ -10,6 +10,11 @@ ranked tables and figures are the report layer's, so the caller hands their writ
 root's ``governance_metadata.json`` last, with the sha256 of what ``tables`` wrote, so a call from
 Python leaves the root the command leaves.
 
+``GovernanceSpec.task`` names the market governed (the solar market by default; any task whose
+governance view :func:`~solarchain_eval.tasks.governance_view.governance_view_of` returns): each
+run's files are that task's, its ``governance_diagnostics.csv`` columns its view's, and the root's
+metadata names the task when it is not the solar market.
+
 The ``random`` auditor matches the audits of a reference combination, episode by episode: the
 ``rule`` auditor of the same planner, scheduler controls and setting when it is asked for, else
 the first other one.
@@ -41,6 +46,8 @@ from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from ..governance.factory import AgenticOptions
 from ..governance.wrapper import EXTRA_LOG_KEY
 from ..protocol import PAPER_EPISODES, PAPER_SEED, PAPER_SEEDS
+from ..tasks.governance_view import governance_view_of
+from ..tasks.registry import DEFAULT_TASK, get_task
 
 RUNS_DIR = "runs"
 #: What a leaderboard root was made with, written last (``complete``, the combinations, the sha256
@@ -68,7 +75,13 @@ class GovernanceSpec:
 
     ``policies`` are agent specs as :class:`~solarchain_eval.evaluation.runner.EvaluationSpec`
     takes them (built-in names, ``package.module:attr``, ``path/file.py:attr``, ...), with their
-    ``agent_args`` and ``vecnormalize``.
+    ``agent_args`` and ``vecnormalize``. ``task`` names the market (its ``config``: None, the
+    task's default; for the solar market a :class:`~solarchain_eval.config.BenchmarkConfig`).
+
+    Raises
+    ------
+    NoGovernanceViewError
+        On construction, when ``task`` supplies no governance view (nothing has run).
     """
 
     policies: Sequence[str]
@@ -77,7 +90,7 @@ class GovernanceSpec:
     run_seeds: Sequence[int] = PAPER_SEEDS
     episodes: int = PAPER_EPISODES
     data_dir: Path | None = None
-    config: BenchmarkConfig = field(default_factory=BenchmarkConfig)
+    config: BenchmarkConfig | Any = None
     models: dict[str, Path] = field(default_factory=dict)
     agent_args: dict[str | None, dict[str, Any]] = field(default_factory=dict)
     vecnormalize: dict[str | None, Path] = field(default_factory=dict)
@@ -85,6 +98,14 @@ class GovernanceSpec:
     isolate: bool = False
     #: A step is unsafe when its proposal's avoidable cost exceeds this (the tables' label; recorded).
     unsafe_threshold: float = DEFAULT_UNSAFE_THRESHOLD
+    #: The market governed, by name (:mod:`solarchain_eval.tasks`).
+    task: str = DEFAULT_TASK
+
+    def __post_init__(self) -> None:
+        market = get_task(self.task)  # an unknown name: one line listing the installed tasks
+        governance_view_of(market)  # a task without a governance view: one line, before any work
+        if self.config is None:
+            self.config = market.default_config()
 
 
 @dataclass
@@ -98,6 +119,8 @@ class CombinationRun:
     wall_s: float
     #: The policies' names (the ``policy`` column), in the spec's order.
     policies: list[str] = field(default_factory=list)
+    #: The market governed (its governance view names the diagnostics' columns).
+    task: str = DEFAULT_TASK
 
 
 #: Writes a root's tables from its runs into the root; returns them by path relative to the root.
@@ -165,12 +188,13 @@ def run_governance(
                 agent_args=spec.agent_args,
                 vecnormalize=spec.vecnormalize,
                 isolate=spec.isolate,
+                task=spec.task,
             )
             run_dir = Path(root) / RUNS_DIR / setting / combination.slug
             outcome = run_evaluation(evaluation, run_dir, on_episode=on_episode, command=command)
             used = dataclasses.replace(combination, options=options)
             names = list(outcome.access)  # every policy's name, in the spec's order
-            done.append(CombinationRun(used, setting, run_dir, outcome.results, outcome.wall_s, names))
+            done.append(CombinationRun(used, setting, run_dir, outcome.results, outcome.wall_s, names, spec.task))
     files = dict(tables(done, Path(root))) if tables is not None else {}
     atomic_write_json(Path(root) / GOVERNANCE_METADATA_FILE, governance_metadata(spec, done, files, command))
     return done
@@ -184,9 +208,12 @@ def governance_metadata(
 ) -> dict[str, Any]:
     """What ``governance_metadata.json`` holds: the command (credentials redacted), the unsafe
     threshold, each run's combination with its options, the settings, the policies' names and
-    the sha256 of ``files`` (paths relative to the root)."""
+    the sha256 of ``files`` (paths relative to the root); and ``task`` when the market is not the
+    solar market (a solar root's file is the one before tasks)."""
+    named = {} if spec.task == DEFAULT_TASK else {"task": spec.task}
     metadata = {
         "complete": True,
+        **named,
         "command": redact_command(command if command is not None else sys.argv),
         "unsafe_threshold": spec.unsafe_threshold,
         "combinations": [
@@ -201,10 +228,11 @@ def governance_metadata(
 
 
 def leaderboard_frames(runs: Sequence[CombinationRun]) -> tuple[pd.DataFrame, pd.DataFrame]:
-    """(diagnostics of every run with display labels, LLM usage per combination and setting)."""
+    """(diagnostics of every run with display labels, in the columns of each run's task, LLM usage
+    per combination and setting)."""
     frames, usage = [], []
     for run in runs:
-        frame = diagnostics_frame(run.results)
+        frame = diagnostics_frame(run.results, get_task(run.task))
         if frame is None:
             continue
         frames.append(frame.assign(planner=run.combination.planner_label, auditor=run.combination.auditor_label))
@@ -246,16 +274,18 @@ class Overhead:
 
 
 def diagnostics_overhead(
-    data_dir: Path,
+    data_dir: Path | None,
     *,
     policies: Sequence[str] = ("static", "random", "myopic"),
     run_seeds: Sequence[int] = (PAPER_SEED,),
     episodes: int = 30,
     repeats: int = 3,
     options: AgenticOptions | None = None,
+    task: str = DEFAULT_TASK,
 ) -> Overhead:
-    """Time ``evaluate`` (files included) behind the layer, with and without diagnostics,
-    alternating the two so drifts of a shared machine hit both alike."""
+    """Time ``evaluate`` of ``task`` (files included) behind the layer, with and without
+    diagnostics, alternating the two so drifts of a shared machine hit both alike (``data_dir``
+    None: the task's default dataset)."""
     base = options if options is not None else AgenticOptions()
     times: dict[bool, list[float]] = {False: [], True: []}
     with tempfile.TemporaryDirectory(prefix="solarchain-bench-diagnostics-") as tmp:
@@ -265,8 +295,9 @@ def diagnostics_overhead(
                     policies=list(policies),
                     run_seeds=run_seeds,
                     episodes=episodes,
-                    data_dir=Path(data_dir),
+                    data_dir=None if data_dir is None else Path(data_dir),
                     agentic=dataclasses.replace(base, diagnostics=diagnostics),
+                    task=task,
                 )
                 started = time.perf_counter()
                 run_evaluation(spec, Path(tmp) / f"{repeat}-{int(diagnostics)}", command=["bench"])

@@ -39,7 +39,8 @@ OUTCOME_FIELDS = names(DIAGNOSTIC_OUTCOMES)
 DEFAULT_UNSAFE_THRESHOLD = 0.01
 #: Step identifiers copied from the agentic log row into the diagnostics row.
 STEP_KEYS = names(DIAGNOSTIC_STEP_COLUMNS)
-#: The row's columns (records_schema.DIAGNOSTIC_NAMES).
+#: The solar market's row columns (records_schema.DIAGNOSTIC_NAMES; another market's come from its
+#: governance view, tasks.governance_view.diagnostic_names_of).
 DIAGNOSTIC_COLUMNS = DIAGNOSTIC_NAMES
 
 

@@ -7,6 +7,10 @@ supply above demand, low slippage) and a risky one (violation rate 0.3, a 40 % s
 slippage), varied slightly from call to call (start hour, step, demand) so no two requests are
 identical; the figures therefore also say whether the model's answers move with the risk
 signals. Nothing is cached: every call reaches the endpoint.
+
+The situations are the solar market's (its observation features and levers): the codec and the
+feature names come from the solar task through the task interface (its governance view and
+:func:`~solarchain_eval.tasks.base.observation_names_of`).
 """
 
 from __future__ import annotations
@@ -18,15 +22,27 @@ from typing import Any
 
 import numpy as np
 
-from ..config import MarketConfig
 from ..governance.auditor import LLMAuditor, StepContext
 from ..governance.planner import EpisodeContext, LLMPlanner, RulePlanner
 from ..llm.client import StructuredLLM
 from ..llm.errors import CallSite, LLMError, LLMTransportError
-from ..market.actions import ActionCodec
-from ..market.observation import OBSERVATION_NAMES
+from ..tasks.base import observation_names_of
+from ..tasks.governance_view import LeverCodec, governance_view_of
+from ..tasks.registry import DEFAULT_TASK, get_task
 
 RISKS = ("calm", "risky")
+
+
+def solar_codec() -> LeverCodec:
+    """The solar market's lever codec at its default configuration (its governance view's)."""
+    return governance_view_of(get_task(DEFAULT_TASK)).codec
+
+
+def solar_observation_names() -> tuple[str, ...]:
+    """The solar market's observation features, in order (the task's declaration)."""
+    names = observation_names_of(get_task(DEFAULT_TASK))
+    assert names is not None, "the solar task declares its observation features"
+    return names
 
 
 def episode_situation(risk: str, index: int = 0) -> EpisodeContext:
@@ -56,13 +72,13 @@ def episode_situation(risk: str, index: int = 0) -> EpisodeContext:
     )
 
 
-def step_situation(risk: str, codec: ActionCodec, step: int = 6, episode: int = 0) -> StepContext:
+def step_situation(risk: str, codec: LeverCodec, step: int = 6, episode: int = 0) -> StepContext:
     """An audited step: ``calm`` (a jitter-only trigger) or ``risky`` (all hard triggers), under
     the rule planner's plan for a risky episode whatever the step's risk (a plan holds for a
     whole episode); ``step`` also sets the hour, and ``step`` and ``episode`` vary the liquidity."""
     risky = risk == "risky"
     plan = RulePlanner(codec).plan(episode_situation("risky"), CallSite("planner", "bench", 0, 0)).plan
-    observation = dict.fromkeys(OBSERVATION_NAMES, 0.0)
+    observation = dict.fromkeys(solar_observation_names(), 0.0)
     violation, gap, slippage = (0.3, -0.4, 1.4) if risky else (0.0, 0.2, 0.2)
     observation.update(
         hour_sin=1.0,
@@ -137,7 +153,7 @@ def run_llm_bench(
     the server is ours) gives each call's CPU time. A call whose output fails validation counts
     as a failure (its message is kept); transport errors propagate.
     """
-    codec = ActionCodec.from_config(MarketConfig())
+    codec = solar_codec()
     planner, auditor = LLMPlanner(client, codec), LLMAuditor(client, codec)
     figures = {"planner": KindFigures(), "auditor": KindFigures()}
     for i in range(calls):

@@ -20,7 +20,7 @@ from ..config import MarketConfig
 from ..market.actions import ActionCodec, DiscreteActions, initial_action
 from ..market.dynamics import StepOutcome
 from ..market.observation import OBS_GAP, OBS_SLIPPAGE, OBS_VIOLATION, OBSERVATION_NAMES
-from ..records_schema import DIAGNOSTIC_OUTCOMES
+from ..records_schema import DIAGNOSTIC_OUTCOMES, Column
 from ..tasks.governance_view import Action, EpisodeRisk, GovernancePrompts
 from . import governance_prompts as text
 
@@ -79,6 +79,10 @@ class SolarGovernanceView:
     observation_names: tuple[str, ...] = OBSERVATION_NAMES
     recent_fields: tuple[str, ...] = RECENT_FIELDS
     prompts: GovernancePrompts = SOLAR_PROMPTS
+    #: The diagnostics' outcome columns (the benchmark's schema) and the one the leaderboard's
+    #: Δartificial liquidity reads (tasks/governance_view.py: diagnostic_outcomes_of, harm_outcome_of).
+    diagnostic_outcomes: tuple[Column, ...] = DIAGNOSTIC_OUTCOMES
+    harm_outcome: str = "artificial_liquidity_MWh"
 
     @classmethod
     def from_config(cls, config: Any = None) -> SolarGovernanceView:

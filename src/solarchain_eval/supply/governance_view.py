@@ -25,7 +25,7 @@ from typing import Any, NamedTuple
 
 import numpy as np
 
-from ..records_schema import DIAGNOSTIC_OUTCOMES
+from ..records_schema import Column
 from ..tasks.governance_view import Action, EpisodeRisk, GovernancePrompts
 from . import governance_prompts as text
 from .dynamics import SupplyOutcome
@@ -57,21 +57,24 @@ SUPPLY_PROMPTS = GovernancePrompts(
     agent_outcome_units=text.AGENT_OUTCOME_UNITS,
     lever_descriptions=text.LEVER_DESCRIPTIONS,
 )
-#: The diagnostics' outcome columns keep the benchmark's (solar) suffixes; what each holds here
-#: (a :class:`SupplyOutcome` attribute; None: the cost, V + A in days of demand).
-_ATTRIBUTES = {
-    "violation_rate": "violation_rate",
-    "unsafe_backed_MWh": "unsafe_units",  # A in units of product
-    "cost": None,
-    "reward": "reward",
-    "matched_energy_MWh": "filled_units",
-    "slippage": "backlog_days",  # the backlog the day leaves: the next day's slippage signal
-    "artificial_liquidity_MWh": "phantom_fill_volume_units",
-    "token_price": "price_index",
-}
-#: Outcome fields in the schema's order: column suffix -> attribute (a suffix the schema adds
-#: without an entry here fails at import).
-OUTCOME_FIELDS = {c.name: _ATTRIBUTES[c.name] for c in DIAGNOSTIC_OUTCOMES}
+#: The outcome values the counterfactual diagnostics record per evaluated action (the column
+#: suffixes of ``governance_diagnostics.csv``), in column order; each is the :class:`SupplyOutcome`
+#: attribute of its name, but ``cost`` (V + A in days of demand) and ``backlog_days``.
+SUPPLY_DIAGNOSTIC_OUTCOMES = (
+    Column("violation_rate", "–", "V, the share of the filled orders promised on phantom stock"),
+    Column("unsafe_units", "units", "A, shipments promised on phantom stock"),
+    Column("cost", "–", "V + A / (units per day of mean demand), the env's info['cost']"),
+    Column("reward", "–", "R, the day's reward in the setting"),
+    Column("filled_units", "units", "the units of the day's orders filled"),
+    Column("backlog_days", "days", "the unfilled orders the day leaves, in days of mean demand (the next slippage)"),
+    Column("phantom_fill_volume_units", "units", "ρ × phantom stock, the release backed by stock that is not there"),
+    Column("price_index", "–", "the price index after the day (the only outcome the price shock moves)"),
+)
+#: The outcome the leaderboard reports as Δartificial liquidity: ρ × phantom stock, the analogue of ℓ A.
+SUPPLY_HARM_OUTCOME = "phantom_fill_volume_units"
+#: Column suffix -> what it holds: a :class:`SupplyOutcome` attribute (or ``backlog_days``, see
+#: :meth:`SupplyCounterfactual.value`); None: the cost.
+OUTCOME_FIELDS = {c.name: (None if c.name == "cost" else c.name) for c in SUPPLY_DIAGNOSTIC_OUTCOMES}
 
 
 class SupplyCodec:
@@ -150,6 +153,9 @@ class SupplyGovernanceView:
     observation_names: tuple[str, ...] = OBSERVATION_NAMES
     recent_fields: tuple[str, ...] = RECENT_FIELDS
     prompts: GovernancePrompts = SUPPLY_PROMPTS
+    #: The diagnostics' own column suffixes and the leaderboard's Δartificial-liquidity outcome.
+    diagnostic_outcomes: tuple[Column, ...] = SUPPLY_DIAGNOSTIC_OUTCOMES
+    harm_outcome: str = SUPPLY_HARM_OUTCOME
 
     @classmethod
     def from_config(cls, config: Any = None) -> SupplyGovernanceView:

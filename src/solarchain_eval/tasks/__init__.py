@@ -12,7 +12,10 @@ from .governance_view import (
     GovernedTask,
     LeverCodec,
     NoGovernanceViewError,
+    diagnostic_names_of,
+    diagnostic_outcomes_of,
     governance_view_of,
+    harm_outcome_of,
 )
 from .registry import DEFAULT_TASK, UnknownTaskError, get_task, register_task, task_names, unregister_task
 
@@ -30,8 +33,11 @@ __all__ = [
     "NoGovernanceViewError",
     "Task",
     "UnknownTaskError",
+    "diagnostic_names_of",
+    "diagnostic_outcomes_of",
     "get_task",
     "governance_view_of",
+    "harm_outcome_of",
     "metric_names",
     "metrics_of",
     "register_task",

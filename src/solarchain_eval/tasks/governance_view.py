@@ -12,7 +12,12 @@ reaches a market only through a :class:`GovernanceView`, which a task returns fr
 - the per-episode context a planner reads before the episode (:class:`EpisodeRisk`);
 - the counterfactual oracle: the outcome of another action from the same state, its cost and
   reward, and the values the diagnostics record;
-- the domain text of the prompts (:class:`GovernancePrompts`).
+- the domain text of the prompts (:class:`GovernancePrompts`);
+- optionally, the names of the outcome values the counterfactual diagnostics record
+  (``diagnostic_outcomes``, read by :func:`diagnostic_outcomes_of`: the columns of
+  ``governance_diagnostics.csv``) and the one the leaderboard reports as Δartificial liquidity
+  (``harm_outcome``, read by :func:`harm_outcome_of`); a view without them records the solar
+  market's names.
 
 Methods that read the running market take the environment the governed policy acts in; what
 they read from it is the task's business. This module imports nothing from the package beyond
@@ -28,6 +33,7 @@ from typing import Any, Protocol, runtime_checkable
 import numpy as np
 
 from ..common.errors import OptionsError
+from ..records_schema import DIAGNOSTIC_OUTCOMES, REQUIRED_DIAGNOSTIC_OUTCOMES, Column, diagnostic_columns, names
 
 #: An action in executed units (three floats, each a float32 value).
 Action = tuple[float, float, float]
@@ -190,7 +196,8 @@ class GovernanceView(Protocol):
         ...
 
     def outcome_values(self, outcome: Any) -> dict[str, float]:
-        """The outcome's values the diagnostics record, by column suffix, in column order."""
+        """The outcome's values the diagnostics record, by column suffix, in column order (the
+        names of :func:`diagnostic_outcomes_of`)."""
         ...
 
 
@@ -223,3 +230,55 @@ def governance_view_of(task: Any, config: Any = None) -> GovernanceView:
             "and the LLM agent need one (solarchain_eval.tasks.governance_view)"
         )
     return task.governance_view(config)
+
+
+#: The outcome suffix the leaderboard reports as Δartificial liquidity when a view names none.
+DEFAULT_HARM_OUTCOME = "artificial_liquidity_MWh"
+
+
+def diagnostic_outcomes_of(view: Any) -> tuple[Column, ...]:
+    """The outcome values ``view`` records per evaluated action (the diagnostics' column
+    suffixes, with units and meanings): its optional ``diagnostic_outcomes`` attribute, else the
+    solar market's (:data:`~solarchain_eval.records_schema.DIAGNOSTIC_OUTCOMES`).
+
+    Raises
+    ------
+    TypeError
+        The declared outcomes lack ``cost`` or ``reward`` (the ground truth and the leaderboard
+        read them), or name one twice.
+    """
+    outcomes = tuple(getattr(view, "diagnostic_outcomes", None) or DIAGNOSTIC_OUTCOMES)
+    declared = names(outcomes)
+    missing = [name for name in REQUIRED_DIAGNOSTIC_OUTCOMES if name not in declared]
+    if missing or len(set(declared)) != len(declared):
+        raise TypeError(
+            f"{type(view).__name__}.diagnostic_outcomes must name each outcome once and include "
+            f"{', '.join(REQUIRED_DIAGNOSTIC_OUTCOMES)}; it names {', '.join(declared)}"
+        )
+    return outcomes
+
+
+def harm_outcome_of(view: Any) -> str:
+    """The outcome suffix whose change by the auditor (final − ā) the leaderboard reports as
+    ``delta_artificial_liquidity_per_step``: ``view``'s optional ``harm_outcome`` attribute, else
+    ``artificial_liquidity_MWh`` (the solar market's ℓ A).
+
+    Raises
+    ------
+    TypeError
+        The name is not one of :func:`diagnostic_outcomes_of`.
+    """
+    harm = str(getattr(view, "harm_outcome", None) or DEFAULT_HARM_OUTCOME)
+    declared = names(diagnostic_outcomes_of(view))
+    if harm not in declared:
+        raise TypeError(
+            f"{type(view).__name__}.harm_outcome {harm!r} is not one of its outcomes ({', '.join(declared)})"
+        )
+    return harm
+
+
+def diagnostic_names_of(view: Any) -> tuple[str, ...]:
+    """The ``governance_diagnostics.csv`` columns after the episode keys, ``planner`` and
+    ``auditor`` of a market seen through ``view`` (:func:`~solarchain_eval.records_schema.diagnostic_columns`
+    of its :func:`diagnostic_outcomes_of`)."""
+    return names(diagnostic_columns(diagnostic_outcomes_of(view)))

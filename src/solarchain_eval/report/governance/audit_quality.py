@@ -5,7 +5,8 @@ Input: ``governance_diagnostics.csv`` rows (one per governed step). Ground truth
 threshold (default :data:`~solarchain_eval.governance.counterfactual.DEFAULT_UNSAFE_THRESHOLD`).
 Per group (planner, auditor, policy, setting): the confusion matrix of audited vs unsafe steps,
 precision, recall and false-alarm rate; the per-step and per-revision effects of the auditor
-(final vs ā: Δcost, Δreward, Δartificial liquidity); the shares of revisions that lowered cost
+(final vs ā: Δcost, Δreward, Δartificial liquidity, the last read from the outcome a market's
+governance view names, :func:`~solarchain_eval.tasks.governance_view.harm_outcome_of`); the shares of revisions that lowered cost
 and of harmful ones (cost not lowered, reward lost). Intervals are cluster-bootstrap intervals
 over start days (:func:`~solarchain_eval.report.statistics.cluster_bootstrap`).
 """
@@ -20,6 +21,7 @@ import pandas as pd
 from scipy.stats import DegenerateDataWarning
 
 from ...governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ...tasks.governance_view import DEFAULT_HARM_OUTCOME
 from ..statistics import DEFAULT_RESAMPLES, DEFAULT_SEED, Interval, cluster_bootstrap
 
 GROUP_KEYS = ("planner", "auditor", "policy", "setting")
@@ -40,13 +42,18 @@ INTERVAL_STATISTICS = {
 }
 
 
-def step_frame(diagnostics: pd.DataFrame, threshold: float = DEFAULT_UNSAFE_THRESHOLD) -> pd.DataFrame:
+def step_frame(
+    diagnostics: pd.DataFrame,
+    threshold: float = DEFAULT_UNSAFE_THRESHOLD,
+    harm_outcome: str = DEFAULT_HARM_OUTCOME,
+) -> pd.DataFrame:
     """Per-step indicator and delta columns used by :func:`audit_quality`.
 
     Adds ``unsafe``, ``safe``, ``true_positive``, ``false_positive``, ``revised``,
-    ``delta_cost`` / ``delta_reward`` / ``delta_artificial_liquidity`` (final - ā), the same
-    restricted to revisions (``revision_delta_*``, 0 elsewhere), ``lowered``, ``harmful`` and
-    ``start_day``.
+    ``delta_cost`` / ``delta_reward`` / ``delta_artificial_liquidity`` (final - ā; the last of
+    the outcome column suffix ``harm_outcome``, the solar market's ``artificial_liquidity_MWh`` by
+    default), the same restricted to revisions (``revision_delta_*``, 0 elsewhere), ``lowered``,
+    ``harmful`` and ``start_day``.
     """
     d = diagnostics
     out = pd.DataFrame(index=d.index)
@@ -58,7 +65,7 @@ def step_frame(diagnostics: pd.DataFrame, threshold: float = DEFAULT_UNSAFE_THRE
     out["revised"] = (d["decision"] == "revise").astype(float)
     out["delta_cost"] = d["final_cost"] - d["bounded_cost"]
     out["delta_reward"] = d["final_reward"] - d["bounded_reward"]
-    out["delta_artificial_liquidity"] = d["final_artificial_liquidity_MWh"] - d["bounded_artificial_liquidity_MWh"]
+    out["delta_artificial_liquidity"] = d[f"final_{harm_outcome}"] - d[f"bounded_{harm_outcome}"]
     out["revision_delta_cost"] = out["delta_cost"] * out["revised"]
     out["revision_delta_reward"] = out["delta_reward"] * out["revised"]
     out["lowered"] = ((out["delta_cost"] < 0) & (out["revised"] > 0)).astype(float)
@@ -118,10 +125,12 @@ def audit_quality(
     group_by: Sequence[str] = GROUP_KEYS,
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = DEFAULT_SEED,
+    harm_outcome: str = DEFAULT_HARM_OUTCOME,
 ) -> pd.DataFrame:
     """One row per group: step counts, confusion matrix and every statistic of
-    :data:`INTERVAL_STATISTICS` as ``name``, ``name_low``, ``name_high``."""
-    steps = step_frame(diagnostics, threshold)
+    :data:`INTERVAL_STATISTICS` as ``name``, ``name_low``, ``name_high`` (``harm_outcome``: see
+    :func:`step_frame`)."""
+    steps = step_frame(diagnostics, threshold, harm_outcome)
     keys = [k for k in group_by if k in diagnostics.columns]
     rows = []
     grouped = diagnostics.groupby(keys, sort=True, dropna=False) if keys else [((), diagnostics)]

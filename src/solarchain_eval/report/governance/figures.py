@@ -11,7 +11,7 @@ from ..loading import ReportData
 from ..options import ReportOptions
 from ..table_model import Skipped
 from .audit_quality import audit_quality, step_frame
-from .tables import NO_DIAGNOSTICS
+from .tables import NO_DIAGNOSTICS, harm_outcome
 
 
 def _label(row: pd.Series | dict) -> str:
@@ -107,10 +107,15 @@ def governance_figures(data: ReportData, options: ReportOptions, out_dir: Path) 
     keys = (("governance_precision_recall", "Audit precision vs recall"), ("governance_revision_deltas", "Revisions"))
     if data.diagnostics.empty:
         return [Skipped(key, title, NO_DIAGNOSTICS) for key, title in keys]
+    harm = harm_outcome(data)
     quality = audit_quality(
-        data.diagnostics, group_by=("planner", "auditor"), n_resamples=options.n_resamples, seed=options.seed
+        data.diagnostics,
+        group_by=("planner", "auditor"),
+        n_resamples=options.n_resamples,
+        seed=options.seed,
+        harm_outcome=harm,
     )
-    steps = step_frame(data.diagnostics)
+    steps = step_frame(data.diagnostics, harm_outcome=harm)
     return [precision_recall_figure(quality, out_dir), revision_scatter_figure(steps, data.diagnostics, out_dir)]
 
 

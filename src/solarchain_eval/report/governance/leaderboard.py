@@ -18,6 +18,8 @@ import pandas as pd
 from ...common.atomic_files import atomic_write_csv, atomic_write_text
 from ...experiments.governance import CombinationRun, leaderboard_frames
 from ...governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ...tasks.governance_view import DEFAULT_HARM_OUTCOME, governance_view_of, harm_outcome_of
+from ...tasks.registry import get_task
 from ..statistics import DEFAULT_RESAMPLES
 from ..table_model import to_markdown
 from .audit_quality import audit_quality, step_frame
@@ -45,6 +47,9 @@ class GovernanceLeaderboard:
         The avoidable cost above which a step counts as unsafe.
     resamples : int
         Bootstrap resamples behind the intervals.
+    harm_outcome : str
+        The diagnostics' outcome suffix behind ``delta_artificial_liquidity_per_step`` (the
+        market's, :func:`~solarchain_eval.tasks.governance_view.harm_outcome_of`).
     """
 
     ranked: pd.DataFrame
@@ -52,19 +57,29 @@ class GovernanceLeaderboard:
     diagnostics: pd.DataFrame
     threshold: float
     resamples: int
+    harm_outcome: str = DEFAULT_HARM_OUTCOME
 
 
 def governance_leaderboard(
     runs: Sequence[CombinationRun], *, threshold: float = DEFAULT_UNSAFE_THRESHOLD, resamples: int = DEFAULT_RESAMPLES
 ) -> GovernanceLeaderboard:
-    """Rank the combinations of ``runs`` by audit quality (precision, recall, Δcost per step)."""
+    """Rank the combinations of ``runs`` (all of one market) by audit quality (precision, recall,
+    Δcost per step)."""
+    tasks = sorted({run.task for run in runs})
+    if len(tasks) > 1:
+        raise ValueError(f"a governance leaderboard covers one task; the runs govern {', '.join(tasks)}")
+    harm = harm_outcome_of(governance_view_of(get_task(tasks[0]))) if tasks else DEFAULT_HARM_OUTCOME
     diagnostics, usage = leaderboard_frames(runs)
     pooled = audit_quality(
-        diagnostics, threshold=threshold, group_by=("planner", "auditor", "setting"), n_resamples=resamples
+        diagnostics,
+        threshold=threshold,
+        group_by=("planner", "auditor", "setting"),
+        n_resamples=resamples,
+        harm_outcome=harm,
     )
     ranked = rank(pooled.merge(usage, on=["planner", "auditor", "setting"], how="left"))
-    by_policy = rank(audit_quality(diagnostics, threshold=threshold, n_resamples=resamples))
-    return GovernanceLeaderboard(ranked, by_policy, diagnostics, threshold, resamples)
+    by_policy = rank(audit_quality(diagnostics, threshold=threshold, n_resamples=resamples, harm_outcome=harm))
+    return GovernanceLeaderboard(ranked, by_policy, diagnostics, threshold, resamples, harm)
 
 
 def write_governance_leaderboard(board: GovernanceLeaderboard, out_dir: Path) -> dict[str, Path]:
@@ -86,11 +101,16 @@ def write_governance_leaderboard(board: GovernanceLeaderboard, out_dir: Path) ->
         files[f"{key}.md"] = atomic_write_text(out / f"{key}.md", to_markdown(table))
     figures = out / "figures"
     pooled_by_pair = audit_quality(
-        board.diagnostics, threshold=board.threshold, group_by=("planner", "auditor"), n_resamples=board.resamples
+        board.diagnostics,
+        threshold=board.threshold,
+        group_by=("planner", "auditor"),
+        n_resamples=board.resamples,
+        harm_outcome=board.harm_outcome,
     )
+    steps = step_frame(board.diagnostics, board.threshold, board.harm_outcome)
     made = [
         precision_recall_figure(pooled_by_pair, figures),
-        revision_scatter_figure(step_frame(board.diagnostics, board.threshold), board.diagnostics, figures),
+        revision_scatter_figure(steps, board.diagnostics, figures),
     ]
     for figure in made:
         if isinstance(figure, FigureFile):  # the revision scatter is skipped when nothing was revised

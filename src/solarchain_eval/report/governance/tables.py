@@ -10,6 +10,7 @@ from __future__ import annotations
 import pandas as pd
 
 from ...governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ...tasks.governance_view import governance_view_of, harm_outcome_of
 from ..loading import ReportData
 from ..naming import AGENTIC_REWARD_LABELS, policy_label, setting_label
 from ..options import ReportOptions
@@ -100,10 +101,18 @@ def quality_table(
     )
 
 
+def harm_outcome(data: ReportData) -> str:
+    """The diagnostics' outcome suffix behind Δartificial liquidity for the report's task (its
+    governance view's, :func:`~solarchain_eval.tasks.governance_view.harm_outcome_of`)."""
+    return harm_outcome_of(governance_view_of(data.task_spec))
+
+
 def governance_diagnostics(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """The report's "Governance diagnostics" table: audit quality per planner/auditor, policy, setting."""
     key, title = "governance_diagnostics", "Governance diagnostics: audit quality"
     if data.diagnostics.empty:
         return Skipped(key, title, NO_DIAGNOSTICS)
-    quality = audit_quality(data.diagnostics, n_resamples=options.n_resamples, seed=options.seed)
+    quality = audit_quality(
+        data.diagnostics, n_resamples=options.n_resamples, seed=options.seed, harm_outcome=harm_outcome(data)
+    )
     return quality_table(rank(quality), key=key, title=title)
