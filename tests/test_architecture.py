@@ -217,12 +217,8 @@ GENERIC_WINGS = (
 #: function: the seam's remaining work. The list may only shrink; a module leaves it when it speaks
 #: only the task interface.
 KNOWN_TASK_DEBT = {
-    "cli.data",
-    "experiments.sweep",
-    "experiments.sweep_spec",
     "jax",
     "perf.llm_bench",
-    "perf.scale_bench",
 }
 
 
