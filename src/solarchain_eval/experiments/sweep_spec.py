@@ -20,7 +20,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..common.errors import OptionsError
 from ..config import BenchmarkConfig, ConfigError, UniqueKeyLoader, config_from_mapping, load_config, read_config_text
-from ..protocol import EPISODE_SEED_RULES
+from ..protocol import EPISODE_SEED_RULES, PAPER_SEED
 from ..tasks.dataset import dataset_of
 from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
@@ -47,7 +47,7 @@ class _Section(BaseModel):
 class SweepGrid(_Section):
     timesteps: int = Field(2048, ge=1, le=10**9)
     episodes: int = Field(5, ge=1, le=10**6)
-    seeds: list[int] = Field(default_factory=lambda: [_DEFAULTS.seed], min_length=1)
+    seeds: list[int] = Field(default_factory=lambda: [PAPER_SEED], min_length=1)
     settings: list[str] = Field(default_factory=lambda: ["main", "no_physics"], min_length=1)
     #: A list, or a list per setting: built-in policies and agent specs (paths relative to the YAML).
     policies: list[str] | dict[str, list[str]] | None = None
