@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 from enum import StrEnum
 from pathlib import Path
 
@@ -10,60 +9,41 @@ import typer
 from rich.table import Table
 
 from ..common.atomic_files import sha256_file
-from ..data.cities import (
-    DEFAULT_END,
-    DEFAULT_NODES_PER_CITY,
-    DEFAULT_SEED,
-    DEFAULT_START,
-    DEFAULT_TIMEZONE,
-    PAPER_CITIES,
-    City,
-    check_unique_prefixes,
-    parse_city,
-)
-from ..data.fdia import DEFAULT_FDIA_PATTERN, FDIA_PATTERNS, FdiaError, FdiaScenario, fdia_pattern_help, parse_severity
-from ..data.files import DATASET_FILES, MANIFEST_FILE
-from ..data.published import PAPER_WEATHER_SHA256, matches_published
-from ..data.sources import Weather, WeatherSource, choose_weather
-from ..data.weather import WeatherError
+from ..common.errors import SolarChainError
+from ..tasks.dataset import dataset_of
+from ..tasks.registry import DEFAULT_TASK, get_task
 from . import app
-from .common import CliError, cli_error, console, progress_bar, register_user_error, reports_errors, say
+from .common import CliError, cli_error, console, progress_bar, reports_errors, say
 from .help import HelpGroup
+
+#: The dataset builder of the solar market: the options' choices and defaults are its.
+DATASET = dataset_of(get_task(DEFAULT_TASK))
+_DEFAULTS = DATASET.defaults
 
 data_app = typer.Typer(help="Build and validate datasets.", cls=HelpGroup, no_args_is_help=True, rich_markup_mode=None)
 app.add_typer(data_app, name="data")
 
 
-register_user_error(FdiaError)
+#: The --fdia-pattern choices: the builder's false-data patterns (data/fdia.py for the solar market).
+FdiaPattern = StrEnum("FdiaPattern", {name: name for name in DATASET.false_data.patterns})
+_DEFAULT_PATTERN = FdiaPattern(DATASET.false_data.default_pattern)
+_PATTERN_HELP = DATASET.false_data.pattern_help("--fdia-burst-hours")
+#: The --weather choices: the builder's weather sources.
+WeatherSource = StrEnum("WeatherSource", {name.replace("-", "_"): name for name in DATASET.weather_sources})
 
 
-#: The --fdia-pattern choices: the patterns of data/fdia.py.
-FdiaPattern = StrEnum("FdiaPattern", {name: name for name in FDIA_PATTERNS})
-_DEFAULT_PATTERN = FdiaPattern(DEFAULT_FDIA_PATTERN)
-_PATTERN_HELP = fdia_pattern_help("--fdia-burst-hours")
-
-
-def _scenario(rate: float, severity: str | None, pattern: str, burst_hours: int) -> FdiaScenario:
+def _scenario(rate: float, severity: str | None, pattern: str, burst_hours: int):
     try:
-        return FdiaScenario(
-            rate=rate,
-            severity=parse_severity(severity) if severity is not None else None,
-            pattern=pattern,
-            burst_hours=burst_hours,
-        )
+        return DATASET.scenario(rate, severity, pattern, burst_hours)
     except ValueError as error:
         raise CliError(f"--fdia-*: {error}") from None
 
 
-def _cities(specs: list[str] | None) -> tuple[City, ...]:
-    if not specs:
-        return PAPER_CITIES
+def _cities(specs: list[str] | None) -> tuple:
     try:
-        cities = tuple(parse_city(spec) for spec in specs)
-        check_unique_prefixes(cities)
+        return DATASET.cities(specs or None)
     except ValueError as error:
         raise cli_error(error) from None
-    return cities
 
 
 @data_app.command("build")
@@ -84,16 +64,16 @@ def build(
         "Default: 'paper' when it covers the cities and dates, else 'synthetic'.",
         show_default=False,
     ),
-    seed: int = typer.Option(DEFAULT_SEED, help="Seed of the build's random stream."),
-    start: str = typer.Option(DEFAULT_START, help="First day (local time), YYYY-MM-DD."),
-    end: str = typer.Option(DEFAULT_END, help="Day after the last one (exclusive), YYYY-MM-DD."),
-    nodes_per_city: int = typer.Option(DEFAULT_NODES_PER_CITY, min=1, help="PV nodes per city."),
+    seed: int = typer.Option(_DEFAULTS.seed, help="Seed of the build's random stream."),
+    start: str = typer.Option(_DEFAULTS.start, help="First day (local time), YYYY-MM-DD."),
+    end: str = typer.Option(_DEFAULTS.end, help="Day after the last one (exclusive), YYYY-MM-DD."),
+    nodes_per_city: int = typer.Option(_DEFAULTS.nodes_per_city, min=1, help="PV nodes per city."),
     city: list[str] | None = typer.Option(
         None, "--city", metavar="NAME:LAT:LON", help="A city; repeat for several. Default: the paper's five cities."
     ),
     timezone: str | None = typer.Option(
         None,
-        help=f"IANA time zone of the dataset's hours. Default: {DEFAULT_TIMEZONE}, or with --weather-file the first "
+        help=f"IANA time zone of the dataset's hours. Default: {_DEFAULTS.timezone}, or with --weather-file the first "
         "file's standard time as a fixed-offset zone (Etc/GMT+5 is UTC-5).",
         show_default=False,
     ),
@@ -139,16 +119,16 @@ def build(
             raise CliError(
                 "--weather-file gives the cities and their weather: drop --city, --weather and --weather-cache"
             )
-        cities, chosen, timezone, files = _from_weather_files(weather_file, timezone, start, end)
-        result = _build(chosen, out, cities, seed, start, end, nodes_per_city, timezone, scenario, files)
-        _show_build(result, out, chosen.source, seed, len(cities))
+        cities, chosen, timezone = _from_weather_files(weather_file, timezone, start, end)
+        manifest = _build(chosen, out, cities, seed, start, end, nodes_per_city, timezone, scenario)
+        _show_build(manifest, out, seed, len(cities))
         return
-    timezone = timezone or DEFAULT_TIMEZONE
+    timezone = timezone or _DEFAULTS.timezone
     cities = _cities(city)
-    downloads = weather_cache is None and weather is WeatherSource.open_meteo
+    downloads = weather_cache is None and weather is not None and weather.value in DATASET.downloaded_weather_sources
     with progress_bar("downloading weather", len(cities), enabled=downloads) as advance:
         try:
-            chosen = choose_weather(
+            chosen = DATASET.choose_weather(
                 cities,
                 start,
                 end,
@@ -162,45 +142,35 @@ def build(
                 on_city=lambda _name: advance(1),
                 notify=say,
             )
-        except WeatherError:
+        except SolarChainError:  # a weather file or answer that cannot be used: reported as it is
             raise
         except ValueError as error:  # dates the synthetic generator cannot cover
             raise cli_error(error) from None
-    result = _build(chosen, out, cities, seed, start, end, nodes_per_city, timezone, scenario)
-    _show_build(result, out, chosen.source, seed, len(cities))
+    manifest = _build(chosen, out, cities, seed, start, end, nodes_per_city, timezone, scenario)
+    _show_build(manifest, out, seed, len(cities))
 
 
 def _refuse_existing(out: Path, force: bool) -> None:
-    if not force and ((out / MANIFEST_FILE).exists() or any((out / name).exists() for name in DATASET_FILES)):
+    if not force and ((out / DATASET.manifest).exists() or any((out / name).exists() for name in DATASET.files)):
         raise CliError(f"{out} already holds a dataset; pass --force to overwrite it")
 
 
 def _from_weather_files(specs: list[str], timezone: str | None, start: str, end: str):
-    """Cities, weather, time zone and file weather of a build from ``--weather-file`` specs (all read
-    and checked before anything is written)."""
-    from ..data.weather_files import etc_zone, parse_weather_file_spec, read_weather_file, weather_from_files
-
-    read = []
-    for spec in specs:
-        name, path = parse_weather_file_spec(spec)
-        read.append((name, read_weather_file(path)))
-    zone = timezone or etc_zone(read[0][1].site.utc_offset_h)
+    """Cities, weather and time zone of a build from ``--weather-file`` specs (all read and checked
+    before anything is written)."""
+    read, file_zone = DATASET.read_weather_files(specs)
+    zone = timezone or file_zone
     try:
-        cities, files = weather_from_files(read, zone, start, end)
-        check_unique_prefixes(cities)
+        cities, weather = DATASET.weather_from_files(read, zone, start, end)
     except (ValueError, KeyError) as error:
-        if isinstance(error, WeatherError):
+        if isinstance(error, SolarChainError):  # a weather file that cannot be used: reported as it is
             raise
         raise CliError(f"--weather-file/--start/--end/--timezone: {error}") from None  # a date, zone or city name
-    return cities, Weather(files.payload, files.source, files.sha256), zone, files
+    return cities, weather, zone
 
 
-def _build(
-    chosen: Weather, out: Path, cities, seed, start, end, nodes_per_city, timezone, scenario: FdiaScenario, files=None
-):
-    """Build the dataset with a progress bar over its nodes."""
-    from ..data.build import build_dataset
-
+def _build(chosen, out: Path, cities, seed, start, end, nodes_per_city, timezone, scenario) -> dict:
+    """Build the dataset with a progress bar over its nodes; returns its manifest."""
     with progress_bar("building dataset", nodes_per_city * len(cities)) as advance:
         done = [0]
 
@@ -209,8 +179,8 @@ def _build(
                 advance(count - done[0])
                 done[0] = count
 
-        return build_dataset(
-            chosen.payload,
+        return DATASET.build(
+            chosen,
             out,
             cities=cities,
             seed=seed,
@@ -218,18 +188,14 @@ def _build(
             end=end,
             nodes_per_city=nodes_per_city,
             timezone=timezone,
-            weather_source=chosen.source,
-            weather_sha256=chosen.sha256,
+            scenario=scenario,
             progress=on_progress,
-            fdia=scenario,
-            weather_files=files.entries if files is not None else None,
-            attribution=files.attribution if files is not None else None,
         )
 
 
-def _show_build(result, out: Path, source: str, seed: int, n_cities: int) -> None:
+def _show_build(manifest: dict, out: Path, seed: int, n_cities: int) -> None:
     """The files table and the one-line summary of a build."""
-    files = result.manifest["files"]
+    files = manifest["files"]
     table = Table(title=f"dataset written to {out}", title_justify="left")
     table.add_column("file")
     table.add_column("rows", justify="right")
@@ -237,15 +203,16 @@ def _show_build(result, out: Path, source: str, seed: int, n_cities: int) -> Non
     for name, info in files.items():
         table.add_row(name, f"{info['rows']:,}", info["sha256"])
     console.print(table)
-    say(f"weather: {source}; seed {seed}; {result.manifest['hours']} hours; {n_cities} cities", err=False)
-    fdia = result.manifest["fdia"]
+    say(f"weather: {manifest['weather_source']}; seed {seed}; {manifest['hours']} hours; {n_cities} cities", err=False)
+    fdia = manifest["fdia"]
     say(f"false data: {fdia['injected_records']:,} records, {fdia['pattern']}, rate {fdia['rate']}", err=False)
-    if result.manifest.get("weather_sha256") == PAPER_WEATHER_SHA256:
+    paper_weather = DATASET.paper_weather_sha256
+    if paper_weather is not None and manifest.get("weather_sha256") == paper_weather:
         say("weather: the paper's Open-Meteo payload (sha256 matches)", err=False)
-    attribution = result.manifest.get("weather_attribution")
+    attribution = manifest.get("weather_attribution")
     if attribution:
         say(f"{attribution['attribution']} ({attribution['licence']}, {attribution['licence_url']})", err=False)
-    if matches_published({name: info["sha256"] for name, info in files.items()}):
+    if DATASET.is_published({name: info["sha256"] for name, info in files.items()}):
         say("byte-identical to the paper's published dataset", style="bold green", err=False)
 
 
@@ -267,9 +234,7 @@ def build_family(
     """
     import time
 
-    from ..data.heldout import build_checked, heldout_dataset
-
-    datasets = [heldout_dataset(family, m) for m in (sorted(set(month)) if month else range(1, 13))]
+    datasets = DATASET.family(family, month)
     for dataset in datasets:
         _refuse_existing(out / dataset.name, force)
     began = time.perf_counter()
@@ -278,8 +243,7 @@ def build_family(
         table.add_column(column)
     with progress_bar(f"building {family}", len(datasets)) as advance:
         for dataset in datasets:
-            target = build_checked(dataset, out / dataset.name, replace=force)
-            hours = json.loads((target / MANIFEST_FILE).read_text(encoding="utf-8"))["hours"]
+            hours = DATASET.build_family_member(dataset, out / dataset.name, replace=force)["hours"]
             table.add_row(dataset.name, f"{dataset.start} to {dataset.end}", str(hours), "match the shipped ones")
             advance(1)
     console.print(table)
@@ -296,21 +260,18 @@ def splits() -> None:
     The rule for results that claim generality: train and tune on the train split only, report
     the test split (docs/dataset.md#splits).
     """
-    from ..data.splits import SPLIT_RULE, SPLITS
-
     table = Table(title="splits", title_justify="left")
     for column in ("split", "role", "datasets", "start days", "what"):
         table.add_column(column)
-    for split in SPLITS.values():
+    for split in DATASET.splits():
         names = split.datasets
         shown = names[0] if len(names) == 1 else f"{names[0]} ... {names[-1]} ({len(names)})"
-        days = {entry.start_days for entry in split.entries}
-        (first,) = days
+        days = split.start_days
         table.add_row(
-            split.name, split.role, shown, "all" if first is None else f"{first[0]}-{first[-1]}", split.description
+            split.name, split.role, shown, "all" if days is None else f"{days[0]}-{days[-1]}", split.description
         )
     console.print(table)
-    say(f"rule: {SPLIT_RULE}", err=False)
+    say(f"rule: {DATASET.split_rule}", err=False)
 
 
 @data_app.command("check")
@@ -321,24 +282,13 @@ def check(data_dir: Path = typer.Argument(..., metavar="DATA_DIR", help="Dataset
     Checks files, columns, numbers (no NaN or negative power), duplicates, missing hours, statuses
     and the trade window; on a problem prints the file, column and first offending row and exits 2.
     """
-    from ..data.load import load_raw_dataset
-    from ..data.table import table_from_raw
-
-    raw = load_raw_dataset(data_dir)
-    table = table_from_raw(raw)
-    gen = raw.generation
+    rows = DATASET.check(data_dir)
     summary = Table(title=f"{data_dir}: valid", title_justify="left", show_header=False)
     summary.add_column("what")
     summary.add_column("value", justify="right")
-    summary.add_row("hours", f"{raw.hours:,} from {raw.first_timestamp.isoformat()}")
-    summary.add_row("cities", ", ".join(table.cities))
-    summary.add_row("nodes", f"{gen['node_id'].nunique():,}")
-    summary.add_row("generation records", f"{len(gen):,}")
-    summary.add_row("FDIA-labelled records", f"{int(gen['fdia_detected'].sum()):,}")
-    summary.add_row("rejected records", f"{int((~gen['verified']).sum()):,}")
-    summary.add_row("trades", f"{len(raw.trades):,}")
-    summary.add_row("mean raw violation rate ν", f"{table.raw_violation_rate.mean():.4f}")
+    for what, value in rows:
+        summary.add_row(what, value)
     console.print(summary)
-    hashes = {name: sha256_file(Path(data_dir) / name) for name in DATASET_FILES}
-    if matches_published(hashes):
+    hashes = {name: sha256_file(Path(data_dir) / name) for name in DATASET.files}
+    if DATASET.is_published(hashes):
         say("byte-identical to the paper's published dataset", style="bold green", err=False)

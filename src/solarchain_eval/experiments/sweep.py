@@ -29,7 +29,6 @@ import pandas as pd
 from ..common.atomic_files import atomic_write_json, atomic_write_with
 from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
-from ..data.files import MANIFEST_FILE
 from ..evaluation.records import ACTIONS_FILE, METRICS_FILE
 from ..records_schema import EPISODE_COST
 from ..tasks.registry import DEFAULT_TASK, get_task
@@ -49,7 +48,7 @@ from .grid_root import (
 )
 from .layout import combined_dir
 from .pool import RunReport, run_units
-from .sweep_spec import Sweep, SweepDataset, SweepPoint, dataset_cities, fdia_scenario
+from .sweep_spec import DATASET, Sweep, SweepDataset, SweepPoint, dataset_cities, fdia_scenario
 from .units import UnitResult, UnitTask
 from .user_agents import GridPolicies, check_resolved, grid_policies
 
@@ -90,26 +89,24 @@ def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
     """Build one point's dataset into ``out`` (skipped when ``out`` holds a complete build).
 
     The paper's cities use the cached weather file when ``dataset.weather_cache`` is given; any
-    other cities (synthetic or listed) get synthetic weather.
+    other cities (synthetic or listed) get synthetic weather. The builder is the solar market's
+    (:data:`~.sweep_spec.DATASET`, reached through its task).
     """
-    from ..data.build import build_dataset
-    from ..data.sources import WeatherSource, choose_weather
-
-    if (out / MANIFEST_FILE).is_file():
+    if (out / DATASET.manifest).is_file():
         return out
     cities = dataset_cities(dataset)
     cached = dataset.weather_cache is not None and dataset.cities is None
-    weather = choose_weather(
+    weather = DATASET.choose_weather(
         cities,
         dataset.start,
         dataset.end,
         seed=dataset.seed,
         timezone=dataset.timezone,
         weather_cache=_resolve(sweep, dataset.weather_cache) if cached else None,
-        source=WeatherSource.synthetic,
+        source="synthetic",
     )
-    build_dataset(
-        weather.payload,
+    DATASET.build(
+        weather,
         out,
         cities=cities,
         seed=dataset.seed,
@@ -117,9 +114,7 @@ def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
         end=dataset.end,
         nodes_per_city=dataset.nodes_per_city,
         timezone=dataset.timezone,
-        weather_source=weather.source,
-        weather_sha256=weather.sha256,
-        fdia=fdia_scenario(dataset),
+        scenario=fdia_scenario(dataset),
     )
     return out
 
@@ -215,7 +210,7 @@ def _prepare_points(
                 )
             data_dir = (root / DATASETS_DIR / point.dataset_key).resolve()
             if str(data_dir) not in tables:
-                fresh = not (data_dir / MANIFEST_FILE).is_file()
+                fresh = not (data_dir / DATASET.manifest).is_file()
                 if on_dataset is not None:  # before the build: a large one takes minutes
                     on_dataset(point.dataset_key, fresh)
                 build_point_dataset(sweep, point.dataset, data_dir)

@@ -20,20 +20,9 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 
 from ..common.errors import OptionsError
 from ..config import BenchmarkConfig, ConfigError, UniqueKeyLoader, config_from_mapping, load_config, read_config_text
-from ..data.cities import (
-    DEFAULT_END,
-    DEFAULT_NODES_PER_CITY,
-    DEFAULT_SEED,
-    DEFAULT_START,
-    DEFAULT_TIMEZONE,
-    PAPER_CITIES,
-    City,
-    check_unique_prefixes,
-    parse_city,
-    synthetic_cities,
-)
-from ..data.fdia import DEFAULT_FDIA_PATTERN, FDIA_FRACTION, FDIA_PATTERNS, FdiaScenario, parse_severity
-from ..protocol import EPISODE_SEED_RULES
+from ..protocol import EPISODE_SEED_RULES, PAPER_SEED
+from ..tasks.dataset import dataset_of
+from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 
 
@@ -41,8 +30,13 @@ class SweepError(OptionsError, ValueError):
     """A sweep YAML that is unreadable or invalid (the message names the file and key)."""
 
 
-#: The names the YAML accepts, from their one definition (data/fdia.py, protocol.py).
-FdiaPatternName = Literal[FDIA_PATTERNS]  # type: ignore[valid-type]
+#: The builder of the dataset section's datasets: the solar market's (its defaults are the section's).
+DATASET = dataset_of(get_task(DEFAULT_TASK))
+_DEFAULTS = DATASET.defaults
+_FALSE_DATA = DATASET.false_data
+
+#: The names the YAML accepts, from their one definition (the builder's patterns, protocol.py).
+FdiaPatternName = Literal[_FALSE_DATA.patterns]  # type: ignore[valid-type]
 EpisodeSeedRuleName = Literal[tuple(EPISODE_SEED_RULES)]  # type: ignore[valid-type]
 
 
@@ -53,7 +47,7 @@ class _Section(BaseModel):
 class SweepGrid(_Section):
     timesteps: int = Field(2048, ge=1, le=10**9)
     episodes: int = Field(5, ge=1, le=10**6)
-    seeds: list[int] = Field(default_factory=lambda: [DEFAULT_SEED], min_length=1)
+    seeds: list[int] = Field(default_factory=lambda: [PAPER_SEED], min_length=1)
     settings: list[str] = Field(default_factory=lambda: ["main", "no_physics"], min_length=1)
     #: A list, or a list per setting: built-in policies and agent specs (paths relative to the YAML).
     policies: list[str] | dict[str, list[str]] | None = None
@@ -70,16 +64,16 @@ class SweepGrid(_Section):
 class SweepDataset(_Section):
     data: str | None = None
     weather_cache: str | None = None
-    seed: int = Field(DEFAULT_SEED, ge=0, le=2**32 - 1)
-    start: str = DEFAULT_START
-    end: str = DEFAULT_END
-    timezone: str = DEFAULT_TIMEZONE
-    nodes_per_city: int = Field(DEFAULT_NODES_PER_CITY, ge=1, le=100_000)
+    seed: int = Field(_DEFAULTS.seed, ge=0, le=2**32 - 1)
+    start: str = _DEFAULTS.start
+    end: str = _DEFAULTS.end
+    timezone: str = _DEFAULTS.timezone
+    nodes_per_city: int = Field(_DEFAULTS.nodes_per_city, ge=1, le=100_000)
     cities: int | list[str] | None = None
-    fdia_rate: float = Field(FDIA_FRACTION, ge=0.0, le=1.0)
-    fdia_pattern: FdiaPatternName = DEFAULT_FDIA_PATTERN
+    fdia_rate: float = Field(_FALSE_DATA.default_rate, ge=0.0, le=1.0)
+    fdia_pattern: FdiaPatternName = _FALSE_DATA.default_pattern
     fdia_severity: str | None = None
-    fdia_burst_hours: int = Field(6, ge=1)
+    fdia_burst_hours: int = Field(_FALSE_DATA.default_burst_hours, ge=1)
 
 
 class SweepLagrangian(_Section):
@@ -151,17 +145,20 @@ def point_id(values: dict[str, Any]) -> str:
     return "__".join(f"{k}-{_slug(v)}" for k, v in values.items()) or "base"
 
 
-def dataset_cities(dataset: SweepDataset) -> tuple[City, ...]:
-    if dataset.cities is None:
-        return PAPER_CITIES
-    if isinstance(dataset.cities, int):
-        return synthetic_cities(dataset.cities)
-    return tuple(parse_city(spec) for spec in dataset.cities)
+def dataset_cities(dataset: SweepDataset) -> tuple[Any, ...]:
+    """The cities of a point's build (the builder's: none given, the paper's; a number, synthetic ones).
+
+    Raises
+    ------
+    ValueError
+        A city that cannot be read, or two sharing a node-id prefix.
+    """
+    return DATASET.cities(dataset.cities)
 
 
-def fdia_scenario(dataset: SweepDataset) -> FdiaScenario:
-    severity = parse_severity(dataset.fdia_severity) if dataset.fdia_severity is not None else None
-    return FdiaScenario(dataset.fdia_rate, severity, dataset.fdia_pattern, dataset.fdia_burst_hours)
+def fdia_scenario(dataset: SweepDataset) -> Any:
+    """The false-data scenario of a point's build (``ValueError``: a knob out of range)."""
+    return DATASET.scenario(dataset.fdia_rate, dataset.fdia_severity, dataset.fdia_pattern, dataset.fdia_burst_hours)
 
 
 def dataset_key(dataset: SweepDataset) -> str:
@@ -210,7 +207,7 @@ def _point(
             reward[REWARD_AXES.get(k, k)] = v
     try:
         config = config_from_mapping({**base.model_dump(), "reward": reward}, str(source))
-        check_unique_prefixes(dataset_cities(dataset))
+        dataset_cities(dataset)  # cities that cannot be read or share a node-id prefix
         fdia_scenario(dataset)
         lag = {**spec.ppo_lag.model_dump(), **{k: v for k, v in values.items() if k in LAGRANGIAN_AXES}}
         lagrangian = LagrangianSettings(float(lag["cost_limit"]), float(lag["multiplier_lr"]))

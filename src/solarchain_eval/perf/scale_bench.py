@@ -18,8 +18,9 @@ import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
-from ..data.files import GENERATION_FILE
 from ..protocol import PAPER_SEED
+from ..tasks.dataset import dataset_of
+from ..tasks.registry import DEFAULT_TASK, get_task
 from .env_bench import single_env_steps_per_s, vector_env_steps_per_s
 
 
@@ -69,19 +70,21 @@ def measure_scale(
     repeats: int = 3,
     seed: int = PAPER_SEED,
 ) -> ScaleResult:
-    """Build, load and step one synthetic dataset of ``cities`` x ``nodes_per_city`` nodes."""
-    from ..data.build import build_dataset
-    from ..data.cities import synthetic_cities
-    from ..data.synthetic import SYNTHETIC_SOURCE, synthesize_weather
-    from ..data.table import load_table
+    """Build, load and step one synthetic dataset of ``cities`` x ``nodes_per_city`` nodes.
 
-    city_list = synthetic_cities(cities)
+    The solar market's dataset builder and loader, reached through its task; the time zone is the
+    builder's default (Asia/Shanghai).
+    """
+    task = get_task(DEFAULT_TASK)
+    builder = dataset_of(task)
+    city_list = builder.cities(cities)
+    timezone = builder.defaults.timezone
     with tempfile.TemporaryDirectory(prefix="solarchain-scale-") as tmp:
         started = time.perf_counter()
-        weather = synthesize_weather(city_list, start, end, seed, "Asia/Shanghai")
+        weather = builder.choose_weather(city_list, start, end, seed=seed, timezone=timezone, source="synthetic")
         weather_s = time.perf_counter() - started
         started, cpu = time.perf_counter(), time.process_time()
-        result = build_dataset(
+        manifest = builder.build(
             weather,
             Path(tmp),
             cities=city_list,
@@ -89,12 +92,11 @@ def measure_scale(
             start=start,
             end=end,
             nodes_per_city=nodes_per_city,
-            timezone="Asia/Shanghai",
-            weather_source=SYNTHETIC_SOURCE,
+            timezone=timezone,
         )
         build_s, build_cpu_s = time.perf_counter() - started, time.process_time() - cpu
         started, cpu = time.perf_counter(), time.process_time()
-        table = load_table(Path(tmp))
+        table = task.load_data(Path(tmp))
         load_s, load_cpu_s = time.perf_counter() - started, time.process_time() - cpu
         single = single_env_steps_per_s(Path(tmp), env_steps, repeats)
         vector = vector_env_steps_per_s(Path(tmp), num_envs, vector_calls, repeats)
@@ -103,7 +105,7 @@ def measure_scale(
             cities=cities,
             nodes=nodes,
             hours=table.hours,
-            generation_rows=int(result.manifest["files"][GENERATION_FILE]["rows"]),
+            generation_rows=int(manifest["files"][builder.node_records_file]["rows"]),
             weather_s=weather_s,
             build_s=build_s,
             build_cpu_s=build_cpu_s,

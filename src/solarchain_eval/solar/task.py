@@ -29,6 +29,8 @@ from ..market.observation import OBSERVATION_NAMES
 from ..records_schema import EPISODE_METRIC_COLUMNS
 from ..tasks.base import Lever, MetricSpec, PaperReference, TrainLogField
 from ..tasks.benchmark_config import BenchmarkConfigMethods
+from ..tasks.dataset import DatasetBuilder
+from .dataset import SOLAR_DATASET
 from .governance_view import SolarGovernanceView
 from .metrics import episode_metrics_from_steps
 
@@ -111,6 +113,8 @@ class SolarTask(BenchmarkConfigMethods):
     # --- the report's and the leaderboard's concern (optional Task attributes, tasks/base.py) ---
     paper_reference: PaperReference | None = SOLAR_PAPER_REFERENCE
     dataset_manifest: str | None = MANIFEST_FILE
+    # --- data, sweep and bench-scale's concern: building and checking datasets (tasks/dataset.py) ---
+    dataset: DatasetBuilder | None = SOLAR_DATASET
 
     def data_dir(self, data_dir: str | Path | None, config: Any) -> Path:
         return resolve_data_dir(data_dir, getattr(config, "data_dir", None))

@@ -1,10 +1,12 @@
 """The task seam: what a market supplies (:class:`Task`) and the registry that names them.
 
-See :mod:`solarchain_eval.tasks.base` for the interface and docs/architecture.md ("Tasks"), and
-:mod:`solarchain_eval.tasks.governance_view` for what a task supplies to the Planner/Auditor layer.
+See :mod:`solarchain_eval.tasks.base` for the interface and docs/architecture.md ("Tasks"),
+:mod:`solarchain_eval.tasks.governance_view` for what a task supplies to the Planner/Auditor layer,
+and :mod:`solarchain_eval.tasks.dataset` for its optional dataset builder.
 """
 
 from .base import DIMENSIONS, DIRECTIONS, Lever, MetricSpec, Task, metric_names, metrics_of
+from .dataset import DatasetBuilder, NoDatasetBuilderError, dataset_of, has_dataset_builder
 from .governance_view import (
     EpisodeRisk,
     GovernancePrompts,
@@ -23,6 +25,7 @@ __all__ = [
     "DEFAULT_TASK",
     "DIMENSIONS",
     "DIRECTIONS",
+    "DatasetBuilder",
     "EpisodeRisk",
     "GovernancePrompts",
     "GovernanceView",
@@ -30,14 +33,17 @@ __all__ = [
     "Lever",
     "LeverCodec",
     "MetricSpec",
+    "NoDatasetBuilderError",
     "NoGovernanceViewError",
     "Task",
     "UnknownTaskError",
+    "dataset_of",
     "diagnostic_names_of",
     "diagnostic_outcomes_of",
     "get_task",
     "governance_view_of",
     "harm_outcome_of",
+    "has_dataset_builder",
     "metric_names",
     "metrics_of",
     "register_task",

@@ -1,0 +1,238 @@
+"""A task's dataset builder: an optional capability (its ``dataset`` attribute).
+
+``solarchain-eval data``, ``sweep`` (its dataset axes) and ``bench-scale`` build, check and list
+datasets. They reach a market's dataset pipeline only through the :class:`DatasetBuilder` its task
+supplies as ``task.dataset``, read with :func:`dataset_of`; a task without one has no dataset
+commands (a one-line error). The interface follows the solar market's build: weather for a set of
+cities (or standard weather files), nodes per city, a seeded random stream and a false-data
+scenario (rate, pattern, severity), written as the builder's files and a manifest.
+
+This module imports nothing from the package beyond the bottom layer, so every wing may use it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Any, Protocol, runtime_checkable
+
+from ..common.errors import OptionsError
+
+
+@dataclass(frozen=True)
+class BuildDefaults:
+    """The build parameters a dataset takes when none are given.
+
+    Attributes
+    ----------
+    seed : int
+        Seed of the build's random stream.
+    start, end : str
+        First day and the day after the last one (local time), ``YYYY-MM-DD``.
+    timezone : str
+        IANA time zone of the dataset's hours.
+    nodes_per_city : int
+        Producing nodes per city.
+    """
+
+    seed: int
+    start: str
+    end: str
+    timezone: str
+    nodes_per_city: int
+
+
+@dataclass(frozen=True)
+class FalseDataKnobs:
+    """The false-data scenario a builder injects: its patterns and defaults.
+
+    Attributes
+    ----------
+    pattern_lines : mapping of str to str
+        Each pattern's name and its line of help, in order; ``{burst_hours}`` in a line stands for
+        where the burst length is set.
+    default_pattern : str
+        The pattern of a build that names none.
+    default_rate : float
+        The fraction of records injected by default, in [0, 1].
+    default_burst_hours : int
+        Hours per clustered burst by default.
+    """
+
+    pattern_lines: Mapping[str, str]
+    default_pattern: str
+    default_rate: float
+    default_burst_hours: int
+
+    @property
+    def patterns(self) -> tuple[str, ...]:
+        """The pattern names, in order."""
+        return tuple(self.pattern_lines)
+
+    def pattern_help(self, burst_hours: str = "burst_hours") -> str:
+        """Every pattern as ``NAME: line``, in one paragraph; ``burst_hours`` names where the burst
+        length is set (the command line passes its option)."""
+        return " ".join(f"{name}: {line.format(burst_hours=burst_hours)}" for name, line in self.pattern_lines.items())
+
+
+@dataclass(frozen=True)
+class SplitSummary:
+    """One named split as ``data splits`` lists it.
+
+    Attributes
+    ----------
+    name, role, description : str
+        The split, what it is for (``train``/``test``) and what it holds.
+    datasets : tuple of str
+        Its datasets, in order.
+    start_days : tuple of int or None
+        The days its episodes may start on (None: every day).
+    """
+
+    name: str
+    role: str
+    description: str
+    datasets: tuple[str, ...]
+    start_days: tuple[int, ...] | None
+
+
+@dataclass(frozen=True)
+class FamilyMember:
+    """One dataset of a shipped family (``data build-family``): its directory name and dates, and
+    ``handle``, the builder's own description of it (generic code passes it back unread)."""
+
+    name: str
+    start: str
+    end: str
+    handle: Any = None
+
+
+#: ``progress(stage, done, total)`` of a build; the ``"generation"`` stage counts nodes.
+BuildProgress = Callable[[str, int, int], None]
+
+
+@runtime_checkable
+class DatasetBuilder(Protocol):
+    """What a task supplies to build, check and list its datasets (see the module docstring).
+
+    Cities, weather and scenarios are the builder's own objects: generic code passes on what the
+    builder returned and reads nothing inside them.
+
+    Attributes
+    ----------
+    files : tuple of str
+        The data files of a dataset directory, beside its manifest (``manifest``).
+    manifest : str
+        The file written last, which marks a complete build.
+    node_records_file : str
+        The file with one row per node and hour (its rows measure a build's size).
+    defaults : BuildDefaults
+        The build parameters of a build that gives none.
+    false_data : FalseDataKnobs
+        The false-data scenario's patterns and defaults.
+    weather_sources : tuple of str
+        The named weather sources (``data build --weather``).
+    downloaded_weather_sources : tuple of str
+        Those of them that download, city by city (the command line shows a progress bar).
+    paper_weather_sha256 : str or None
+        sha256 of the paper's weather payload, when the task has one (a build names it).
+    split_rule : str
+        How the splits are to be used (one line).
+    families : tuple of str
+        The shipped dataset families (``data build-family``).
+    """
+
+    files: tuple[str, ...]
+    manifest: str
+    node_records_file: str
+    defaults: BuildDefaults
+    false_data: FalseDataKnobs
+    weather_sources: tuple[str, ...]
+    downloaded_weather_sources: tuple[str, ...]
+    paper_weather_sha256: str | None
+    split_rule: str
+    families: tuple[str, ...]
+
+    def cities(self, specs: Sequence[str] | int | None) -> tuple[Any, ...]:
+        """The cities of a build: None the default ones, a number that many synthetic ones,
+        ``NAME:LAT:LON`` strings those cities. ``ValueError``: a bad spec or a shared node-id prefix."""
+        ...
+
+    def scenario(self, rate: float, severity: str | None, pattern: str, burst_hours: int) -> Any:
+        """The false-data scenario (``severity`` ``"LO:HI"`` or None); ``ValueError`` names the bad knob."""
+        ...
+
+    def choose_weather(self, cities: Sequence[Any], start: str, end: str, **options: Any) -> Any:
+        """The weather of a build (keywords: ``seed``, ``timezone``, ``weather_cache``, ``source``,
+        ``open_meteo_url``, ``refresh``, ``retries``, ``on_city``, ``notify``)."""
+        ...
+
+    def read_weather_files(self, specs: Sequence[str]) -> tuple[Any, str]:
+        """Read ``[CITY=]FILE`` weather files; returns them and the first file's time zone."""
+        ...
+
+    def weather_from_files(self, read: Any, timezone: str, start: str, end: str) -> tuple[tuple[Any, ...], Any]:
+        """The cities (at the files' sites) and the weather of a build from :meth:`read_weather_files`'s files."""
+        ...
+
+    def build(
+        self,
+        weather: Any,
+        out: Path,
+        *,
+        cities: Sequence[Any],
+        seed: int,
+        start: str,
+        end: str,
+        nodes_per_city: int,
+        timezone: str,
+        scenario: Any = None,
+        progress: BuildProgress | None = None,
+    ) -> dict[str, Any]:
+        """Build a dataset into ``out`` (the manifest written last); returns the manifest."""
+        ...
+
+    def is_published(self, file_sha256: Mapping[str, str]) -> bool:
+        """Whether the files' sha256 (name -> digest) are the paper's published dataset's."""
+        ...
+
+    def check(self, data_dir: Path) -> tuple[tuple[str, str], ...]:
+        """Validate the dataset in ``data_dir`` (a one-line error naming the file otherwise);
+        returns its summary as (what, value) rows."""
+        ...
+
+    def splits(self) -> tuple[SplitSummary, ...]:
+        """The named splits, in order."""
+        ...
+
+    def family(self, family: str, months: Sequence[int] | None) -> tuple[FamilyMember, ...]:
+        """The members of a shipped family (``months`` None: all); an error names an unknown family or month."""
+        ...
+
+    def build_family_member(self, member: FamilyMember, out: Path, *, replace: bool) -> dict[str, Any]:
+        """Build ``member`` into ``out`` if it matches its shipped checksums; returns its manifest."""
+        ...
+
+
+class NoDatasetBuilderError(OptionsError, ValueError):
+    """A task without a dataset builder was asked to build or check a dataset."""
+
+
+def dataset_of(task: Any) -> DatasetBuilder:
+    """``task``'s dataset builder (its optional ``dataset`` attribute).
+
+    Raises
+    ------
+    NoDatasetBuilderError
+        The task has none.
+    """
+    builder = getattr(task, "dataset", None)
+    if builder is None:
+        raise NoDatasetBuilderError(f"task {getattr(task, 'name', task)!r} has no dataset builder")
+    return builder
+
+
+def has_dataset_builder(task: Any) -> bool:
+    """Whether ``task`` has a dataset builder."""
+    return getattr(task, "dataset", None) is not None
