@@ -182,3 +182,17 @@ def test_an_edited_suite_root_is_refused(roots, tmp_path):
     with pytest.raises(ReportDataError, match="differ from those recomputed from the entries' runs"):
         build_report(edited, tmp_path / "report")
     assert not (tmp_path / "board").exists() and not (tmp_path / "report").exists()
+
+
+def test_verify_checks_every_entry_and_the_suite_files(roots, tmp_path):
+    done = runner.invoke(app, ["verify", str(roots["heldout"]), "--episodes", "1"])
+    assert done.exit_code == 0, done.output
+    assert [line for line in done.output.splitlines() if line.endswith(":")] == ["m01:", "m07:"]
+    assert done.output.count("static: verified (1 episode)") == 2
+    assert "suite files: checksums and scores match (suite two-months-rank" in done.output
+    edited = tmp_path / "edited"
+    shutil.copytree(roots["heldout"], edited)
+    (edited / SUITE_SCORES_FILE).write_text((edited / SUITE_SCORES_FILE).read_text().replace("m07", "m7", 1))
+    done = runner.invoke(app, ["verify", str(edited), "--episodes", "1"])
+    assert done.exit_code == 1 and "suite files: FAIL" in done.output and "suite_scores.csv" in done.output
+    assert done.output.count("static: verified (1 episode)") == 2  # the entries' runs are untouched
