@@ -35,8 +35,15 @@ from .loading import ReportData, load_report_data
 from .options import ReportDataError
 from .table_files import read_json
 
-#: Fields of ``suite_metadata.json`` a suite root must hold.
-REQUIRED_FIELDS = ("suite", "protocol_id", "protocol", "reference", "entries", "sha256")
+#: Fields of ``suite_metadata.json`` a suite root must hold, with their JSON types.
+REQUIRED_FIELDS = {
+    "suite": str,
+    "protocol_id": str,
+    "protocol": dict,
+    "reference": list,
+    "entries": list,
+    "sha256": dict,
+}
 
 
 def is_suite_root(path: Path | str) -> bool:
@@ -150,13 +157,12 @@ def load_suite_data(root: Path | str, *, read_run: Callable[[Path], ReportData] 
     if not path.is_file():
         raise ReportDataError(f"{root}: no {SUITE_METADATA_FILE} (not a suite root, or an unfinished one)")
     metadata = read_json(path)
-    for name in REQUIRED_FIELDS:
-        _field(metadata, name, {"suite": str, "protocol_id": str, "protocol": dict}.get(name, object), path)
-    entries = _field(metadata, "entries", list, path)
-    reference = tuple(_field(metadata, "reference", list, path))
+    for name, kind in REQUIRED_FIELDS.items():
+        _field(metadata, name, kind, path)
+    entries, reference = metadata["entries"], tuple(metadata["reference"])
     if len(reference) != 2:
         raise ReportDataError(f"{path}: field 'reference' must name two baselines")
-    _check_sha256(root, _field(metadata, "sha256", dict, path), path)
+    _check_sha256(root, metadata["sha256"], path)
     protocol = metadata["protocol"]
     if protocol_id(protocol) != metadata["protocol_id"]:
         raise ReportDataError(f"{path}: field 'protocol' does not hash to its protocol_id (edited by hand?)")
@@ -182,6 +188,7 @@ def load_suite_data(root: Path | str, *, read_run: Callable[[Path], ReportData] 
         suite = Suite(
             str(metadata["suite"]),
             str(metadata.get("description", "")),
+            # the entries' datasets are not read again: their runs were verified against their sha256s
             tuple(SuiteEntry(str(e["name"]), str(e["task"]), str(e["split"]), root) for e in entries),
             (str(reference[0]), str(reference[1])),
         )

@@ -42,7 +42,7 @@ from .layout import SAFETY_METRICS as SAFETY_METRICS
 from .layout import BoardLayout as BoardLayout
 from .layout import board_layout as board_layout
 from .sections import UNKNOWN_ACCESS, LeaderboardError, Section
-from .suite_inputs import SuiteBoard
+from .suite_inputs import SuiteBoard, SuiteSection
 
 #: ``row_kind`` of measured rows and of the paper's published rows.
 RANKED, REFERENCE = "ranked", "reference"
@@ -341,6 +341,9 @@ def build_leaderboard(
     options = options or LeaderboardOptions()
     if not sections:
         raise LeaderboardError("no rows to rank")
+    suite = next((s for s in sections if isinstance(s, SuiteSection)), None)
+    if suite is not None:  # its rows are normalised suite scores: suite_board.build_boards ranks them
+        raise LeaderboardError(f"{suite.where} is a suite root; rank it with suite_board.build_boards")
     check_one_task(sections)
     check_one_protocol(sections)
     layout = board_layout(sections[0].task)
