@@ -1,4 +1,5 @@
-"""``solarchain-eval leaderboard``: rank runs and paper roots of one task and protocol, per setting."""
+"""``solarchain-eval leaderboard``: rank runs and paper roots of one task and protocol, per setting, and
+suite roots by their suite aggregate, one board per suite protocol."""
 
 from __future__ import annotations
 
@@ -28,13 +29,15 @@ def leaderboard(
     inputs: list[Path] = typer.Argument(
         ...,
         metavar="RUN_OR_ROOT",
-        help="Run directories (evaluate --out), paper roots, or tarballs (.tar, .tar.gz, .tgz) of either.",
+        help="Run directories (evaluate --out), paper roots, tarballs (.tar, .tar.gz, .tgz) of either, or suite "
+        "roots (evaluate --suite --out).",
     ),
     out: Path = typer.Option(..., "--out", help="The board's folder (leaderboard.csv, .md, .html, pareto.png)."),
     split: bool = typer.Option(
         False,
         "--split",
-        help="Write one board per task and protocol into OUT/<protocol id>/ instead of refusing a mix.",
+        help="Write one board per task and protocol (per suite protocol for suite roots) into OUT/<protocol id>/ "
+        "instead of refusing a mix.",
     ),
     formats: str = typer.Option(
         ",".join(LEADERBOARD_FORMATS), "--formats", help="Comma-separated: csv, md, html (md and html add pareto.png)."
@@ -65,7 +68,12 @@ def leaderboard(
     command names the first differing field and two inputs, and writes nothing. A tarball is
     refused before anything is unpacked when it passes --max-unpacked-mb or --max-members, holds
     a link, or holds a file its metadata does not vouch for; --out may not lie inside an input.
-    See docs/comparing_results.md and docs/security.md.
+
+    A suite root (evaluate --suite) is ranked by the IQM of its normalised scores with its
+    stratified-bootstrap interval, mean, median and optimality gap beside, on a board of its suite
+    protocol id: never beside runs, paper roots or suite roots of another split or protocol
+    (refused, or with --split one board each and a line naming the inputs kept apart).
+    See docs/comparing_results.md, docs/suites.md and docs/security.md.
     """
     refuse_file_out(out)
     try:
@@ -88,6 +96,9 @@ def leaderboard(
     except LeaderboardError as error:
         raise cli_error(error) from None
     for board in outcome.boards:
+        if board.suite is not None:
+            console.print(_suite_table(board))
+            continue
         ranked = board.layout.ranked.name
         label = board.layout.label(board.layout.ranked) or ranked
         for section in board.sections:
@@ -108,6 +119,25 @@ def leaderboard(
                     str(row["source"]),
                 )
             console.print(shown)
+    for note in outcome.notes:
+        say(note, err=False)
     if not outcome.files:
         raise CliError("nothing to write")
     say(f"wrote {len(outcome.files)} files to {outcome.out_dir}", err=False)
+
+
+def _suite_table(board) -> Table:
+    """A suite board on the console: rank, policy, the aggregates with their intervals, source."""
+    section = board.sections[0]
+    shown = Table(
+        title=f"suite {board.suite.suite}, split {', '.join(board.suite.splits)} (suite protocol {board.board_id}): "
+        "normalised score, 95 % stratified-bootstrap intervals",
+        title_justify="left",
+    )
+    names = ("iqm", "mean", "optimality_gap")  # the median is in the board's files
+    for column in ("rank", "policy", "access", *names, "source"):
+        shown.add_column(column.replace("_", " "), justify="right" if column == "rank" else "left")
+    for row in section.ranked.to_dict("records"):
+        cells = (f"{row[n]:.3f} [{row[f'{n}_low']:.3f}, {row[f'{n}_high']:.3f}]" for n in names)
+        shown.add_row(str(row["rank"]), str(row["policy"]), str(row["access"]), *cells, str(row["source"]))
+    return shown

@@ -60,7 +60,10 @@ def _print_check(table) -> None:
 @reports_errors
 def report(
     root: Path = typer.Argument(
-        ..., metavar="ROOT", help="A run directory (from `evaluate --out`) or a paper root (with combined/<setting>/)."
+        ...,
+        metavar="ROOT",
+        help="A run directory (from `evaluate --out`), a paper root (with combined/<setting>/) or a suite root "
+        "(from `evaluate --suite --out`).",
     ),
     out: Path | None = typer.Option(None, "--out", help="Output folder (default: ROOT/report)."),
     formats: str = typer.Option(
@@ -107,8 +110,10 @@ def report(
 
     Tables and figures the run cannot support (e.g. no learned policies, no agentic setting)
     are listed with the reason. A run of a task other than the solar market gets one table per
-    template dimension of the metrics its task declares instead of the paper's. Same inputs and
-    options give byte-identical files."""
+    template dimension of the metrics its task declares instead of the paper's. A suite root gets
+    its own: the normalised score per entry, the aggregates (IQM, mean, median, optimality gap) with
+    stratified-bootstrap intervals, the probability of improvement, the performance profile and a
+    per-entry heat map (docs/suites.md). Same inputs and options give byte-identical files."""
     refuse_file_out(out)
     try:
         chosen = parse_formats(formats)

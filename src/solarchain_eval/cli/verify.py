@@ -19,7 +19,11 @@ register_user_error(VerifyError)
 @app.command("verify")
 @reports_errors
 def verify(
-    run: Path = typer.Argument(..., metavar="RUN", help="A run directory (evaluate --out) or a paper grid root."),
+    run: Path = typer.Argument(
+        ...,
+        metavar="RUN",
+        help="A run directory (evaluate --out), a paper grid root or a suite root (evaluate --suite).",
+    ),
     episodes: int = typer.Option(
         DEFAULT_VERIFY_EPISODES, "--episodes", min=1, help="Episodes re-run per policy, chosen at random."
     ),
@@ -72,8 +76,10 @@ def verify(
     run_metadata.json records (never code the run names); a task not installed here is an error.
 
     A paper grid root verifies each finished eval unit (learned policies from the grid's own
-    models under the root) and the combined files. See docs/comparing_results.md#verifying-a-run
-    and docs/security.md.
+    models under the root) and the combined files. A suite root verifies each entry's run as a run
+    is verified, then its own files against suite_metadata.json and its scores against those
+    recomputed from the entries' runs (docs/suites.md). See
+    docs/comparing_results.md#verifying-a-run and docs/security.md.
     """
     try:
         specs = [parse_agent_spec(text, known_policies()) for text in agents or []]
@@ -90,8 +96,14 @@ def verify(
         models=parse_models(models or []),
     )
     from ..experiments.layout import is_paper_root
+    from ..report.suite_loading import is_suite_root
 
-    ok = _verify_grid(run, options) if run.is_dir() and is_paper_root(run) else _show(verify_run(run, options))
+    if run.is_dir() and is_suite_root(run):
+        ok = _verify_suite(run, options)
+    elif run.is_dir() and is_paper_root(run):
+        ok = _verify_grid(run, options)
+    else:
+        ok = _show(verify_run(run, options))
     if not ok:
         raise typer.Exit(1)
 
@@ -128,3 +140,30 @@ def _verify_grid(root: Path, options: VerifyOptions) -> bool:
         say(f"checksum: {problem}", err=False)
     say(f"combined files: {'checksums match' if not combined else 'checksums FAIL'}", err=False)
     return ok and not combined
+
+
+def _verify_suite(root: Path, options: VerifyOptions) -> bool:
+    """Each entry's run of a suite root (as a run is verified), then the root's own files and scores."""
+    from ..evaluation.suite_run import SUITE_METADATA_FILE
+    from ..report.loading import load_report_data
+    from ..report.options import ReportDataError
+    from ..report.suite_loading import load_suite_data
+    from ..report.table_files import read_json
+
+    if options.data_dir is not None:
+        raise CliError("--data applies to a single run directory (each entry of a suite has its own dataset)")
+    entries = read_json(root / SUITE_METADATA_FILE).get("entries")
+    if not isinstance(entries, list) or not all(isinstance(e, dict) and "name" in e for e in entries):
+        raise CliError(f"{root / SUITE_METADATA_FILE}: field 'entries' is missing or malformed")
+    ok = True
+    for entry in entries:
+        name = str(entry.get("run_dir", entry["name"]))
+        say(f"{name}:", err=False)
+        ok = _show(verify_run(root / name, options), indent="  ") and ok
+    try:  # the entries' own files were checked above: here only the suite root's
+        data = load_suite_data(root, read_run=lambda path: load_report_data(path, allow_unverified=True))
+    except ReportDataError as error:
+        say(f"suite files: FAIL: {error}", err=False)
+        return False
+    say(f"suite files: checksums and scores match (suite {data.suite}, suite protocol {data.protocol_id})", err=False)
+    return ok

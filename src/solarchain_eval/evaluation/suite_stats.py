@@ -142,22 +142,31 @@ def profile_thresholds(matrices: Mapping[str, np.ndarray], points: int = 101) ->
     return np.linspace(float(values.min()), float(values.max()), points)
 
 
-def performance_profile_figure(matrices: Mapping[str, np.ndarray], path: Path, title: str) -> Path:
-    """Write the performance profile of every agent (:func:`score_distribution`) to ``path`` (PNG)."""
-    from matplotlib.figure import Figure  # the object API: no pyplot state, no backend switch
-
+def draw_performance_profile(
+    axes, matrices: Mapping[str, np.ndarray], colours: Mapping[str, str] | None = None
+) -> None:
+    """Draw every agent's performance profile (:func:`score_distribution`) on matplotlib ``axes``, with
+    dotted lines at the reference levels 0 and 1 (the suite root's figure, the report's and the board's)."""
     taus = profile_thresholds(matrices)
-    figure = Figure(figsize=(6, 4))
-    axes = figure.subplots()
     for agent, matrix in matrices.items():
-        axes.plot(taus, score_distribution(matrix, taus), label=agent)
+        colour = {"color": colours[agent]} if colours and agent in colours else {}
+        axes.plot(taus, score_distribution(matrix, taus), label=agent, **colour)
     for reference in (0.0, 1.0):
         axes.axvline(reference, color="grey", linewidth=0.8, linestyle=":")
     axes.set_xlabel("normalised score τ (0 and 1: the reference baselines)")
     axes.set_ylabel("fraction of episodes with score > τ")
     axes.set_ylim(-0.02, 1.02)
-    axes.set_title(title)
     axes.legend()
+
+
+def performance_profile_figure(matrices: Mapping[str, np.ndarray], path: Path, title: str) -> Path:
+    """Write the performance profile of every agent (:func:`score_distribution`) to ``path`` (PNG)."""
+    from matplotlib.figure import Figure  # the object API: no pyplot state, no backend switch
+
+    figure = Figure(figsize=(6, 4))
+    axes = figure.subplots()
+    draw_performance_profile(axes, matrices)
+    axes.set_title(title)
     figure.tight_layout()
     atomic_write_with(path, lambda target: figure.savefig(target, format="png", dpi=120, metadata={"Software": None}))
     return path

@@ -12,11 +12,10 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Literal
 
-import numpy as np
 import pandas as pd
 
 from ..common.redaction import redact_metadata
-from ..evaluation.records import DIAGNOSTICS_FILE, PARQUET_TWINS, SUMMARY_FILE
+from ..evaluation.records import DIAGNOSTICS_FILE, SUMMARY_FILE
 from ..evaluation.run_metadata import RunMetadata, RunMetadataError
 from ..evaluation.rundir import verify_files, verify_run_dir
 from ..experiments.layout import (
@@ -32,11 +31,12 @@ from ..experiments.layout import (
     is_paper_root,
     run_table_paths,
 )
-from ..records_schema import EPISODE_KEYS, upgrade_columns
+from ..records_schema import EPISODE_KEYS
 from ..tasks.base import Task, metric_names
 from ..tasks.registry import DEFAULT_TASK, UnknownTaskError, get_task
 from .naming import SETTINGS
 from .options import ReportDataError as ReportDataError
+from .table_files import check_settings, read_json, read_tables
 
 #: Keys of one agentic log step that the report reads (the agentic contract has more).
 LOG_KEYS = (
@@ -144,75 +144,6 @@ class ReportData:
         return self.metrics[self.metrics["setting"] == setting]
 
 
-def _read_csv(path: Path, required: tuple[str, ...]) -> pd.DataFrame:
-    """A CSV table, or its Parquet twin (``evaluate --step-format parquet``) by its suffix."""
-    if path.suffix == ".parquet":
-        frame = _read_parquet(path)
-    else:
-        try:
-            frame = pd.read_csv(path)
-        except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError) as error:
-            raise ReportDataError(f"{path}: not a readable CSV ({error})") from None
-    # Files written before a column was renamed or removed (records_schema's version history).
-    upgrade = upgrade_columns(list(frame.columns))
-    if upgrade:
-        frame = frame.drop(columns=[c for c, new in upgrade.items() if new is None])
-        frame = frame.rename(columns={c: new for c, new in upgrade.items() if new is not None})
-    missing = [c for c in required if c not in frame.columns]
-    if missing:
-        raise ReportDataError(f"{path}: missing column(s) {', '.join(missing)}")
-    return frame
-
-
-def _read_parquet(path: Path) -> pd.DataFrame:
-    import pyarrow as pa
-
-    try:
-        return pd.read_parquet(path)
-    except (pa.ArrowException, OSError, ValueError) as error:
-        raise ReportDataError(f"{path}: not a readable Parquet file ({error})") from None
-
-
-def _check_numeric(frame: pd.DataFrame, columns: tuple[str, ...], path: Path) -> None:
-    for column in columns:
-        if not pd.api.types.is_numeric_dtype(frame[column]):
-            values = pd.to_numeric(frame[column], errors="coerce")
-            bad = int(np.flatnonzero(values.isna() & frame[column].notna())[0])
-            raise ReportDataError(
-                f"{path}: column {column} row {bad + 2} holds {frame[column].iloc[bad]!r}, not a number"
-            )
-
-
-def _check_settings(frame: pd.DataFrame, path: Path, kind: str) -> None:
-    unknown = sorted(set(frame["setting"].astype(str)) - set(SETTINGS))
-    if unknown:
-        row = int(np.flatnonzero(frame["setting"].astype(str) == unknown[0])[0])
-        raise ReportDataError(
-            f"{path}: row {row + 2} has setting {unknown[0]!r} (expected one of {', '.join(SETTINGS)})"
-        )
-    if kind == "paper" and path.parent.parent.name == COMBINED_DIR:
-        other = sorted(set(frame["setting"]) - {path.parent.name})
-        if other:
-            raise ReportDataError(f"{path}: holds setting {other[0]!r} but lies in the folder of {path.parent.name!r}")
-
-
-def _read_table(
-    root: Path, name: str, required: tuple[str, ...], kind: str, numeric: tuple[str, ...] = ()
-) -> tuple[pd.DataFrame, list[Path]]:
-    paths = run_table_paths(root, name)
-    if name in PARQUET_TWINS:
-        paths += run_table_paths(root, PARQUET_TWINS[name])
-    frames = []
-    for path in paths:
-        frame = _read_csv(path, required)
-        _check_settings(frame, path, kind)
-        _check_numeric(frame, numeric, path)
-        frames.append(frame)
-    if not frames:
-        return pd.DataFrame(columns=list(required)), []
-    return pd.concat(frames, ignore_index=True), paths
-
-
 #: Per-row figures of the model calls a log row records (NaN where it records none): the
 #: auditor's call at this step, and the planner's call on the episode's first row only (the plan,
 #: with its call, is repeated on every row).
@@ -272,17 +203,8 @@ def read_agentic_logs(path: Path) -> pd.DataFrame:
             rows.append(_flatten_log(record))
     frame = pd.DataFrame(rows, columns=[*LOG_KEYS, *LLM_CALL_FIELDS])
     if not frame.empty:
-        _check_settings(frame, path, "paper" if path.parent.parent.name == COMBINED_DIR else "run")
+        check_settings(frame, path, "paper" if path.parent.parent.name == COMBINED_DIR else "run")
     return frame
-
-
-def _read_json(path: Path) -> dict[str, Any]:
-    if not path.is_file():
-        return {}
-    try:
-        return json.loads(path.read_text(encoding="utf-8"))
-    except json.JSONDecodeError as error:
-        raise ReportDataError(f"{path}: not valid JSON ({error.msg} at line {error.lineno})") from None
 
 
 def _redacted(metadata: dict[str, Any]) -> dict[str, Any]:
@@ -321,7 +243,7 @@ def verify_report_inputs(root: Path, kind: str) -> list[str]:
 def verify_combined(root: Path) -> list[str]:
     """Problems of a paper root's combined files against ``paper_metadata.json``'s ``combined_sha256``."""
     meta_path = Path(root) / PAPER_METADATA_FILE
-    recorded = _read_json(meta_path).get("combined_sha256") or {}
+    recorded = read_json(meta_path).get("combined_sha256") or {}
     names = (METRICS_FILE, ACTIONS_FILE, CITY_HOUR_FILE, AGENTIC_LOG_FILE, DIAGNOSTICS_FILE, SUMMARY_FILE)
     problems = []
     for folder in sorted(p for p in (Path(root) / COMBINED_DIR).glob("*") if p.is_dir()):
@@ -391,21 +313,21 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     task = _task_of(root, records)
     # The metric columns are the task's declared ones (the solar market's for every run before tasks).
     names = metric_names(get_task(task))
-    metrics, metric_paths = _read_table(root, METRICS_FILE, (*EPISODE_KEYS, *names), kind, names)
+    metrics, metric_paths = read_tables(root, METRICS_FILE, (*EPISODE_KEYS, *names), kind, names)
     if not metric_paths:
         where = f"{root}/{COMBINED_DIR}/<setting>/{METRICS_FILE}" if kind == "paper" else f"{root}/{METRICS_FILE}"
         raise ReportDataError(f"{root}: no {METRICS_FILE} found (looked for {where})")
     if metrics.empty:
         raise ReportDataError(f"{', '.join(str(p) for p in metric_paths)}: no rollouts (only a header)")
     _check_unique_rollouts(metrics, metric_paths)
-    actions, action_paths = _read_table(root, ACTIONS_FILE, ACTION_KEYS, kind)
-    city_hour, city_paths = _read_table(root, CITY_HOUR_FILE, CITY_HOUR_KEYS, kind)
+    actions, action_paths = read_tables(root, ACTIONS_FILE, ACTION_KEYS, kind)
+    city_hour, city_paths = read_tables(root, CITY_HOUR_FILE, CITY_HOUR_KEYS, kind)
     log_paths = run_table_paths(root, AGENTIC_LOG_FILE)
     logs = [read_agentic_logs(path) for path in log_paths]
     log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=[*LOG_KEYS, *LLM_CALL_FIELDS])
     # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
     log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
-    diagnostics, diagnostic_paths = _read_table(root, DIAGNOSTICS_FILE, DIAGNOSTICS_REQUIRED, kind)
+    diagnostics, diagnostic_paths = read_tables(root, DIAGNOSTICS_FILE, DIAGNOSTICS_REQUIRED, kind)
     # Checked after the files parse, so a malformed file gets the message naming its row.
     unverified = verify_report_inputs(root, kind)
     if unverified and not allow_unverified:
@@ -422,7 +344,7 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
         actions=actions,
         city_hour=city_hour,
         logs=log_frame,
-        metadata=_redacted(_read_json(root / PAPER_METADATA_FILE)) if kind == "paper" else _shown(run_metadata),
+        metadata=_redacted(read_json(root / PAPER_METADATA_FILE)) if kind == "paper" else _shown(run_metadata),
         unit_metadata={name: _shown(record) for name, record in units.items()},
         run_metadata=run_metadata,
         unit_run_metadata={name: record for name, record in units.items() if record is not None},

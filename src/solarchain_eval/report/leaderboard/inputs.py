@@ -1,230 +1,36 @@
-"""The inputs of a leaderboard: run directories, paper roots and tarballs of either, each split
-into one section per setting with the protocol its rows were evaluated under.
+"""The inputs of a leaderboard: run directories, paper roots, suite roots and tarballs of a run
+directory or paper root, opened into sections (:mod:`.sections`; a suite root's:
+:mod:`.suite_inputs`).
 
-A run directory is one section (its setting); a paper root is one section per setting, whose
-protocol merges its evaluation units' (each unit evaluates one run seed: the section's run seeds
-are theirs together). Every input is read and verified by
-:func:`~solarchain_eval.report.loading.load_report_data` (every file against its recorded
-sha256); a tarball is checked before anything is written (:mod:`.tarballs`: size and member
-limits, and a file its metadata does not vouch for is refused). Every policy must hold exactly
-the rollouts its protocol promises (run seeds × episodes, each once:
-:func:`~solarchain_eval.evaluation.verify_checks.rollout_set_problem`, verify's rule), so that
-rows of different inputs pair up episode by episode.
-
-The rule of one board (docs/comparing_results.md): all sections must be of one task and share
-the protocol *without its setting* (:func:`board_fingerprint`: the setting and the reward switch it
-implies are left out); rows are ranked per setting.
+A tarball is checked before anything is written (:mod:`.tarballs`: size and member limits, and a
+file its metadata does not vouch for is refused), unpacked into a temporary folder and read as
+the folder it holds. The names of :mod:`.sections` stay importable here.
 """
 
 from __future__ import annotations
 
-import json
 import tempfile
-from collections.abc import Iterator, Mapping, Sequence
+from collections.abc import Iterator, Sequence
 from contextlib import ExitStack, contextmanager
-from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any
 
-import pandas as pd
-
-from ...common.errors import InputDataError, NamesOptions
-from ...config import BenchmarkConfig
-from ...evaluation.fingerprint import protocol_difference, protocol_id, task_config_sha256
-
-# The legacy names live with the run record's model now (LEGACY_*, UNKNOWN_ACCESS, rule_name: kept importable here).
-from ...evaluation.run_metadata import LEGACY_ACCESS as LEGACY_ACCESS
-from ...evaluation.run_metadata import LEGACY_ENV_ID as LEGACY_ENV_ID
-from ...evaluation.run_metadata import LEGACY_PROTOCOL_KEYS as LEGACY_PROTOCOL_KEYS
-from ...evaluation.run_metadata import UNKNOWN_ACCESS as UNKNOWN_ACCESS
-from ...evaluation.run_metadata import ProtocolMismatch, RunMetadata, RunMetadataError, setting_protocol
-from ...evaluation.run_metadata import rule_name as rule_name
-from ...evaluation.verify_checks import rollout_set_problem
-from ...experiments.layout import METADATA_FILE, UNITS_DIR, is_done
-from ...tasks.registry import DEFAULT_TASK, get_task
-from ..loading import load_report_data
+from ..suite_loading import is_suite_root
+from .sections import LEGACY_ACCESS as LEGACY_ACCESS
+from .sections import LEGACY_ENV_ID as LEGACY_ENV_ID
+from .sections import LEGACY_PROTOCOL_KEYS as LEGACY_PROTOCOL_KEYS
+from .sections import UNKNOWN_ACCESS as UNKNOWN_ACCESS
+from .sections import LeaderboardError as LeaderboardError
+from .sections import Section as Section
+from .sections import board_fingerprint as board_fingerprint
+from .sections import data_sections as data_sections
+from .sections import read_input as read_input
+from .sections import rule_name as rule_name
+from .sections import run_protocol as run_protocol
+from .suite_inputs import read_suite_input
 from .tarballs import TarballLimits, TarballRefused, unpack_tarball
 
 #: Names of inputs read as tarballs of a run directory or a paper root.
 TARBALL_SUFFIXES = (".tar", ".tar.gz", ".tgz", ".tar.bz2", ".tbz2", ".tar.xz", ".txz")
-
-
-class LeaderboardError(NamesOptions, InputDataError, ValueError):
-    """The inputs cannot be ranked on one board (the one-line message names the inputs and why)."""
-
-
-@dataclass
-class Section:
-    """The rows of one setting of one input, with their protocol.
-
-    Attributes
-    ----------
-    source : str
-        The input as the user named it (a path, or a tarball's path).
-    where : str
-        The source with the setting (``RUN [main]``), as refusals name it.
-    setting : str
-    protocol : dict
-        The setting's protocol fingerprint (:func:`~solarchain_eval.evaluation.fingerprint.protocol_fingerprint`).
-    board_protocol : dict
-        :func:`board_fingerprint` of it: what every section of one board shares.
-    metrics : pandas.DataFrame
-        The setting's ``metrics.csv`` rows.
-    access : dict
-        Policy -> ``"isolated"``, ``"in-process"``, ``"privileged"`` or ``"unknown"`` (not recorded).
-    task : str
-        The task the rows were evaluated on (``solar`` for every run before tasks).
-    """
-
-    source: str
-    where: str
-    setting: str
-    protocol: dict[str, Any]
-    board_protocol: dict[str, Any]
-    metrics: pd.DataFrame
-    access: dict[str, str] = field(default_factory=dict)
-    task: str = DEFAULT_TASK
-
-    @property
-    def protocol_id(self) -> str:
-        """The id of the setting's protocol (as ``run_metadata.json`` records it for a run directory)."""
-        return protocol_id(self.protocol)
-
-    @property
-    def board_id(self) -> str:
-        """The id of the protocol without its setting: equal ids share a board."""
-        return protocol_id(self.board_protocol)
-
-
-def board_fingerprint(fingerprint: Mapping[str, Any], config: Any, task: str = DEFAULT_TASK) -> dict[str, Any]:
-    """``fingerprint`` without its setting: the comparison key of one board.
-
-    The setting decides the reward's physics switch (``no_physics_penalty``), so the task
-    configuration is hashed with that switch off; every other field is kept as it is. A task
-    other than ``solar`` is part of the key (``task``), so boards of two tasks never share an id;
-    a solar board's key is what it was before tasks.
-    """
-    board = {key: value for key, value in fingerprint.items() if key != "setting"}
-    market = get_task(task)
-    board["config_sha256"] = task_config_sha256(market.setting_config(config, no_physics_penalty=False), market)
-    if task != DEFAULT_TASK:
-        board.setdefault("task", task)
-    return board
-
-
-def run_protocol(metadata: RunMetadata) -> tuple[dict[str, Any], dict[str, Any]]:
-    """(fingerprint, board fingerprint) of a run from its ``run_metadata.json``.
-
-    A run that records no ``protocol`` (written before protocols were recorded) is ranked under the
-    one :class:`~solarchain_eval.evaluation.run_metadata.RunMetadata` computes for it on read.
-
-    Raises
-    ------
-    LeaderboardError
-        No protocol can be established, the recorded config is not readable, or the recorded
-        protocol disagrees with its recorded id or config.
-    """
-    path = metadata.where
-    try:
-        config = metadata.task_config()
-        fingerprint = metadata.fingerprint()
-    except RunMetadataError as error:
-        raise LeaderboardError(
-            f"{error}; its protocol cannot be compared (evaluate the agent again to rank it)"
-        ) from None
-    if metadata.protocol_recorded:
-        if protocol_id(fingerprint) != metadata.protocol_id:
-            raise LeaderboardError(f"{path}: its protocol does not hash to its protocol_id (edited by hand?)")
-        if fingerprint.get("config_sha256") != task_config_sha256(config, metadata.resolve_task()):
-            raise LeaderboardError(f"{path}: its protocol's config_sha256 does not match its config (edited by hand?)")
-    return fingerprint, board_fingerprint(fingerprint, config, metadata.task)
-
-
-def _check_rollouts(section: Section) -> None:
-    """Every policy holds exactly its protocol's rollouts, each once (verify's rule), else refuse."""
-    metrics = section.metrics
-    problem = rollout_set_problem(
-        zip(
-            metrics["policy"].astype(str), metrics["run_seed"].astype(int), metrics["episode"].astype(int), strict=True
-        ),
-        sorted(set(metrics["policy"].astype(str))),
-        section.protocol["run_seeds"],
-        int(section.protocol["episodes"]),
-    )
-    if problem is not None:
-        raise LeaderboardError(f"{section.where}: {problem}; a board ranks only whole runs")
-
-
-def _run_sections(source: str, root: Path, metrics: pd.DataFrame, metadata: RunMetadata | None) -> list[Section]:
-    if metadata is None:
-        raise LeaderboardError(f"{root} has no {METADATA_FILE}; a leaderboard needs every run's protocol")
-    fingerprint, board = run_protocol(metadata)
-    setting = fingerprint["setting"]
-    other = sorted(set(metrics["setting"].astype(str)) - {setting})
-    if other:
-        raise LeaderboardError(f"{root}: metrics.csv holds setting {other[0]!r} but its protocol is of {setting!r}")
-    where = f"{source} [{setting}]"
-    return [Section(source, where, setting, fingerprint, board, metrics, dict(metadata.policy_access), metadata.task)]
-
-
-def _paper_sections(source: str, root: Path, data) -> list[Section]:
-    """One section per setting of a paper root, its protocol merged from its finished eval units
-    (:func:`~solarchain_eval.evaluation.run_metadata.setting_protocol`, as the paper root records it)."""
-    units: dict[str, dict[str, RunMetadata]] = {}
-    configs: dict[str, BenchmarkConfig] = {}
-    for name, metadata in sorted(data.unit_run_metadata.items()):
-        unit_dir = root / UNITS_DIR / "eval" / name
-        if not is_done(unit_dir):
-            continue
-        fingerprint, _ = run_protocol(metadata)  # each unit's own protocol checked
-        units.setdefault(fingerprint["setting"], {})[str(unit_dir)] = metadata
-        configs.setdefault(fingerprint["setting"], metadata.task_config())
-    sections = []
-    for setting in data.settings:
-        group = units.get(setting)
-        if not group:
-            raise LeaderboardError(
-                f"{source}: no finished evaluation unit under {UNITS_DIR}/eval records the protocol of setting "
-                f"{setting!r}; a leaderboard needs every run's protocol"
-            )
-        try:
-            merged = setting_protocol(group)
-        except ProtocolMismatch as error:
-            raise LeaderboardError(str(error)) from None
-        access: dict[str, str] = {}
-        for metadata in group.values():
-            access.update(metadata.policy_access)
-        metrics = data.rollouts(setting).reset_index(drop=True)
-        unrecorded = sorted(set(metrics["policy"].astype(str)) - set(access))
-        if unrecorded:
-            raise LeaderboardError(
-                f"{source} [{setting}]: no evaluation unit records policy {unrecorded[0]!r} of combined/{setting}"
-            )
-        board = board_fingerprint(merged, configs[setting], data.task)
-        sections.append(Section(source, f"{source} [{setting}]", setting, merged, board, metrics, access, data.task))
-    return sections
-
-
-def read_input(path: Path, source: str | None = None) -> list[Section]:
-    """The sections of a run directory or paper root ``path`` (verified; see the module docstring).
-
-    Raises
-    ------
-    ReportDataError
-        A file is missing, malformed or not vouched for by the run's metadata.
-    LeaderboardError
-        No protocol can be established, or a policy lacks rollouts its protocol promises.
-    """
-    path = Path(path)
-    source = source or str(path)
-    data = load_report_data(path)
-    run = data.kind == "run"
-    sections = (
-        _run_sections(source, path, data.metrics, data.run_metadata) if run else _paper_sections(source, path, data)
-    )
-    for section in sections:
-        _check_rollouts(section)
-    return sections
 
 
 def _is_tarball(path: Path) -> bool:
@@ -257,7 +63,7 @@ def check_out_outside_inputs(paths: Sequence[Path | str], out: Path | str) -> No
 @contextmanager
 def open_inputs(paths: Sequence[Path | str], limits: TarballLimits | None = None) -> Iterator[list[Section]]:
     """Every section of every input (tarballs, within ``limits``, unpacked into a temporary folder
-    removed on exit).
+    removed on exit; a suite root gives one :class:`~.suite_inputs.SuiteSection`).
 
     Raises
     ------
@@ -265,7 +71,7 @@ def open_inputs(paths: Sequence[Path | str], limits: TarballLimits | None = None
         No input, an input that is neither a folder nor a tarball, or one that cannot be ranked.
     """
     if not paths:
-        raise LeaderboardError("no run directory, paper root or tarball given")
+        raise LeaderboardError("no run directory, paper root, suite root or tarball given")
     with ExitStack() as stack:
         sections: list[Section] = []
         for given in paths:
@@ -273,146 +79,10 @@ def open_inputs(paths: Sequence[Path | str], limits: TarballLimits | None = None
             if _is_tarball(path):
                 scratch = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="solarchain-board-")))
                 sections += read_input(_unpack(path, scratch, limits), source=str(given))
+            elif path.is_dir() and is_suite_root(path):
+                sections.append(read_suite_input(path, source=str(given)))
             elif path.is_dir():
                 sections += read_input(path, source=str(given))
             else:
-                raise LeaderboardError(f"{given}: not a run directory, a paper root or a tarball of one")
+                raise LeaderboardError(f"{given}: not a run directory, a paper root, a suite root or a tarball of one")
         yield sections
-
-
-def _short(value: Any) -> str:
-    if isinstance(value, str) and len(value) == 64:
-        return value[:12]  # a sha256
-    return json.dumps(value, sort_keys=True) if not isinstance(value, str) else value
-
-
-def describe_difference(field_name: str, first: Mapping[str, Any], second: Mapping[str, Any]) -> str:
-    """``field (a vs b)``, naming the first differing entry of a mapping (``dataset_sha256[p2p_trades.csv]``)."""
-    a, b = first.get(field_name), second.get(field_name)
-    if isinstance(a, dict) and isinstance(b, dict):
-        key = next(k for k in sorted(set(a) | set(b)) if a.get(k) != b.get(k))
-        return f"{field_name}[{key}] ({_short(a.get(key, 'absent'))} vs {_short(b.get(key, 'absent'))})"
-    return f"{field_name} ({_short(a)} vs {_short(b)})"
-
-
-def check_one_task(sections: Sequence[Section]) -> None:
-    """Refuse sections of different tasks: a board ranks the policies of one task.
-
-    Raises
-    ------
-    LeaderboardError
-        One line naming two inputs and their tasks.
-    """
-    first = sections[0]
-    other = next((s for s in sections if s.task != first.task), None)
-    if other is not None:
-        raise LeaderboardError.about(
-            "{a} was evaluated on task {task_a!r} and {b} on task {task_b!r}; a board ranks one task "
-            "({opt_split} writes one board per task and protocol)",
-            a=first.where,
-            task_a=first.task,
-            b=other.where,
-            task_b=other.task,
-        )
-
-
-def check_one_protocol(sections: Sequence[Section]) -> None:
-    """Refuse sections that do not share one protocol apart from their setting.
-
-    Raises
-    ------
-    LeaderboardError
-        One line naming the first differing field and the two inputs.
-    """
-    first = sections[0]
-    for other in sections[1:]:
-        differs = protocol_difference(first.board_protocol, other.board_protocol)
-        if differs is not None:
-            raise LeaderboardError.about(
-                "{a} and {b} were evaluated under different protocols: {difference} differs; a board ranks one "
-                "protocol ({opt_split} writes one board per protocol)",
-                a=first.where,
-                b=other.where,
-                difference=describe_difference(differs, first.board_protocol, other.board_protocol),
-            )
-    settings: dict[str, Section] = {}
-    for section in sections:  # one setting, one reward: caught here only if a run's label hid its switch
-        same = settings.setdefault(section.setting, section)
-        differs = protocol_difference(same.protocol, section.protocol)
-        if differs is not None:
-            raise LeaderboardError(
-                f"{same.where} and {section.where} were evaluated under different protocols: "
-                f"{describe_difference(differs, same.protocol, section.protocol)} differs"
-            )
-
-
-def group_by_protocol(sections: Sequence[Section]) -> dict[str, list[Section]]:
-    """Sections by board id (the protocol without its setting; a task other than solar is part of
-    it), in the order the inputs were given."""
-    groups: dict[str, list[Section]] = {}
-    for section in sections:
-        groups.setdefault(section.board_id, []).append(section)
-    return groups
-
-
-def _rows_text(metrics: pd.DataFrame) -> str:
-    # A paper root's frame holds every setting's columns; those a setting never fills are empty.
-    ordered = metrics.dropna(axis=1, how="all").sort_values(["run_seed", "episode"], kind="stable")
-    return ordered[sorted(ordered.columns)].to_csv(index=False)
-
-
-def merge_by_setting(sections: Sequence[Section]) -> tuple[dict[str, list[Section]], list[str]]:
-    """Sections by setting with every policy once; identical duplicates are dropped with a note.
-
-    Returns
-    -------
-    (dict, list of str)
-        Setting -> its sections (duplicated policies removed from the later ones), and the notes.
-
-    Raises
-    ------
-    LeaderboardError
-        A policy name holds different rollouts in two inputs of one setting.
-    """
-    by_setting: dict[str, list[Section]] = {}
-    owner: dict[tuple[str, str], Section] = {}
-    notes: list[str] = []
-    for section in sections:
-        keep = []
-        for policy, rows in section.metrics.groupby("policy", sort=False):
-            # names are one name whatever their case, as within a run (agents/specs.check_unique)
-            first = owner.get((section.setting, str(policy).lower()))
-            if first is None:
-                owner[(section.setting, str(policy).lower())] = section
-                keep.append(policy)
-                continue
-            other = next(p for p in first.metrics["policy"].unique() if str(p).lower() == str(policy).lower())
-            if other != policy:
-                raise LeaderboardError(
-                    f"policy {policy!r} of {section.source} and {other!r} of {first.source} (setting "
-                    f"{section.setting!r}) differ only in case; a board ranks each name once (rename one)"
-                )
-            earlier = first.metrics[first.metrics["policy"] == policy]
-            if _rows_text(earlier) != _rows_text(rows):
-                raise LeaderboardError(
-                    f"policy {policy!r} of setting {section.setting!r} is in both {first.source} and "
-                    f"{section.source} with different results; a board ranks each name once (rename one)"
-                )
-            notes.append(
-                f"{policy} in {section.setting}: {section.source} repeats {first.source} row for row (kept once)"
-            )
-        if keep:
-            kept = section.metrics[section.metrics["policy"].isin(keep)].reset_index(drop=True)
-            by_setting.setdefault(section.setting, []).append(
-                Section(
-                    section.source,
-                    section.where,
-                    section.setting,
-                    section.protocol,
-                    section.board_protocol,
-                    kept,
-                    section.access,
-                    section.task,
-                )
-            )
-    return by_setting, notes

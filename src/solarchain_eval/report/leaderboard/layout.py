@@ -11,7 +11,7 @@ from dataclasses import dataclass
 
 from ...tasks.base import MetricSpec, PaperReference, paper_reference_of
 from ...tasks.registry import DEFAULT_TASK, get_task
-from .inputs import LeaderboardError
+from .sections import LeaderboardError
 
 #: The ranked metric (of the solar market's board).
 REWARD = "cumulative_reward"

@@ -35,20 +35,14 @@ from ..naming import SETTINGS
 from ..options import LeaderboardOptions
 from ..statistics import Interval, bootstrap_iqm, bootstrap_mean, cluster_bootstrap, sample_size
 from ..table_model import basis_sentence
-from .inputs import (
-    UNKNOWN_ACCESS,
-    LeaderboardError,
-    Section,
-    check_one_protocol,
-    check_one_task,
-    group_by_protocol,
-    merge_by_setting,
-)
+from .grouping import check_one_protocol, check_one_task, group_by_protocol, merge_by_setting
 from .layout import COLUMNS as COLUMNS
 from .layout import REWARD as REWARD
 from .layout import SAFETY_METRICS as SAFETY_METRICS
 from .layout import BoardLayout as BoardLayout
 from .layout import board_layout as board_layout
+from .sections import UNKNOWN_ACCESS, LeaderboardError, Section
+from .suite_inputs import SuiteBoard, SuiteSection
 
 #: ``row_kind`` of measured rows and of the paper's published rows.
 RANKED, REFERENCE = "ranked", "reference"
@@ -202,6 +196,9 @@ class Leaderboard:
     options : LeaderboardOptions
     layout : BoardLayout
         What the board ranks and shows (its task's declarations).
+    suite : SuiteBoard or None
+        A suite board's suite (None for a board of runs and paper roots): its rows rank agents by
+        their suite aggregates (:mod:`.suite_board`), ``board_id`` is the suite protocol id.
     """
 
     board_id: str
@@ -211,6 +208,7 @@ class Leaderboard:
     notes: list[str] = field(default_factory=list)
     options: LeaderboardOptions = field(default_factory=LeaderboardOptions)
     layout: BoardLayout = field(default_factory=board_layout)
+    suite: SuiteBoard | None = None
 
     def frame(self) -> pd.DataFrame:
         """Every row of every section (``leaderboard.csv``)."""
@@ -343,6 +341,9 @@ def build_leaderboard(
     options = options or LeaderboardOptions()
     if not sections:
         raise LeaderboardError("no rows to rank")
+    suite = next((s for s in sections if isinstance(s, SuiteSection)), None)
+    if suite is not None:  # its rows are normalised suite scores: suite_board.build_boards ranks them
+        raise LeaderboardError(f"{suite.where} is a suite root; rank it with suite_board.build_boards")
     check_one_task(sections)
     check_one_protocol(sections)
     layout = board_layout(sections[0].task)

@@ -1,6 +1,7 @@
 """A leaderboard's files: ``leaderboard.csv``, ``leaderboard.md``, the self-contained
 ``leaderboard.html`` (inline CSS and script, the Pareto figure as a PNG data URI, tables sorted by
-clicking a column header) and ``pareto.png``/``pareto.svg``.
+clicking a column header) and ``pareto.png``/``pareto.svg`` (a suite board's: its performance
+profile, ``performance_profile.png``/``.svg``, and the columns of :mod:`.suite_board`).
 
 Rendering is pure: the same board gives byte-identical files.
 """
@@ -9,126 +10,41 @@ from __future__ import annotations
 
 import base64
 import html
-import math
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Sequence
 from typing import Any
 
 import pandas as pd
 
-from ...tasks.base import MetricSpec
 from ...tasks.registry import DEFAULT_TASK
-from ..naming import policy_label, setting_label
-from ..table_model import fixed, pm, with_interval
-from ..task_summary import ARROWS, metric_header
+from ..naming import setting_label
+from ..task_summary import ARROWS
+from .columns import DisplayColumn as DisplayColumn
+from .columns import display_columns as display_columns
+from .columns import missing
+from .columns import shown_policy as shown_policy
 from .pareto import SOLAR_PARETO, ParetoAxes, pareto_figure
-from .ranking import RANKED, REFERENCE, REWARD, BoardLayout, BoardSection, Leaderboard, board_layout
+from .ranking import RANKED, REFERENCE, BoardLayout, BoardSection, Leaderboard
+from .suite_board import PROFILE, suite_display_columns, suite_profile_figure, suite_protocol_lines, suite_reading
 
 #: The Pareto figure's file stem.
 FIGURE = "pareto"
 
 
-@dataclass(frozen=True)
-class DisplayColumn:
-    """A printed column of a board's table.
-
-    Attributes
-    ----------
-    header : str
-    key : str
-        The ``leaderboard.csv`` column the HTML table sorts by.
-    numeric : bool
-        Sort as numbers (empty cells last) or as text.
-    best : str
-        ``"ascending"`` or ``"descending"``: the order a first click sorts in (best first).
-    render : callable
-        Row -> cell text.
-    """
-
-    header: str
-    key: str
-    numeric: bool
-    best: str
-    render: Callable[[dict[str, Any]], str]
+def board_columns(board: Leaderboard) -> list[DisplayColumn]:
+    """The printed columns of ``board``'s tables: a suite board's (:mod:`.suite_board`) or its task's."""
+    return (
+        suite_display_columns(board)
+        if board.suite is not None
+        else display_columns(board.options.confidence, board.layout)
+    )
 
 
-def _missing(value: Any) -> bool:
-    return value is None or (isinstance(value, float) and math.isnan(value))
+def _title(board: Leaderboard) -> str:
+    return "SolarChain-Eval suite leaderboard" if board.suite is not None else "SolarChain-Eval leaderboard"
 
 
-def _reward(digits: int, name: str = REWARD) -> Callable[[dict[str, Any]], str]:
-    def render(row: dict[str, Any]) -> str:
-        mean = row.get(f"{name}_mean")
-        if row["row_kind"] == REFERENCE:  # published rows: mean ± std as the paper prints them
-            std = row.get(f"{name}_std")
-            if _missing(mean):
-                return "–"
-            return pm(mean, std, digits) if not _missing(std) else fixed(mean, digits)
-        return with_interval(mean, row[f"{name}_low"], row[f"{name}_high"], digits)
-
-    return render
-
-
-def _reference_interval(name: str, digits: int) -> Callable[[dict[str, Any]], str]:
-    def render(row: dict[str, Any]) -> str:
-        if row["row_kind"] == REFERENCE or _missing(row.get(name)):
-            return "–"
-        return with_interval(row[name], row[f"{name}_low"], row[f"{name}_high"], digits)
-
-    return render
-
-
-def _number(name: str, digits: int) -> Callable[[dict[str, Any]], str]:
-    return lambda row: "–" if _missing(row.get(name)) else fixed(row[name], digits)
-
-
-def _rank(row: dict[str, Any]) -> str:
-    return "paper" if row["row_kind"] == REFERENCE else str(int(row["rank"]))
-
-
-def shown_policy(layout: BoardLayout, policy: str) -> str:
-    """A policy's name on the board: the report's label, except that a task's own baseline is not
-    marked as a user agent (the report's labels know the solar market's baselines only)."""
-    if layout.paper is None and policy in layout.baselines:
-        return policy
-    return policy_label(policy)
-
-
-#: The order a first click on a metric's header sorts in (best first), by its declared direction.
-_BEST = {"higher": "descending", "lower": "ascending", "none": "ascending"}
-
-
-def _metric_column(layout: BoardLayout, spec: MetricSpec) -> DisplayColumn:
-    """A shown metric's column: the paper's header where it has one, else ``name (unit) arrow``."""
-    key = f"{spec.name}_mean"
-    return DisplayColumn(layout.label(spec) or metric_header(spec), key, True, _BEST[spec.direction], _number(key, 4))
-
-
-def display_columns(confidence: float, layout: BoardLayout | None = None) -> list[DisplayColumn]:
-    """The printed columns of every board table (Markdown and HTML) of ``layout``'s task (default: solar)."""
-    layout = layout or board_layout()
-    level = f"{confidence:.0%}"
-    name = layout.ranked.name
-    ranked = layout.label(layout.ranked) or metric_header(layout.ranked)
-    return [
-        DisplayColumn("Rank", "rank", True, "ascending", _rank),
-        DisplayColumn("Policy", "policy", False, "ascending", lambda r: shown_policy(layout, str(r["policy"]))),
-        DisplayColumn("Access", "access", False, "ascending", lambda r: str(r["access"]) or "–"),
-        DisplayColumn("Source", "source", False, "ascending", lambda r: str(r["source"])),
-        DisplayColumn("Episodes", "episodes", True, "descending", _number("episodes", 0)),
-        DisplayColumn(f"Mean {ranked} [{level} CI]", f"{name}_mean", True, "descending", _reward(2, name)),
-        DisplayColumn(
-            f"IQM {ranked} [{level} CI]", f"{name}_iqm", True, "descending", _reference_interval(f"{name}_iqm", 2)
-        ),
-        DisplayColumn(
-            f"P(> best baseline) [{level} CI]",
-            "p_improvement",
-            True,
-            "descending",
-            _reference_interval("p_improvement", 2),
-        ),
-        *(_metric_column(layout, spec) for spec in layout.shown),
-    ]
+def _id_label(board: Leaderboard) -> str:
+    return "suite protocol id" if board.suite is not None else "protocol id"
 
 
 def _cells(section: BoardSection, columns: Sequence[DisplayColumn]) -> list[tuple[dict[str, Any], list[str]]]:
@@ -137,6 +53,8 @@ def _cells(section: BoardSection, columns: Sequence[DisplayColumn]) -> list[tupl
 
 
 def _protocol_lines(board: Leaderboard) -> list[tuple[str, str]]:
+    if board.suite is not None:
+        return suite_protocol_lines(board)
     protocol = board.protocol
     dataset = ", ".join(f"{name} {digest[:12]}" for name, digest in protocol.get("dataset_sha256", {}).items())
     task = [("Task", board.layout.task)] if board.layout.task != DEFAULT_TASK else []  # solar boards as before
@@ -159,6 +77,8 @@ def _either(names: Sequence[str]) -> str:
 
 
 def _reading(board: Leaderboard) -> list[str]:
+    if board.suite is not None:
+        return suite_reading(board)
     layout = board.layout
     level = f"{board.options.confidence:.0%}"
     words = layout.ranked.name.replace("_", " ")
@@ -186,7 +106,11 @@ def _reading(board: Leaderboard) -> list[str]:
     ]
 
 
-def _section_notes(section: BoardSection, layout: BoardLayout) -> list[str]:
+def _section_notes(section: BoardSection, board: Leaderboard) -> list[str]:
+    layout = board.layout
+    if board.suite is not None:
+        high = board.suite.reference[1]
+        return [f"P(> {high}) compares every policy with {high}, the suite's upper reference (score 1)."]
     notes = []
     if section.best_baseline is None:
         notes.append(
@@ -221,23 +145,50 @@ def pareto_axes(layout: BoardLayout) -> ParetoAxes | None:
     )
 
 
+def board_figure(board: Leaderboard) -> tuple[str, str, str] | None:
+    """The board's figure: (file stem, title, caption), or None when it has none (a suite board's
+    performance profile; else the Pareto figure of :func:`pareto_axes`)."""
+    if board.suite is not None:
+        caption = (
+            "For each threshold τ, the fraction of each policy's normalised scores (every entry and episode) "
+            "above τ; dotted lines mark the reference levels 0 and 1."
+        )
+        return PROFILE, f"suite {board.suite.suite}: performance profile", caption
+    axes = pareto_axes(board.layout)
+    if axes is None:
+        return None
+    if axes is SOLAR_PARETO:
+        caption = (
+            "Mean cumulative reward against mean artificial liquidity per policy and setting, with "
+            "the reward's interval; outlined points joined by the dashed line form the Pareto front (no other "
+            "policy has both more reward and less artificial liquidity)."
+        )
+    else:
+        caption = (
+            f"{axes.y_label} against {axes.x_label} per policy and setting, with the ranked metric's interval; "
+            "outlined points joined by the dashed line form the Pareto front."
+        )
+    return FIGURE, axes.title, caption
+
+
 def render_markdown(board: Leaderboard, figure: bool = True) -> str:
     """``leaderboard.md``: the protocol, the inputs, one table per setting and the figure's link."""
-    columns = display_columns(board.options.confidence, board.layout)
-    axes = pareto_axes(board.layout)
-    lines = ["# SolarChain-Eval leaderboard", ""]
+    columns = board_columns(board)
+    drawn = board_figure(board)
+    lines = [f"# {_title(board)}", ""]
     lines += [f"- {name}: `{value}`" for name, value in _protocol_lines(board)]
     lines += ["", "Inputs:", ""] + [f"- `{source}`" for source in board.sources] + [""]
     lines += [" ".join(_reading(board)), ""]
-    if figure and axes is not None:
-        lines += [f"![{axes.title}, Pareto front highlighted]({FIGURE}.png)", ""]
+    if figure and drawn is not None:
+        stem, title, _ = drawn
+        lines += [f"![{title}{', Pareto front highlighted' if stem == FIGURE else ''}]({stem}.png)", ""]
     for section in board.sections:
-        lines += [f"## {setting_label(section.setting)} (protocol id `{section.protocol_id}`)", ""]
+        lines += [f"## {setting_label(section.setting)} ({_id_label(board)} `{section.protocol_id}`)", ""]
         lines.append("| " + " | ".join(c.header for c in columns) + " |")
         lines.append("|" + "|".join("--:" if c.numeric else ":--" for c in columns) + "|")
         for _, cells in _cells(section, columns):
             lines.append("| " + " | ".join(cell.replace("|", "\\|") for cell in cells) + " |")
-        lines += ["", f"*{section.basis}*", ""] + [f"- {note}" for note in _section_notes(section, board.layout)] + [""]
+        lines += ["", f"*{section.basis}*", ""] + [f"- {note}" for note in _section_notes(section, board)] + [""]
     if board.notes:
         lines += ["## Notes", ""] + [f"- {note}" for note in board.notes] + [""]
     return "\n".join(lines)
@@ -303,8 +254,8 @@ def _escape(value: Any) -> str:
 
 def _sort_value(value: Any, numeric: bool) -> str:
     if numeric:
-        return "" if _missing(value) or value == "" else repr(float(value))
-    return "" if _missing(value) else str(value)
+        return "" if missing(value) or value == "" else repr(float(value))
+    return "" if missing(value) else str(value)
 
 
 def _head(column: DisplayColumn) -> str:
@@ -334,40 +285,31 @@ def _table(section: BoardSection, columns: Sequence[DisplayColumn]) -> str:
 
 def render_html(board: Leaderboard, png: bytes | None) -> str:
     """``leaderboard.html`` as one string: no external resources, so it opens offline from any folder."""
-    columns = display_columns(board.options.confidence, board.layout)
+    columns = board_columns(board)
     protocol = "".join(f"<dt>{_escape(k)}</dt><dd>{_escape(v)}</dd>" for k, v in _protocol_lines(board))
     parts = [
-        "<h1>SolarChain-Eval leaderboard</h1>",
+        f"<h1>{_title(board)}</h1>",
         f'<dl class="protocol">{protocol}</dl>',
         '<p class="meta">Inputs: ' + ", ".join(f"<code>{_escape(s)}</code>" for s in board.sources) + "</p>",
         "".join(f'<p class="meta">{_escape(text)}</p>' for text in _reading(board)),
         '<p class="meta">Click a column header to sort by it (best first); click again to reverse.</p>',
     ]
     for section in board.sections:
-        notes = "".join(f"<li>{_escape(n)}</li>" for n in _section_notes(section, board.layout))
+        notes = "".join(f"<li>{_escape(n)}</li>" for n in _section_notes(section, board))
         parts += [
             f'<h2 id="{_escape(section.setting)}">{_escape(setting_label(section.setting))} '
-            f'<span class="meta">(protocol id <code>{_escape(section.protocol_id)}</code>)</span></h2>',
+            f'<span class="meta">({_id_label(board)} <code>{_escape(section.protocol_id)}</code>)</span></h2>',
             _table(section, columns),
             f'<p class="basis">{_escape(section.basis)}</p><ul class="notes">{notes}</ul>',
         ]
-    axes = pareto_axes(board.layout)
-    if png is not None and axes is not None:
+    drawn = board_figure(board)
+    if png is not None and drawn is not None:
+        stem, title, caption = drawn
         data = base64.b64encode(png).decode("ascii")
-        if axes is SOLAR_PARETO:
-            caption = (
-                "Mean cumulative reward against mean artificial liquidity per policy and setting, with "
-                "the reward's interval; outlined points joined by the dashed line form the Pareto front (no other "
-                "policy has both more reward and less artificial liquidity)."
-            )
-        else:
-            caption = (
-                f"{axes.y_label} against {axes.x_label} per policy and setting, with the ranked metric's interval; "
-                "outlined points joined by the dashed line form the Pareto front."
-            )
+        anchor = "pareto-front" if stem == FIGURE else stem.replace("_", "-")
         parts.append(
-            f'<h2 id="pareto-front">{_escape(axes.title)}</h2>'
-            f'<figure id="pareto"><img src="data:image/png;base64,{data}" alt="{_escape(axes.title)}">'
+            f'<h2 id="{anchor}">{_escape(title)}</h2>'
+            f'<figure id="{stem}"><img src="data:image/png;base64,{data}" alt="{_escape(title)}">'
             f"<figcaption>{html.escape(caption, quote=False)}</figcaption></figure>"
         )
     if board.notes:
@@ -375,18 +317,22 @@ def render_html(board: Leaderboard, png: bytes | None) -> str:
     return (
         '<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
         '<meta name="viewport" content="width=device-width, initial-scale=1">\n<link rel="icon" href="data:,">\n'
-        f"<title>SolarChain-Eval leaderboard {_escape(board.board_id)}</title>\n<style>{CSS}</style>\n</head>\n"
+        f"<title>{_title(board)} {_escape(board.board_id)}</title>\n<style>{CSS}</style>\n</head>\n"
         "<body>\n" + "\n".join(parts) + f"\n<script>{SCRIPT}</script>\n</body>\n</html>\n"
     )
 
 
 def render_files(board: Leaderboard, formats: Sequence[str]) -> dict[str, bytes]:
     """The board's files by name: ``leaderboard.<format>`` for each format, and the Pareto
-    figure (``pareto.png``, ``pareto.svg``) with ``md`` or ``html``."""
+    figure (``pareto.png``, ``pareto.svg``; a suite board's performance profile,
+    ``performance_profile.png``/``.svg``) with ``md`` or ``html``."""
     files: dict[str, bytes] = {}
     figure = None
     axes = pareto_axes(board.layout)
-    if {"md", "html"} & set(formats) and axes is not None:
+    if {"md", "html"} & set(formats) and board.suite is not None:
+        figure = suite_profile_figure(board)
+        files[f"{PROFILE}.png"], files[f"{PROFILE}.svg"] = figure["png"], figure["svg"]
+    elif {"md", "html"} & set(formats) and axes is not None:
         points = pd.concat([s.ranked for s in board.sections], ignore_index=True)
         figure = pareto_figure(points, axes)
         files[f"{FIGURE}.png"], files[f"{FIGURE}.svg"] = figure["png"], figure["svg"]

@@ -3,7 +3,6 @@
 from __future__ import annotations
 
 from collections.abc import Sequence
-from dataclasses import dataclass, field
 from pathlib import Path
 
 from ...common.atomic_files import atomic_write_text
@@ -11,32 +10,21 @@ from ...experiments.layout import REPORT_DIR
 from ...tasks.base import paper_reference_of
 from ...tasks.registry import DEFAULT_TASK
 from ..against_paper.tables import AGAINST_CHOICES, AGAINST_KEYS, against_paper_tables
-from ..loading import ReportData, load_report_data
+from ..loading import load_report_data
 from ..options import FORMATS as FORMATS
 from ..options import ReportDataError, ReportOptions
 from ..options import parse_formats as parse_formats
+from ..outputs import INDEX_FILE as INDEX_FILE
+from ..outputs import MARKDOWN_FILE as MARKDOWN_FILE
+from ..outputs import TABLE_FORMATS as TABLE_FORMATS
+from ..outputs import ReportOutcome as ReportOutcome
+from ..outputs import write_tables as write_tables
+from ..suite_loading import is_suite_root
+from ..suite_report import build_suite_report
 from ..task_summary import NO_PAPER, task_summary_tables
 from .figures import FigureFile, build_figures
 from .html import render_html
-from .tables import ReportTable, Skipped, build_tables, overlap_warning, to_csv, to_latex, to_markdown
-
-TABLE_FORMATS = {"md": to_markdown, "tex": to_latex, "csv": to_csv}
-INDEX_FILE = "index.html"
-MARKDOWN_FILE = "report.md"
-
-
-@dataclass
-class ReportOutcome:
-    """What :func:`build_report` made: output folder, tables and figures (or why not), files, warnings."""
-
-    out_dir: Path
-    data: ReportData
-    tables: list[ReportTable | Skipped]
-    figures: list[FigureFile | Skipped]
-    files: list[Path] = field(default_factory=list)
-    warnings: list[str] = field(default_factory=list)
-    #: The against-paper tables (``build_report(against="paper")``), else empty.
-    against: list[ReportTable | Skipped] = field(default_factory=list)
+from .tables import ReportTable, Skipped, build_tables, overlap_warning, to_markdown
 
 
 def _remove_stale(
@@ -51,16 +39,6 @@ def _remove_stale(
         if isinstance(item, Skipped):
             for ext in ("png", "svg"):
                 (out_dir / "figures" / f"{item.key}.{ext}").unlink(missing_ok=True)
-
-
-def _write_tables(out_dir: Path, tables: Sequence[ReportTable | Skipped], formats: Sequence[str]) -> list[Path]:
-    return [
-        atomic_write_text(out_dir / "tables" / f"{table.key}.{fmt}", TABLE_FORMATS[fmt](table))
-        for table in tables
-        if isinstance(table, ReportTable)
-        for fmt in formats
-        if fmt in TABLE_FORMATS
-    ]
 
 
 def _against_section(outcome: ReportOutcome) -> list[str]:
@@ -110,7 +88,8 @@ def build_report(
     Parameters
     ----------
     root
-        A run directory (``solarchain-eval evaluate --out``) or a paper root.
+        A run directory (``solarchain-eval evaluate --out``), a paper root, or a suite root
+        (``evaluate --suite``: its own tables and figures, :mod:`~solarchain_eval.report.suite_report`).
     out_dir
         Output folder (default ``root/report``).
     formats
@@ -135,6 +114,12 @@ def build_report(
     """
     if against is not None and against not in AGAINST_CHOICES:
         raise ValueError(f"against must be one of {', '.join(AGAINST_CHOICES)}, got {against!r}")
+    if is_suite_root(root):
+        if against is not None:
+            raise ReportDataError(f"{root}: a suite root is checked against no paper (report an entry's run instead)")
+        return build_suite_report(
+            Path(root), out_dir, formats=formats, options=options, figures=figures, allow_unverified=allow_unverified
+        )
     data = load_report_data(Path(root), allow_unverified=allow_unverified)
     out = Path(out_dir) if out_dir is not None else Path(root) / REPORT_DIR
     paper = paper_reference_of(data.task_spec) is not None
@@ -151,10 +136,10 @@ def build_report(
     outcome = ReportOutcome(out_dir=out, data=data, tables=tables, figures=drawn, warnings=[warning] if warning else [])
     outcome.warnings[:0] = [f"UNVERIFIED INPUT: {problem}" for problem in data.unverified]
     outcome.files += [p for f in drawn if isinstance(f, FigureFile) for p in (f.png, f.svg)]
-    outcome.files += _write_tables(out, tables, formats)
+    outcome.files += write_tables(out, tables, formats)
     if against == "paper":
         outcome.against = against_paper_tables(data, options)
-        outcome.files += _write_tables(out, outcome.against, formats)
+        outcome.files += write_tables(out, outcome.against, formats)
     # a table not made this time (skipped, or the against-paper check not asked for) leaves no old file behind
     made = {t.key for t in outcome.against if isinstance(t, ReportTable)}
     _remove_stale(out, [*tables, *(Skipped(k, k, "") for k in AGAINST_KEYS if k not in made)], drawn)

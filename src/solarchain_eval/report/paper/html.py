@@ -51,7 +51,8 @@ def _escape(value: Any) -> str:
     return html.escape(str(value))
 
 
-def _img(figure: FigureFile) -> str:
+def figure_html(figure: FigureFile) -> str:
+    """A written figure as an HTML ``<figure>``: its PNG as a data URI, its title and caption."""
     data = base64.b64encode(Path(figure.png).read_bytes()).decode("ascii")
     css = ' class="wide"' if figure.key in WIDE_FIGURES else ""
     return (
@@ -202,7 +203,7 @@ def render_html(
         _skipped([t for t in tables if isinstance(t, Skipped)], "Tables"),
         _against(against),
         '<h2 id="figures">Figures</h2>',
-        '<div class="figures">' + "".join(_img(f) for f in made_figures) + "</div>",
+        '<div class="figures">' + "".join(figure_html(f) for f in made_figures) + "</div>",
         _skipped([f for f in figures if isinstance(f, Skipped)], "Figures"),
         '<h2 id="provenance">Dataset provenance</h2>',
         _provenance(data),
