@@ -11,6 +11,7 @@ from ..experiments.grid import Unit
 from ..experiments.grid_root import GridError
 from ..experiments.sweep_spec import SweepError, load_sweep
 from ..experiments.units import UnitResult
+from ..tasks.base import steps_per_day_of
 from ..tasks.registry import DEFAULT_TASK, get_task
 from . import app
 from .common import cli_error, console, err_console, invoked_command, register_user_error, reports_errors
@@ -109,7 +110,13 @@ def sweep(
         from ..report.sensitivity import write_sensitivity
 
         results = pd.read_csv(outcome.root / RESULTS_FILE)
-        write_sensitivity(results, sweep_spec.axes, outcome.root / "sensitivity", sweep_spec.spec.bootstrap_resamples)
+        write_sensitivity(
+            results,
+            sweep_spec.axes,
+            outcome.root / "sensitivity",
+            sweep_spec.spec.bootstrap_resamples,
+            steps_per_day=steps_per_day_of(get_task(task)),
+        )
         console.print(f"results: {outcome.root / RESULTS_FILE}; sensitivity: {outcome.root / 'sensitivity'}")
     if outcome.report.failed:
         for r in outcome.report.failed:

@@ -1,8 +1,9 @@
 """The sensitivity report of a sweep: each metric against each axis, and where paper findings flip.
 
-Both tables resample start days (an episode's ``start_hour // 24``) with the cluster bootstrap of
-:mod:`.statistics`: episodes that start on the same day share its weather and attacks, so a day
-is the unit of independent evidence (docs/statistics.md).
+Both tables resample start days (an episode's ``start_hour // steps_per_day``: 24 hours for the
+solar market, 1 for the supply-chain market's days; :func:`~solarchain_eval.tasks.base.steps_per_day_of`)
+with the cluster bootstrap of :mod:`.statistics`: episodes that start on the same day share its
+weather and attacks, so a day is the unit of independent evidence (docs/statistics.md).
 
 - ``sensitivity.csv``: for every axis, axis value, setting, policy and metric, the mean over all
   episodes at that value (pooled over the other axes' values) with its 95 % interval.
@@ -27,9 +28,10 @@ import numpy as np
 import pandas as pd
 
 from ..common.atomic_files import atomic_write_text, atomic_write_with
+from ..tasks.base import DEFAULT_STEPS_PER_DAY
 from ..tasks.registry import DEFAULT_TASK, get_task
 from .naming import is_trained
-from .statistics import Interval, bootstrap_mean, bootstrap_mean_difference
+from .statistics import Interval, bootstrap_mean, bootstrap_mean_difference, start_days
 
 SENSITIVITY_METRICS = (
     "cumulative_reward",
@@ -46,8 +48,8 @@ FINDINGS_FILE = "findings.csv"
 SENSITIVITY_MD = "sensitivity.md"
 
 
-def _days(frame: pd.DataFrame) -> np.ndarray:
-    return (frame["start_hour"].to_numpy() // 24).astype(np.int64)
+def _days(frame: pd.DataFrame, steps_per_day: int) -> np.ndarray:
+    return start_days(frame["start_hour"], steps_per_day)
 
 
 def verdict(interval: Interval) -> str:
@@ -60,13 +62,16 @@ def verdict(interval: Interval) -> str:
     return "unclear"
 
 
-def sensitivity_table(results: pd.DataFrame, axes: Sequence[str], resamples: int = 2000) -> pd.DataFrame:
-    """Mean and cluster-bootstrap interval of each metric per axis value, setting and policy."""
+def sensitivity_table(
+    results: pd.DataFrame, axes: Sequence[str], resamples: int = 2000, *, steps_per_day: int = DEFAULT_STEPS_PER_DAY
+) -> pd.DataFrame:
+    """Mean and cluster-bootstrap interval of each metric per axis value, setting and policy
+    (``steps_per_day``: the task's, whose start days the intervals resample)."""
     metrics = [m for m in SENSITIVITY_METRICS if m in results.columns]
     rows = []
     for axis in axes:
         for (value, setting, policy), group in results.groupby([axis, "setting", "policy"], sort=False):
-            days = _days(group)
+            days = _days(group, steps_per_day)
             for metric in metrics:
                 iv = bootstrap_mean(group[metric].to_numpy(dtype=float), days, n_resamples=resamples)
                 rows.append(
@@ -91,13 +96,17 @@ def _best(frame: pd.DataFrame, policies: Sequence[str]) -> str:
     return str(means.idxmax())
 
 
-def _difference(a: pd.DataFrame, b: pd.DataFrame, metric: str, resamples: int) -> Interval:
+def _difference(a: pd.DataFrame, b: pd.DataFrame, metric: str, resamples: int, steps_per_day: int) -> Interval:
     return bootstrap_mean_difference(
-        a[metric].to_numpy(dtype=float), _days(a), b[metric].to_numpy(dtype=float), _days(b), n_resamples=resamples
+        a[metric].to_numpy(dtype=float),
+        _days(a, steps_per_day),
+        b[metric].to_numpy(dtype=float),
+        _days(b, steps_per_day),
+        n_resamples=resamples,
     )
 
 
-def _point_findings(frame: pd.DataFrame, resamples: int) -> list[dict]:
+def _point_findings(frame: pd.DataFrame, resamples: int, steps_per_day: int) -> list[dict]:
     rows: list[dict] = []
 
     def add(finding: str, detail: str, metric: str, iv: Interval) -> None:
@@ -119,7 +128,9 @@ def _point_findings(frame: pd.DataFrame, resamples: int) -> list[dict]:
     heuristics = sorted(p for p in main["policy"].unique() if p in baselines)
     if learned and heuristics:
         rl, heuristic = _best(main, learned), _best(main, heuristics)
-        iv = _difference(main[main["policy"] == rl], main[main["policy"] == heuristic], "cumulative_reward", resamples)
+        iv = _difference(
+            main[main["policy"] == rl], main[main["policy"] == heuristic], "cumulative_reward", resamples, steps_per_day
+        )
         add("rl_over_heuristics", f"{rl} - {heuristic}", "cumulative_reward", iv)
     no_physics = frame[frame["setting"] == "no_physics"]
     for policy in sorted(set(learned) & set(no_physics["policy"])):
@@ -128,24 +139,28 @@ def _point_findings(frame: pd.DataFrame, resamples: int) -> list[dict]:
             main[main["policy"] == policy],
             "artificial_liquidity_MWh",
             resamples,
+            steps_per_day,
         )
         add("artificial_liquidity_rise", f"{policy}: no_physics - main", "artificial_liquidity_MWh", iv)
     if "episode_cost" in frame.columns:
         for setting, group in frame[frame["policy"] == "ppo-lag"].groupby("setting", sort=False):
             limit = float(group["cost_limit"].iloc[0])
             iv = bootstrap_mean(
-                limit - group["episode_cost"].to_numpy(dtype=float), _days(group), n_resamples=resamples
+                limit - group["episode_cost"].to_numpy(dtype=float), _days(group, steps_per_day), n_resamples=resamples
             )
             add("cost_within_limit", f"ppo-lag ({setting}): D - cost with D = {limit:g}", "episode_cost", iv)
     return rows
 
 
-def findings_table(results: pd.DataFrame, axes: Sequence[str], resamples: int = 2000) -> pd.DataFrame:
-    """The paper's findings re-tested at every point (see the module docstring)."""
+def findings_table(
+    results: pd.DataFrame, axes: Sequence[str], resamples: int = 2000, *, steps_per_day: int = DEFAULT_STEPS_PER_DAY
+) -> pd.DataFrame:
+    """The paper's findings re-tested at every point (see the module docstring; ``steps_per_day``:
+    the task's, whose start days the intervals resample)."""
     rows = []
     for point, frame in results.groupby("point", sort=False):
         values = {axis: frame[axis].iloc[0] for axis in axes}
-        for row in _point_findings(frame, resamples):
+        for row in _point_findings(frame, resamples, steps_per_day):
             rows.append({"point": point, **values, **row})
     return pd.DataFrame(rows)
 
@@ -161,11 +176,19 @@ def _markdown(frame: pd.DataFrame, digits: int = 4) -> str:
     return header + "\n".join(lines) + "\n"
 
 
-def write_sensitivity(results: pd.DataFrame, axes: Sequence[str], out_dir: Path, resamples: int = 2000) -> dict:
-    """Write ``sensitivity.csv``, ``findings.csv`` and ``sensitivity.md`` into ``out_dir``."""
+def write_sensitivity(
+    results: pd.DataFrame,
+    axes: Sequence[str],
+    out_dir: Path,
+    resamples: int = 2000,
+    *,
+    steps_per_day: int = DEFAULT_STEPS_PER_DAY,
+) -> dict:
+    """Write ``sensitivity.csv``, ``findings.csv`` and ``sensitivity.md`` into ``out_dir``
+    (``steps_per_day``: the sweep's task's, :func:`~solarchain_eval.tasks.base.steps_per_day_of`)."""
     out = Path(out_dir)
-    table = sensitivity_table(results, axes, resamples)
-    findings = findings_table(results, axes, resamples)
+    table = sensitivity_table(results, axes, resamples, steps_per_day=steps_per_day)
+    findings = findings_table(results, axes, resamples, steps_per_day=steps_per_day)
     atomic_write_with(out / SENSITIVITY_FILE, lambda tmp: table.to_csv(tmp, index=False))
     atomic_write_with(out / FINDINGS_FILE, lambda tmp: findings.to_csv(tmp, index=False))
     focus = table[table["metric"].isin(["cumulative_reward", "episode_cost", "artificial_liquidity_MWh"])]

@@ -19,6 +19,7 @@ import numpy as np
 import pandas as pd
 from scipy import stats
 
+from ..tasks.base import DEFAULT_STEPS_PER_DAY
 from .options import DEFAULT_CONFIDENCE as DEFAULT_CONFIDENCE
 from .options import DEFAULT_RESAMPLES as DEFAULT_RESAMPLES
 from .options import DEFAULT_SEED as DEFAULT_SEED
@@ -121,6 +122,14 @@ def sample_size(frame: pd.DataFrame) -> SampleSize:
         episode_seeds=int(frame["episode_seed"].nunique()) if "episode_seed" in frame else 0,
         start_days=int(frame["start_hour"].nunique()) if "start_hour" in frame else 0,
     )
+
+
+def start_days(start_hours: ArrayLike, steps_per_day: int = DEFAULT_STEPS_PER_DAY) -> np.ndarray:
+    """Each episode's start day, ``start_hour // steps_per_day`` (int64): the cluster the bootstrap
+    resamples. ``start_hour`` is the episode's first step; ``steps_per_day`` is the task's
+    (:func:`~solarchain_eval.tasks.base.steps_per_day_of`: 24 for the solar market's hours, 1 for
+    the supply-chain market, whose steps are days)."""
+    return (pd.to_numeric(pd.Series(np.asarray(start_hours))).to_numpy() // int(steps_per_day)).astype(np.int64)
 
 
 @dataclass

@@ -44,6 +44,9 @@ class SupplyChainTask(BenchmarkConfigMethods):
     step_fields: tuple[str, ...] = STEP_FIELDS
     metrics: tuple[MetricSpec, ...] = SUPPLY_METRICS
     observation_names: tuple[str, ...] = OBSERVATION_NAMES
+    #: One step is one day: an episode's ``start_hour`` (its first step) is its start day, the
+    #: report's resampling unit (:func:`~solarchain_eval.tasks.base.steps_per_day_of`).
+    steps_per_day: int = 1
 
     def data_dir(self, data_dir: str | Path | None, config: Any) -> Path:
         if data_dir:

@@ -18,6 +18,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Mapping
 from dataclasses import dataclass
+from numbers import Integral
 from pathlib import Path
 from typing import Any, Protocol, runtime_checkable
 
@@ -197,6 +198,32 @@ def metrics_of(task: Task, dimension: str) -> tuple[MetricSpec, ...]:
     if dimension not in DIMENSIONS:
         raise ValueError(f"unknown dimension {dimension!r} (one of {', '.join(DIMENSIONS)})")
     return tuple(m for m in task.metrics if m.dimension == dimension)
+
+
+#: Steps in one day of a task without a ``steps_per_day`` attribute: the solar market's (one step = one hour).
+DEFAULT_STEPS_PER_DAY = 24
+
+
+def steps_per_day_of(task: Task | None) -> int:
+    """How many of the task's steps make one day (its optional ``steps_per_day`` attribute).
+
+    The report clusters episodes by start day, ``start_hour // steps_per_day`` (``start_hour`` is
+    the episode's first step, counted from the dataset's first): 24 for the solar market and any
+    task without the attribute (one step = one hour), 1 for the supply-chain market (one step = one
+    day). ``None`` (a run that records no task) is the solar market.
+
+    Raises
+    ------
+    ValueError
+        The attribute is not a positive integer.
+    """
+    value = getattr(task, "steps_per_day", None) if task is not None else None
+    if value is None:
+        return DEFAULT_STEPS_PER_DAY
+    if isinstance(value, bool) or not isinstance(value, Integral) or int(value) < 1:
+        name = getattr(task, "name", type(task).__name__)
+        raise ValueError(f"task {name!r}: steps_per_day must be a positive integer, got {value!r}")
+    return int(value)
 
 
 # --- the report's and the leaderboard's concern: a task's paper reference (optional attributes) ---

@@ -8,7 +8,9 @@ precision, recall and false-alarm rate; the per-step and per-revision effects of
 (final vs ā: Δcost, Δreward, Δartificial liquidity, the last read from the outcome a market's
 governance view names, :func:`~solarchain_eval.tasks.governance_view.harm_outcome_of`); the shares of revisions that lowered cost
 and of harmful ones (cost not lowered, reward lost). Intervals are cluster-bootstrap intervals
-over start days (:func:`~solarchain_eval.report.statistics.cluster_bootstrap`).
+over start days (:func:`~solarchain_eval.report.statistics.cluster_bootstrap`), a start day being
+``start_hour // steps_per_day`` with the market's steps per day (24 hours for the solar market, 1
+for the supply-chain market's days).
 """
 
 from __future__ import annotations
@@ -21,8 +23,9 @@ import pandas as pd
 from scipy.stats import DegenerateDataWarning
 
 from ...governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ...tasks.base import DEFAULT_STEPS_PER_DAY
 from ...tasks.governance_view import DEFAULT_HARM_OUTCOME
-from ..statistics import DEFAULT_RESAMPLES, DEFAULT_SEED, Interval, cluster_bootstrap
+from ..statistics import DEFAULT_RESAMPLES, DEFAULT_SEED, Interval, cluster_bootstrap, start_days
 
 GROUP_KEYS = ("planner", "auditor", "policy", "setting")
 #: Estimates with an interval (name -> (numerator column, denominator column or None for a mean)).
@@ -46,6 +49,7 @@ def step_frame(
     diagnostics: pd.DataFrame,
     threshold: float = DEFAULT_UNSAFE_THRESHOLD,
     harm_outcome: str = DEFAULT_HARM_OUTCOME,
+    steps_per_day: int = DEFAULT_STEPS_PER_DAY,
 ) -> pd.DataFrame:
     """Per-step indicator and delta columns used by :func:`audit_quality`.
 
@@ -53,7 +57,8 @@ def step_frame(
     ``delta_cost`` / ``delta_reward`` / ``delta_artificial_liquidity`` (final - ā; the last of
     the outcome column suffix ``harm_outcome``, the solar market's ``artificial_liquidity_MWh`` by
     default), the same restricted to revisions (``revision_delta_*``, 0 elsewhere), ``lowered``,
-    ``harmful`` and ``start_day``.
+    ``harmful`` and ``start_day`` (``start_hour // steps_per_day``: the task's steps per day,
+    :func:`~solarchain_eval.tasks.base.steps_per_day_of`; 24 for the solar market's hours).
     """
     d = diagnostics
     out = pd.DataFrame(index=d.index)
@@ -71,7 +76,7 @@ def step_frame(
     out["lowered"] = ((out["delta_cost"] < 0) & (out["revised"] > 0)).astype(float)
     out["harmful"] = ((out["delta_cost"] >= 0) & (out["delta_reward"] < 0) & (out["revised"] > 0)).astype(float)
     out["total_delta_cost"] = d["final_cost"] - d["proposal_cost"]
-    out["start_day"] = pd.to_numeric(d["start_hour"]) // 24
+    out["start_day"] = start_days(d["start_hour"], steps_per_day)
     return out
 
 
@@ -126,11 +131,12 @@ def audit_quality(
     n_resamples: int = DEFAULT_RESAMPLES,
     seed: int = DEFAULT_SEED,
     harm_outcome: str = DEFAULT_HARM_OUTCOME,
+    steps_per_day: int = DEFAULT_STEPS_PER_DAY,
 ) -> pd.DataFrame:
     """One row per group: step counts, confusion matrix and every statistic of
-    :data:`INTERVAL_STATISTICS` as ``name``, ``name_low``, ``name_high`` (``harm_outcome``: see
-    :func:`step_frame`)."""
-    steps = step_frame(diagnostics, threshold, harm_outcome)
+    :data:`INTERVAL_STATISTICS` as ``name``, ``name_low``, ``name_high`` (``harm_outcome`` and
+    ``steps_per_day``: see :func:`step_frame`; the intervals resample start days)."""
+    steps = step_frame(diagnostics, threshold, harm_outcome, steps_per_day)
     keys = [k for k in group_by if k in diagnostics.columns]
     rows = []
     grouped = diagnostics.groupby(keys, sort=True, dropna=False) if keys else [((), diagnostics)]

@@ -6,12 +6,13 @@ from pathlib import Path
 
 import pandas as pd
 
+from ...tasks.base import steps_per_day_of
 from ..figure_style import EXTRA_COLOURS, FigureFile, new_figure, save_figure
 from ..loading import ReportData
 from ..options import ReportOptions
 from ..table_model import Skipped
-from .audit_quality import audit_quality, step_frame
-from .tables import NO_DIAGNOSTICS, harm_outcome
+from .audit_quality import step_frame
+from .tables import NO_DIAGNOSTICS, harm_outcome, report_audit_quality
 
 
 def _label(row: pd.Series | dict) -> str:
@@ -107,15 +108,10 @@ def governance_figures(data: ReportData, options: ReportOptions, out_dir: Path) 
     keys = (("governance_precision_recall", "Audit precision vs recall"), ("governance_revision_deltas", "Revisions"))
     if data.diagnostics.empty:
         return [Skipped(key, title, NO_DIAGNOSTICS) for key, title in keys]
-    harm = harm_outcome(data)
-    quality = audit_quality(
-        data.diagnostics,
-        group_by=("planner", "auditor"),
-        n_resamples=options.n_resamples,
-        seed=options.seed,
-        harm_outcome=harm,
+    quality = report_audit_quality(data, options, group_by=("planner", "auditor"))
+    steps = step_frame(
+        data.diagnostics, harm_outcome=harm_outcome(data), steps_per_day=steps_per_day_of(data.task_spec)
     )
-    steps = step_frame(data.diagnostics, harm_outcome=harm)
     return [precision_recall_figure(quality, out_dir), revision_scatter_figure(steps, data.diagnostics, out_dir)]
 
 

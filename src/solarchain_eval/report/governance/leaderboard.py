@@ -18,6 +18,7 @@ import pandas as pd
 from ...common.atomic_files import atomic_write_csv, atomic_write_text
 from ...experiments.governance import CombinationRun, leaderboard_frames
 from ...governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
+from ...tasks.base import DEFAULT_STEPS_PER_DAY, steps_per_day_of
 from ...tasks.governance_view import DEFAULT_HARM_OUTCOME, governance_view_of, harm_outcome_of
 from ...tasks.registry import get_task
 from ..statistics import DEFAULT_RESAMPLES
@@ -50,6 +51,9 @@ class GovernanceLeaderboard:
     harm_outcome : str
         The diagnostics' outcome suffix behind ``delta_artificial_liquidity_per_step`` (the
         market's, :func:`~solarchain_eval.tasks.governance_view.harm_outcome_of`).
+    steps_per_day : int
+        The market's steps per day (:func:`~solarchain_eval.tasks.base.steps_per_day_of`): the
+        intervals resample start days, ``start_hour // steps_per_day``.
     """
 
     ranked: pd.DataFrame
@@ -58,6 +62,7 @@ class GovernanceLeaderboard:
     threshold: float
     resamples: int
     harm_outcome: str = DEFAULT_HARM_OUTCOME
+    steps_per_day: int = DEFAULT_STEPS_PER_DAY
 
 
 def governance_leaderboard(
@@ -68,7 +73,9 @@ def governance_leaderboard(
     tasks = sorted({run.task for run in runs})
     if len(tasks) > 1:
         raise ValueError(f"a governance leaderboard covers one task; the runs govern {', '.join(tasks)}")
-    harm = harm_outcome_of(governance_view_of(get_task(tasks[0]))) if tasks else DEFAULT_HARM_OUTCOME
+    task = get_task(tasks[0]) if tasks else None
+    harm = harm_outcome_of(governance_view_of(task)) if task is not None else DEFAULT_HARM_OUTCOME
+    per_day = steps_per_day_of(task)
     diagnostics, usage = leaderboard_frames(runs)
     pooled = audit_quality(
         diagnostics,
@@ -76,10 +83,13 @@ def governance_leaderboard(
         group_by=("planner", "auditor", "setting"),
         n_resamples=resamples,
         harm_outcome=harm,
+        steps_per_day=per_day,
     )
     ranked = rank(pooled.merge(usage, on=["planner", "auditor", "setting"], how="left"))
-    by_policy = rank(audit_quality(diagnostics, threshold=threshold, n_resamples=resamples, harm_outcome=harm))
-    return GovernanceLeaderboard(ranked, by_policy, diagnostics, threshold, resamples, harm)
+    by_policy = rank(
+        audit_quality(diagnostics, threshold=threshold, n_resamples=resamples, harm_outcome=harm, steps_per_day=per_day)
+    )
+    return GovernanceLeaderboard(ranked, by_policy, diagnostics, threshold, resamples, harm, per_day)
 
 
 def write_governance_leaderboard(board: GovernanceLeaderboard, out_dir: Path) -> dict[str, Path]:
@@ -96,7 +106,14 @@ def write_governance_leaderboard(board: GovernanceLeaderboard, out_dir: Path) ->
         (LEADERBOARD, board.ranked, "Governance leaderboard", True),
         (BY_POLICY, board.by_policy, "Governance leaderboard per policy", False),
     ):
-        table = quality_table(frame, key=key, title=title, usage=usage_columns, threshold=board.threshold)
+        table = quality_table(
+            frame,
+            key=key,
+            title=title,
+            usage=usage_columns,
+            threshold=board.threshold,
+            harm_outcome=board.harm_outcome,
+        )
         files[f"{key}.csv"] = atomic_write_csv(out / f"{key}.csv", frame)
         files[f"{key}.md"] = atomic_write_text(out / f"{key}.md", to_markdown(table))
     figures = out / "figures"
@@ -106,8 +123,9 @@ def write_governance_leaderboard(board: GovernanceLeaderboard, out_dir: Path) ->
         group_by=("planner", "auditor"),
         n_resamples=board.resamples,
         harm_outcome=board.harm_outcome,
+        steps_per_day=board.steps_per_day,
     )
-    steps = step_frame(board.diagnostics, board.threshold, board.harm_outcome)
+    steps = step_frame(board.diagnostics, board.threshold, board.harm_outcome, board.steps_per_day)
     made = [
         precision_recall_figure(pooled_by_pair, figures),
         revision_scatter_figure(steps, board.diagnostics, figures),

@@ -10,12 +10,13 @@ from __future__ import annotations
 import pandas as pd
 
 from ...governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
-from ...tasks.governance_view import governance_view_of, harm_outcome_of
+from ...tasks.base import steps_per_day_of
+from ...tasks.governance_view import DEFAULT_HARM_OUTCOME, GovernedTask, governance_view_of, harm_outcome_of
 from ..loading import ReportData
 from ..naming import AGENTIC_REWARD_LABELS, policy_label, setting_label
 from ..options import ReportOptions
 from ..table_model import Column, ReportTable, Row, Skipped, fixed, integer, text, with_interval
-from .audit_quality import audit_quality
+from .audit_quality import GROUP_KEYS, audit_quality
 
 NO_DIAGNOSTICS = (
     "the run has no governance_diagnostics.csv: evaluate with --agentic planner_auditor --diagnostics "
@@ -43,8 +44,15 @@ def rank(quality: pd.DataFrame) -> pd.DataFrame:
     return ordered.reset_index(drop=True).assign(rank=lambda f: range(1, len(f) + 1))
 
 
-def quality_columns(frame: pd.DataFrame, usage: bool) -> list[Column]:
-    """Printed columns: identifiers present in ``frame``, rates and effects, LLM usage if asked."""
+def harm_header(harm_outcome: str = DEFAULT_HARM_OUTCOME) -> str:
+    """The header of the ``delta_artificial_liquidity_per_step`` column: ``Δ Art. Liq. / step`` for
+    the solar market's outcome, else ``Δ <outcome> / step`` (the name the market's view declares)."""
+    return "Δ Art. Liq. / step" if harm_outcome == DEFAULT_HARM_OUTCOME else f"Δ {harm_outcome} / step"
+
+
+def quality_columns(frame: pd.DataFrame, usage: bool, harm_outcome: str = DEFAULT_HARM_OUTCOME) -> list[Column]:
+    """Printed columns: identifiers present in ``frame``, rates and effects, LLM usage if asked
+    (``harm_outcome``: the diagnostics' outcome behind the Δartificial-liquidity column, which heads it)."""
     columns = [Column("#", integer("rank"), align="r")] if "rank" in frame.columns else []
     labels = {"planner": "Planner", "auditor": "Auditor", "setting": "Reward", "policy": "Policy"}
     for key, header in labels.items():
@@ -63,7 +71,7 @@ def quality_columns(frame: pd.DataFrame, usage: bool) -> list[Column]:
         Column("False alarms", _plain("false_alarm_rate", 3)),
         Column("Δ Cost / step", _ci("delta_cost_per_step", 4)),
         Column("Δ Reward / step", _ci("delta_reward_per_step", 4)),
-        Column("Δ Art. Liq. / step", _plain("delta_artificial_liquidity_per_step", 5)),
+        Column(harm_header(harm_outcome), _plain("delta_artificial_liquidity_per_step", 5)),
         Column("Δ Cost vs none / step", _plain("total_delta_cost_per_step", 4)),
         Column("Lowered cost", _plain("revisions_lowering_cost", 3)),
         Column("Harmful", _plain("revisions_harmful", 3)),
@@ -78,9 +86,16 @@ def quality_columns(frame: pd.DataFrame, usage: bool) -> list[Column]:
 
 
 def quality_table(
-    quality: pd.DataFrame, *, key: str, title: str, usage: bool = False, threshold: float = DEFAULT_UNSAFE_THRESHOLD
+    quality: pd.DataFrame,
+    *,
+    key: str,
+    title: str,
+    usage: bool = False,
+    threshold: float = DEFAULT_UNSAFE_THRESHOLD,
+    harm_outcome: str = DEFAULT_HARM_OUTCOME,
 ) -> ReportTable:
-    """A :class:`ReportTable` of audit-quality rows (ranked when they carry ``rank``)."""
+    """A :class:`ReportTable` of audit-quality rows (ranked when they carry ``rank``; ``harm_outcome``:
+    see :func:`quality_columns`)."""
     steps, days = int(quality["steps"].sum()), int(quality["start_days"].max()) if len(quality) else 0
     return ReportTable(
         key=key,
@@ -95,7 +110,7 @@ def quality_table(
             "'Lowered cost' and 'Harmful' (cost not lowered, reward lost) are shares of revisions. Brackets are 95 % "
             "cluster-bootstrap intervals over start days."
         ),
-        columns=quality_columns(quality, usage),
+        columns=quality_columns(quality, usage, harm_outcome),
         data=quality,
         basis=f"{steps} governed steps; up to {days} start days per row",
     )
@@ -107,12 +122,34 @@ def harm_outcome(data: ReportData) -> str:
     return harm_outcome_of(governance_view_of(data.task_spec))
 
 
+def has_governance_section(data: ReportData) -> bool:
+    """Whether the report shows the governance section (table and figures, made or skipped): the
+    run has counterfactual diagnostics, or its task has a governance view (then the section says
+    how to record them)."""
+    return not data.diagnostics.empty or isinstance(data.task_spec, GovernedTask)
+
+
+def report_audit_quality(
+    data: ReportData, options: ReportOptions, group_by: tuple[str, ...] = GROUP_KEYS
+) -> pd.DataFrame:
+    """:func:`~solarchain_eval.report.governance.audit_quality.audit_quality` of the run's
+    diagnostics, read the way its task declares them: the harm outcome its governance view names
+    and its steps per day (episodes are clustered by start day, ``start_hour // steps_per_day``)."""
+    return audit_quality(
+        data.diagnostics,
+        group_by=group_by,
+        n_resamples=options.n_resamples,
+        seed=options.seed,
+        harm_outcome=harm_outcome(data),
+        steps_per_day=steps_per_day_of(data.task_spec),
+    )
+
+
 def governance_diagnostics(data: ReportData, options: ReportOptions) -> ReportTable | Skipped:
     """The report's "Governance diagnostics" table: audit quality per planner/auditor, policy, setting."""
     key, title = "governance_diagnostics", "Governance diagnostics: audit quality"
     if data.diagnostics.empty:
         return Skipped(key, title, NO_DIAGNOSTICS)
-    quality = audit_quality(
-        data.diagnostics, n_resamples=options.n_resamples, seed=options.seed, harm_outcome=harm_outcome(data)
+    return quality_table(
+        rank(report_audit_quality(data, options)), key=key, title=title, harm_outcome=harm_outcome(data)
     )
-    return quality_table(rank(quality), key=key, title=title)

@@ -10,6 +10,8 @@ from ...experiments.layout import REPORT_DIR
 from ...tasks.base import paper_reference_of
 from ...tasks.registry import DEFAULT_TASK
 from ..against_paper.tables import AGAINST_CHOICES, AGAINST_KEYS, against_paper_tables
+from ..governance.figures import governance_figures
+from ..governance.tables import governance_diagnostics, has_governance_section
 from ..loading import load_report_data
 from ..options import FORMATS as FORMATS
 from ..options import ReportDataError, ReportOptions
@@ -132,6 +134,9 @@ def build_report(
         tables = [Skipped("paper", "The paper's tables and figures", NO_PAPER.format(task=data.task))]
         tables += task_summary_tables(data, options)
         drawn = []
+        if has_governance_section(data):  # the Planner/Auditor layer's diagnostics are every market's
+            tables.append(governance_diagnostics(data, options))
+            drawn = governance_figures(data, options, out / "figures") if figures else []
     warning = overlap_warning(data.metrics, options.cluster_by)
     outcome = ReportOutcome(out_dir=out, data=data, tables=tables, figures=drawn, warnings=[warning] if warning else [])
     outcome.warnings[:0] = [f"UNVERIFIED INPUT: {problem}" for problem in data.unverified]
