@@ -13,7 +13,7 @@ import pytest
 
 from solarchain_eval.report.loading import ReportData
 from solarchain_eval.report.options import ReportOptions
-from solarchain_eval.report.table_model import ReportTable, Skipped, to_markdown
+from solarchain_eval.report.table_model import ReportTable, Skipped, to_latex, to_markdown
 from solarchain_eval.report.task_contrast import (
     contrast_frame,
     same_episodes,
@@ -153,6 +153,7 @@ def test_tables_mark_intervals_that_exclude_zero_and_skip_what_the_run_lacks(toy
     shortfall = _row(frame, "no_physics − main", "ppo", "shortfall_units")
     cell = f"{shortfall['difference']:.3f} [{shortfall['low']:.3f}, {shortfall['high']:.3f}] *"
     assert "| no_physics − main | ppo | safety | shortfall_units (units) ↓ |" in text and cell in text
+    assert r"no\_physics $-$ main & ppo & safety & shortfall\_units (units) $\downarrow$" in to_latex(ablation)
     steady = _row(frame, "no_physics − main", "steady", "stock_swing")
     assert not steady["excludes_zero"]  # no shift: the interval holds 0 and carries no mark
     assert f"[{steady['low']:.3f}, {steady['high']:.3f}] |" in text
