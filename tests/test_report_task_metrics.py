@@ -138,9 +138,12 @@ def test_a_declared_metric_shows_in_the_report_with_its_unit_and_direction(toy_r
     outcome = build_report(toy_run, formats=("md", "tex", "csv", "html"), options=REPORT_OPTIONS, figures=False)
     keys = [t.key for t in outcome.tables]
     # one line instead of the paper's tables, then one table per template dimension
-    assert keys == ["paper", "task_utility", "task_safety", "task_stability", "task_fairness", "task_auditability"]
+    assert keys[:6] == ["paper", "task_utility", "task_safety", "task_stability", "task_fairness", "task_auditability"]
+    # then one contrast table per declared kind: a run of one setting has no contrast to draw
+    assert keys[6:] == ["task_contrast_ablation", "task_contrast_governance"]
     skipped = {t.key: t.reason for t in outcome.tables if not hasattr(t, "data")}
-    assert set(skipped) == {"paper", "task_fairness", "task_auditability"}
+    assert set(skipped) == {"paper", "task_fairness", "task_auditability", *keys[6:]}
+    assert "the run has main" in skipped["task_contrast_ablation"]
     assert "no paper reference" in skipped["paper"]
     assert "declares no fairness metric" in skipped["task_fairness"]
     utility = (outcome.out_dir / "tables" / "task_utility.md").read_text(encoding="utf-8")

@@ -88,4 +88,15 @@ def test_a_task_from_the_tests_runs_the_paper_grid_smoke_preset(toy, tmp_path):
     assert list(dict.fromkeys(combined["policy"])) == ["steady", "ppo", "sac", "dqn"]
     assert not (out / "combined" / "main" / "city_hour_policy.csv").exists()  # the toy records no extras
     assert "idle_stock_units (units) ↓" in (out / "report" / "tables" / "task_utility.md").read_text(encoding="utf-8")
+    # the ablation the grid ran (no_physics - main), per policy and declared metric, paired on the same episodes
+    contrast = pd.read_csv(out / "report" / "tables" / "task_contrast_ablation.csv")
+    assert set(contrast["comparison"]) == {"no_physics − main"} and contrast["paired"].all()
+    both = pd.concat([combined, pd.read_csv(out / "combined" / "no_physics" / "metrics.csv")])
+    means = both[both["policy"] == "ppo"].groupby("setting")["idle_stock_units"].mean()
+    row = contrast[(contrast["policy"] == "ppo") & (contrast["metric"] == "idle_stock_units")].iloc[0]
+    assert row["difference"] == pytest.approx(means["no_physics"] - means["main"], abs=1e-9)
+    # the toy market has no calendar (every episode starts at hour 0): one cluster gives no interval, said so
+    assert np.isnan(row["low"]) and np.isnan(row["high"]) and not row["excludes_zero"]
+    assert "[n/a, n/a]" in (out / "report" / "tables" / "task_contrast_ablation.md").read_text(encoding="utf-8")
+    assert (out / "report" / "figures" / "task_contrast_safety.png").exists()
     assert get_task("toy-stock") is toy

@@ -206,6 +206,7 @@ _LATEX_SYMBOLS = {
     "↑": r"$\uparrow$",  # a declared metric's direction (report/task_summary.py)
     "↓": r"$\downarrow$",
     "·": r"$\cdot$",
+    "−": r"$-$",  # the minus of a contrast's "treated − base" (report/task_contrast.py)
 }
 
 

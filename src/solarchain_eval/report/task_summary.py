@@ -28,7 +28,8 @@ KEY_PREFIX = "task_"
 #: What the report says in place of the paper's tables and figures for a task without a paper reference.
 NO_PAPER = (
     "the paper's tables and figures are the solar market's; task {task!r} has no paper reference, so the "
-    "report shows its declared metrics by template dimension (tables task_<dimension>)"
+    "report shows its declared metrics by template dimension (tables task_<dimension>) and what each declared "
+    "setting contrast changes in them (tables task_contrast_<kind>)"
 )
 
 

@@ -23,6 +23,7 @@ from ..outputs import ReportOutcome as ReportOutcome
 from ..outputs import write_tables as write_tables
 from ..suite_loading import is_suite_root
 from ..suite_report import build_suite_report
+from ..task_contrast import contrast_frame, task_contrast_figure, task_contrast_tables
 from ..task_summary import NO_PAPER, task_summary_tables
 from .figures import FigureFile, build_figures
 from .html import render_html
@@ -133,10 +134,12 @@ def build_report(
     else:  # the paper's tables read the solar market's columns: one line says so, the task's own tables instead
         tables = [Skipped("paper", "The paper's tables and figures", NO_PAPER.format(task=data.task))]
         tables += task_summary_tables(data, options)
-        drawn = []
+        contrasts = contrast_frame(data, options)  # the declared setting contrasts, shared by tables and figure
+        tables += task_contrast_tables(data, options, contrasts)
+        drawn = [task_contrast_figure(data, options, out / "figures", contrasts)] if figures else []
         if has_governance_section(data):  # the Planner/Auditor layer's diagnostics are every market's
             tables.append(governance_diagnostics(data, options))
-            drawn = governance_figures(data, options, out / "figures") if figures else []
+            drawn += governance_figures(data, options, out / "figures") if figures else []
     warning = overlap_warning(data.metrics, options.cluster_by)
     outcome = ReportOutcome(out_dir=out, data=data, tables=tables, figures=drawn, warnings=[warning] if warning else [])
     outcome.warnings[:0] = [f"UNVERIFIED INPUT: {problem}" for problem in data.unverified]
