@@ -33,6 +33,7 @@ from ..experiments.layout import (
 )
 from ..records_schema import EPISODE_KEYS
 from ..tasks.base import Task, metric_names
+from ..tasks.governance_view import GovernedTask, governance_view_of, harm_outcome_of
 from ..tasks.registry import DEFAULT_TASK, UnknownTaskError, get_task
 from .naming import SETTINGS
 from .options import ReportDataError as ReportDataError
@@ -84,6 +85,17 @@ DIAGNOSTICS_REQUIRED = (
     "final_cost",
     "final_reward",
 )
+
+
+def _diagnostics_required(task: Task) -> tuple[str, ...]:
+    """:data:`DIAGNOSTICS_REQUIRED` plus the task's harm outcome before and after the auditor (the
+    governance tables' Δ column), so a file of other outcome names is refused naming the column."""
+    if not isinstance(task, GovernedTask):
+        return DIAGNOSTICS_REQUIRED
+    harm = harm_outcome_of(governance_view_of(task))
+    return (*DIAGNOSTICS_REQUIRED, f"bounded_{harm}", f"final_{harm}")
+
+
 #: Rollout identity: one row per (setting, policy, run seed, episode).
 ROLLOUT_KEY = ["setting", "policy", "run_seed", "episode"]
 
@@ -327,7 +339,7 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=[*LOG_KEYS, *LLM_CALL_FIELDS])
     # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
     log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
-    diagnostics, diagnostic_paths = read_tables(root, DIAGNOSTICS_FILE, DIAGNOSTICS_REQUIRED, kind)
+    diagnostics, diagnostic_paths = read_tables(root, DIAGNOSTICS_FILE, _diagnostics_required(get_task(task)), kind)
     # Checked after the files parse, so a malformed file gets the message naming its row.
     unverified = verify_report_inputs(root, kind)
     if unverified and not allow_unverified:
