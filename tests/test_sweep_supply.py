@@ -16,9 +16,8 @@ from solarchain_eval.experiments.sweep_spec import SweepDataset, SweepError, dat
 from solarchain_eval.supply.build import build_supply_dataset
 from solarchain_eval.supply.dataset import SUPPLY_DATASET
 from solarchain_eval.supply.files import MANIFEST_FILE, SUPPLY_FILES
-from solarchain_eval.tasks import DatasetBuilder, dataset_of, get_task
+from solarchain_eval.tasks import DatasetBuilder, ScenarioDatasetBuilder, dataset_of, get_task
 from solarchain_eval.tasks.base import episode_cost_fields
-from solarchain_eval.tasks.dataset import ScenarioDatasetBuilder
 
 TINY = """
 grid:
