@@ -130,9 +130,14 @@ def test_the_supply_builder_builds_byte_reproducibly(tmp_path):
     assert rows["spoofed reports"] == "28" and rows["days"].startswith("28 from 2024-02-05")
 
 
-def test_the_solar_sweep_keeps_its_dataset_keys_and_cost_fields():
+def test_the_solar_sweep_keeps_its_dataset_keys_and_cost_fields(tmp_path):
     # Keys of sweep roots made before the builder capability (a changed hash would rebuild them).
     assert dataset_key(SweepDataset()) == "ds-faf5ca2221f2"
     assert dataset_key(SweepDataset(fdia_rate=0.15, fdia_pattern="stealthy")) == "ds-c78800fd450b"
+    sweep = load_sweep(_write(tmp_path, "axes: {fdia_rate: [0.05, 0.15], fdia_pattern: [uniform, stealthy]}\n"))
+    assert sweep.task == "solar" and [p.dataset_key for p in sweep.points][::3] == [
+        "ds-faf5ca2221f2",
+        "ds-c78800fd450b",
+    ]
     assert episode_cost_fields(get_task("solar")) == ("physics_violation_rate", "unsafe_backed_MWh")
     assert episode_cost_fields(get_task("supply-chain")) == ("cost",)
