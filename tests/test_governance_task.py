@@ -72,7 +72,9 @@ def test_governance_runs_the_supply_chain_market_with_its_own_diagnostics_column
     assert json.loads((run / "run_metadata.json").read_text())["task"] == "supply-chain"
     # the report reads the run with its market's names, and refuses a file of other names naming the column
     assert invoke(["report", run, "--out", tmp_path / "report", "--resamples", "100"]).exit_code == 0
-    diagnostics.drop(columns=["final_phantom_fill_volume_units"]).to_csv(run / "governance_diagnostics.csv", index=False)
+    diagnostics.drop(columns=["final_phantom_fill_volume_units"]).to_csv(
+        run / "governance_diagnostics.csv", index=False
+    )
     refused = invoke(["report", run, "--out", tmp_path / "report2"])
     assert refused.exit_code == 2, refused.output
     assert "governance_diagnostics.csv: missing column(s) final_phantom_fill_volume_units" in refused.output

@@ -35,8 +35,8 @@ def sweep(
     task: str = typer.Option(
         DEFAULT_TASK,
         "--task",
-        help="The task every point trains and evaluates on (default: the solar market; another task's points "
-        "take their dataset from dataset.data).",
+        help="The task every point trains and evaluates on (default: the solar market); the dataset section "
+        "and axes are its dataset builder's build parameters.",
     ),
 ) -> None:
     """Run a sweep: every combination of the YAML's axes is one grid of the `paper` runner.
@@ -53,7 +53,7 @@ def sweep(
     flips). Re-running the same command skips every finished unit.
     """
     task = get_task(task).name  # an unknown task is a one-line error before anything else
-    sweep_spec = load_sweep(spec_file)
+    sweep_spec = load_sweep(spec_file, task)
     err_console.print(
         f"sweep {spec_file}: {len(sweep_spec.points)} point(s) over axes {', '.join(sweep_spec.axes) or '(none)'} -> {out}",
         soft_wrap=True,
@@ -110,12 +110,10 @@ def sweep(
         from ..report.sensitivity import write_sensitivity
 
         results = pd.read_csv(outcome.root / RESULTS_FILE)
+        resamples = sweep_spec.spec.bootstrap_resamples
+        steps_per_day = steps_per_day_of(get_task(task))
         write_sensitivity(
-            results,
-            sweep_spec.axes,
-            outcome.root / "sensitivity",
-            sweep_spec.spec.bootstrap_resamples,
-            steps_per_day=steps_per_day_of(get_task(task)),
+            results, sweep_spec.axes, outcome.root / "sensitivity", resamples, task, steps_per_day=steps_per_day
         )
         console.print(f"results: {outcome.root / RESULTS_FILE}; sensitivity: {outcome.root / 'sensitivity'}")
     if outcome.report.failed:

@@ -31,6 +31,8 @@ from ..common.redaction import redact_command
 from ..common.versions import git_commit, package_versions
 from ..evaluation.records import ACTIONS_FILE, METRICS_FILE
 from ..records_schema import EPISODE_COST
+from ..tasks.base import episode_cost_fields
+from ..tasks.dataset import ScenarioDatasetBuilder, dataset_of, has_dataset_builder
 from ..tasks.registry import DEFAULT_TASK, get_task
 from .combine import combine_setting
 from .grid import GridSpec, Unit, plan_units, scoped
@@ -48,7 +50,7 @@ from .grid_root import (
 )
 from .layout import combined_dir
 from .pool import RunReport, run_units
-from .sweep_spec import DATASET, Sweep, SweepDataset, SweepPoint, dataset_cities, fdia_scenario
+from .sweep_spec import DATASET, Sweep, SweepDataset, SweepPoint, build_parameters
 from .units import UnitResult, UnitTask
 from .user_agents import GridPolicies, check_resolved, grid_policies
 
@@ -85,37 +87,30 @@ def _resolve(sweep: Sweep, path: str) -> Path:
     return p if p.is_absolute() else (sweep.source.parent / p)
 
 
-def build_point_dataset(sweep: Sweep, dataset: SweepDataset, out: Path) -> Path:
+def build_point_dataset(
+    sweep: Sweep, dataset: SweepDataset, out: Path, builder: ScenarioDatasetBuilder = DATASET
+) -> Path:
     """Build one point's dataset into ``out`` (skipped when ``out`` holds a complete build).
 
-    The paper's cities use the cached weather file when ``dataset.weather_cache`` is given; any
-    other cities (synthetic or listed) get synthetic weather. The builder is the solar market's
-    (:data:`~.sweep_spec.DATASET`, reached through its task).
+    The build is the task's dataset builder's (:meth:`~solarchain_eval.tasks.dataset.ScenarioDatasetBuilder.build_point`;
+    default: the solar market's, :data:`~.sweep_spec.DATASET`), with ``weather_cache`` relative to
+    the YAML. For the solar market, the paper's cities use the cached weather file when it is given;
+    any other cities (synthetic or listed) get synthetic weather.
+
+    Raises
+    ------
+    GridError
+        A build parameter the builder refuses (one line naming the sweep file).
     """
-    if (out / DATASET.manifest).is_file():
+    if (out / builder.manifest).is_file():
         return out
-    cities = dataset_cities(dataset)
-    cached = dataset.weather_cache is not None and dataset.cities is None
-    weather = DATASET.choose_weather(
-        cities,
-        dataset.start,
-        dataset.end,
-        seed=dataset.seed,
-        timezone=dataset.timezone,
-        weather_cache=_resolve(sweep, dataset.weather_cache) if cached else None,
-        source="synthetic",
-    )
-    DATASET.build(
-        weather,
-        out,
-        cities=cities,
-        seed=dataset.seed,
-        start=dataset.start,
-        end=dataset.end,
-        nodes_per_city=dataset.nodes_per_city,
-        timezone=dataset.timezone,
-        scenario=fdia_scenario(dataset),
-    )
+    parameters = build_parameters(dataset, builder)
+    if parameters.get("weather_cache") is not None:
+        parameters["weather_cache"] = str(_resolve(sweep, parameters["weather_cache"]))
+    try:
+        builder.build_point(out, parameters)
+    except ValueError as error:
+        raise GridError(f"{sweep.source}: dataset: {error}") from None
     return out
 
 
@@ -197,23 +192,23 @@ def _prepare_points(
     task: str = DEFAULT_TASK,
 ) -> list[_PointRun]:
     market = get_task(task)
+    builder = dataset_of(market) if has_dataset_builder(market) else None
     tables: dict[str, dict[str, Any]] = {}
     data_dirs: list[Path] = []
     for point in sweep.points:
         if point.uses_existing_data:
             data_dir = _resolve(sweep, str(point.dataset.data)).resolve()
         else:
-            if task != DEFAULT_TASK:  # the dataset axes are the solar market's build parameters
+            if builder is None:  # the dataset section holds build parameters, and this task builds nothing
                 raise GridError(
-                    f"{sweep.source}: the dataset section builds the solar market's datasets; "
-                    f"a sweep of task {task!r} takes its dataset as dataset.data"
+                    f"{sweep.source}: task {task!r} has no dataset builder; its sweep takes its dataset as dataset.data"
                 )
             data_dir = (root / DATASETS_DIR / point.dataset_key).resolve()
             if str(data_dir) not in tables:
-                fresh = not (data_dir / DATASET.manifest).is_file()
+                fresh = not (data_dir / builder.manifest).is_file()
                 if on_dataset is not None:  # before the build: a large one takes minutes
                     on_dataset(point.dataset_key, fresh)
-                build_point_dataset(sweep, point.dataset, data_dir)
+                build_point_dataset(sweep, point.dataset, data_dir, builder)
         if str(data_dir) not in tables:
             tables[str(data_dir)] = market.provenance(market.load_data(data_dir))
         data_dirs.append(data_dir)
@@ -254,20 +249,25 @@ def run_sweep(
     on_dataset: Callable[[str, bool], None] | None = None,
     command: list[str] | None = None,
     ray_transfer: str = "auto",
-    task: str = DEFAULT_TASK,
+    task: str | None = None,
 ) -> SweepOutcome:
     """Run (or resume) ``sweep`` into ``root``; see the module docstring.
 
-    ``task``: the task every point trains and evaluates on (default: the solar market); another
-    task's points take their dataset from ``dataset.data`` (the dataset axes build the solar
-    market's).
+    ``task``: the task every point trains and evaluates on, the one the sweep was loaded for
+    (``load_sweep(path, task)``; None: that one). Its dataset builder builds the points' datasets
+    (:mod:`~solarchain_eval.tasks.dataset`), and its declarations give the results' columns.
 
     Raises
     ------
     GridError
-        Bad grid arguments, a point whose directory holds a different grid, or ``root`` busy.
+        Bad grid arguments, a task other than the sweep's, a point whose directory holds a
+        different grid, or ``root`` busy.
     """
     started = time.perf_counter()
+    if task is None:
+        task = sweep.task
+    elif task != sweep.task:
+        raise GridError(f"{sweep.source}: loaded for task {sweep.task!r}, run for task {task!r}")
     if workers < 1:
         raise GridError.about("{opt_workers} must be at least 1, got {workers}", workers=workers)
     policies = sweep_policies(sweep)  # user agents named (and built once) before anything is written
@@ -296,7 +296,8 @@ def run_sweep(
             if _finish_point(root, run, done):
                 outcome.complete_points.append(run.point.point_id)
         outcome.all_points = len(outcome.complete_points) == len(runs)
-        results = tidy_results(sweep, root, [r.point for r in runs if r.point.point_id in outcome.complete_points])
+        complete = [r.point for r in runs if r.point.point_id in outcome.complete_points]
+        results = tidy_results(sweep, root, complete, task)
         if not results.empty:
             atomic_write_with(root / RESULTS_FILE, lambda tmp: results.to_csv(tmp, index=False))
             outcome.results_rows = len(results)
@@ -323,20 +324,26 @@ def _finish_point(root: Path, run: _PointRun, done: set[str]) -> bool:
 _EPISODE = ["policy", "setting", "run_seed", "episode"]
 
 
-def tidy_results(sweep: Sweep, root: Path, points: list[SweepPoint]) -> pd.DataFrame:
-    """One row per point x setting x policy x seed x episode: the axes' values, the metrics,
-    and ``episode_cost`` = Σ_t (V_t + A_t) from the per-step records."""
+def tidy_results(sweep: Sweep, root: Path, points: list[SweepPoint], task: str | None = None) -> pd.DataFrame:
+    """One row per point x setting x policy x seed x episode: the axes' values, the task's
+    metrics (``metrics.csv``'s columns, its declarations), and ``episode_cost`` = Σ_t (V_t + A_t),
+    summed from the per-step records' fields the task names
+    (:func:`~solarchain_eval.tasks.base.episode_cost_fields`; no column when it names none).
+    ``task`` None: the sweep's."""
+    fields = episode_cost_fields(get_task(task or sweep.task))
     frames = []
     for point in points:
         for setting in sweep.spec.grid.settings:
             folder = combined_dir(root / POINTS_DIR / point.point_id, setting)
             frame = pd.read_csv(folder / METRICS_FILE)
-            steps = pd.read_csv(
-                folder / ACTIONS_FILE, usecols=[*_EPISODE, "physics_violation_rate", "unsafe_backed_MWh"]
-            )
-            steps[EPISODE_COST] = steps["physics_violation_rate"] + steps["unsafe_backed_MWh"]
-            cost = steps.groupby(_EPISODE, sort=False)[EPISODE_COST].sum().reset_index()
-            frame = frame.merge(cost, on=_EPISODE, how="left", validate="one_to_one")
+            if fields:
+                steps = pd.read_csv(folder / ACTIONS_FILE, usecols=[*_EPISODE, *fields])
+                total = steps[fields[0]]
+                for name in fields[1:]:  # added step by step, in order (the solar results' bytes: V + A)
+                    total = total + steps[name]
+                steps[EPISODE_COST] = total
+                cost = steps.groupby(_EPISODE, sort=False)[EPISODE_COST].sum().reset_index()
+                frame = frame.merge(cost, on=_EPISODE, how="left", validate="one_to_one")
             head = {"point": point.point_id, "cost_limit": point.lagrangian.cost_limit}
             head.update({a: _cell(point.values[a]) for a in sweep.axes})
             frames.append(pd.concat([pd.DataFrame([head] * len(frame)), frame], axis=1))

@@ -4,6 +4,10 @@ A sweep is a base grid (budgets, seeds, settings, policies), a base dataset (an 
 directory, or build parameters), an optional benchmark config, and ``axes``: each axis a list of
 values. The points are the Cartesian product of the axes, in the order the YAML lists them;
 each point is one grid (see :mod:`.sweep`). docs/stress.md#sweep-yaml documents every key.
+
+The dataset section and the dataset axes are the build parameters of the sweep's task's dataset
+builder (:mod:`~solarchain_eval.tasks.dataset`): a key the builder does not read is refused, and a
+key not given takes the builder's default (the solar market's are the schema's own defaults).
 """
 
 from __future__ import annotations
@@ -21,7 +25,7 @@ from pydantic import BaseModel, ConfigDict, Field, ValidationError
 from ..common.errors import OptionsError
 from ..config import BenchmarkConfig, ConfigError, UniqueKeyLoader, config_from_mapping, load_config, read_config_text
 from ..protocol import EPISODE_SEED_RULES, PAPER_SEED
-from ..tasks.dataset import dataset_of
+from ..tasks.dataset import ScenarioDatasetBuilder, dataset_of, has_dataset_builder
 from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.lagrangian import DEFAULT_COST_LIMIT, DEFAULT_MULTIPLIER_LR, LagrangianSettings
 
@@ -121,9 +125,12 @@ class SweepPoint:
 
 @dataclass(frozen=True)
 class Sweep:
+    """A loaded sweep: its file, validated spec, points and the task its datasets are built for."""
+
     source: Path
     spec: SweepFile
     points: tuple[SweepPoint, ...]
+    task: str = DEFAULT_TASK
 
     @property
     def axes(self) -> tuple[str, ...]:
@@ -156,15 +163,52 @@ def dataset_cities(dataset: SweepDataset) -> tuple[Any, ...]:
     return DATASET.cities(dataset.cities)
 
 
-def fdia_scenario(dataset: SweepDataset) -> Any:
+def fdia_scenario(dataset: SweepDataset, builder: ScenarioDatasetBuilder = DATASET) -> Any:
     """The false-data scenario of a point's build (``ValueError``: a knob out of range)."""
-    return DATASET.scenario(dataset.fdia_rate, dataset.fdia_severity, dataset.fdia_pattern, dataset.fdia_burst_hours)
+    return builder.scenario(dataset.fdia_rate, dataset.fdia_severity, dataset.fdia_pattern, dataset.fdia_burst_hours)
 
 
-def dataset_key(dataset: SweepDataset) -> str:
-    """Directory name of a built dataset: a hash of its build parameters."""
-    payload = json.dumps(dataset.model_dump(mode="json"), sort_keys=True)
+def build_parameters(dataset: SweepDataset, builder: ScenarioDatasetBuilder) -> dict[str, Any]:
+    """The values of the builder's build parameters in a point's dataset section."""
+    dump = dataset.model_dump(mode="json")
+    return {key: dump[key] for key in builder.parameters}
+
+
+def dataset_key(dataset: SweepDataset, task: str = DEFAULT_TASK, builder: ScenarioDatasetBuilder | None = None) -> str:
+    """Directory name of a built dataset: a hash of its build parameters.
+
+    The solar market's hash covers the whole section (as it always has: existing sweep roots
+    resume); another task's covers its task name and its builder's parameters.
+    """
+    if task == DEFAULT_TASK or builder is None:
+        payload = json.dumps(dataset.model_dump(mode="json"), sort_keys=True)
+    else:
+        payload = json.dumps({"task": task, **build_parameters(dataset, builder)}, sort_keys=True)
     return "ds-" + hashlib.sha256(payload.encode()).hexdigest()[:12]
+
+
+def _task_builder(task: str) -> ScenarioDatasetBuilder | None:
+    market = get_task(task)
+    return dataset_of(market) if has_dataset_builder(market) else None
+
+
+def _with_builder_defaults(source: Path, payload: dict[str, Any], task: str, builder: ScenarioDatasetBuilder | None):
+    """``payload`` with the task builder's defaults in the dataset section; a key or axis the
+    builder does not read is a :class:`SweepError`."""
+    if task == DEFAULT_TASK or builder is None or not isinstance(payload.get("dataset", {}), dict):
+        return payload  # the solar market's defaults are the schema's; a bad section fails validation
+    section = dict(payload.get("dataset") or {})
+    taken = {"data", *builder.parameters}
+    for key in section:
+        if key not in taken and key in SweepDataset.model_fields:
+            raise SweepError(f"{source}: dataset.{key}: the {task} task's datasets take no {key}")
+    for axis in payload.get("axes") or {}:
+        if axis in DATASET_AXES and axis not in builder.parameters:
+            raise SweepError(f"{source}: axes.{axis}: the {task} task's datasets take no {axis}")
+    d, knobs = builder.defaults, builder.false_data
+    defaults = {"seed": d.seed, "start": d.start, "end": d.end, "fdia_rate": knobs.default_rate}
+    defaults.update(fdia_pattern=knobs.default_pattern, fdia_burst_hours=knobs.default_burst_hours)
+    return {**payload, "dataset": {**defaults, **section}}
 
 
 def _where(item: dict) -> str:
@@ -190,7 +234,13 @@ def _load_yaml(path: Path) -> dict[str, Any]:
 
 
 def _point(
-    source: Path, spec: SweepFile, base: BenchmarkConfig, values: dict[str, Any], where: dict[str, str]
+    source: Path,
+    spec: SweepFile,
+    base: BenchmarkConfig,
+    values: dict[str, Any],
+    where: dict[str, str],
+    task: str = DEFAULT_TASK,
+    builder: ScenarioDatasetBuilder | None = DATASET,
 ) -> SweepPoint:
     data_values = {k: v for k, v in values.items() if k in DATASET_AXES}
     try:
@@ -207,19 +257,24 @@ def _point(
             reward[REWARD_AXES.get(k, k)] = v
     try:
         config = config_from_mapping({**base.model_dump(), "reward": reward}, str(source))
-        dataset_cities(dataset)  # cities that cannot be read or share a node-id prefix
-        fdia_scenario(dataset)
+        if builder is not None and "cities" in builder.parameters:
+            builder.cities(dataset.cities)  # type: ignore[attr-defined]  # cities unreadable or sharing a prefix
+        if builder is not None:
+            fdia_scenario(dataset, builder)
         lag = {**spec.ppo_lag.model_dump(), **{k: v for k, v in values.items() if k in LAGRANGIAN_AXES}}
         lagrangian = LagrangianSettings(float(lag["cost_limit"]), float(lag["multiplier_lr"]))
     except (ConfigError, ValueError, TypeError) as error:
         keys = ", ".join(where[k] for k in values) or "dataset/ppo_lag"
         raise SweepError(f"{source}: {keys}: {error}") from None
-    key = dataset_key(dataset) if dataset.data is None else "given"
+    key = dataset_key(dataset, task, builder) if dataset.data is None else "given"
     return SweepPoint(point_id(values), values, dataset, key, config, lagrangian)
 
 
-def load_sweep(path: str | Path) -> Sweep:
-    """Read and validate a sweep YAML and expand its axes into points.
+def load_sweep(path: str | Path, task: str = DEFAULT_TASK) -> Sweep:
+    """Read and validate a sweep YAML for ``task`` and expand its axes into points.
+
+    The dataset section's defaults and the dataset keys and axes it accepts are those of the
+    task's dataset builder (see the module docstring).
 
     Raises
     ------
@@ -227,7 +282,8 @@ def load_sweep(path: str | Path) -> Sweep:
         One line naming the file and the key at fault.
     """
     source = Path(path)
-    payload = _load_yaml(source)
+    builder = _task_builder(task)
+    payload = _with_builder_defaults(source, _load_yaml(source), task, builder)
     try:
         spec = SweepFile.model_validate(payload)
     except ValidationError as error:
@@ -256,8 +312,8 @@ def load_sweep(path: str | Path) -> Sweep:
     for combo in itertools.product(*(enumerate(spec.axes[a]) for a in names)):
         values = {a: v for a, (_, v) in zip(names, combo, strict=True)}
         where = {a: f"axes.{a}[{i}]" for a, (i, _) in zip(names, combo, strict=True)}
-        points.append(_point(source, spec, base, values, where))
+        points.append(_point(source, spec, base, values, where, task, builder))
     ids = [p.point_id for p in points]
     if len(set(ids)) != len(ids):
         raise SweepError(f"{source}: axes: two points share the directory name {ids[0]!r}; use distinct values")
-    return Sweep(source, spec, tuple(points))
+    return Sweep(source, spec, tuple(points), task)

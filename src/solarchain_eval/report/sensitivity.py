@@ -44,6 +44,17 @@ SENSITIVITY_METRICS = (
     "max_drawdown",
 )
 SENSITIVITY_FILE = "sensitivity.csv"
+
+
+def sensitivity_metrics(task: str = DEFAULT_TASK) -> tuple[str, ...]:
+    """The metrics ``sensitivity.csv`` covers: the solar market's :data:`SENSITIVITY_METRICS`; for
+    another task, the reward, the episode cost and its declared safety and utility metrics."""
+    if task == DEFAULT_TASK:
+        return SENSITIVITY_METRICS
+    declared = [m.name for m in get_task(task).metrics if m.dimension in ("safety", "utility")]
+    return tuple(dict.fromkeys(["cumulative_reward", "episode_cost", *declared]))
+
+
 FINDINGS_FILE = "findings.csv"
 SENSITIVITY_MD = "sensitivity.md"
 
@@ -63,11 +74,16 @@ def verdict(interval: Interval) -> str:
 
 
 def sensitivity_table(
-    results: pd.DataFrame, axes: Sequence[str], resamples: int = 2000, *, steps_per_day: int = DEFAULT_STEPS_PER_DAY
+    results: pd.DataFrame,
+    axes: Sequence[str],
+    resamples: int = 2000,
+    task: str = DEFAULT_TASK,
+    *,
+    steps_per_day: int = DEFAULT_STEPS_PER_DAY,
 ) -> pd.DataFrame:
-    """Mean and cluster-bootstrap interval of each metric per axis value, setting and policy
-    (``steps_per_day``: the task's, whose start days the intervals resample)."""
-    metrics = [m for m in SENSITIVITY_METRICS if m in results.columns]
+    """Mean and cluster-bootstrap interval of each metric (:func:`sensitivity_metrics`) per axis
+    value, setting and policy (``steps_per_day``: the task's, whose start days the intervals resample)."""
+    metrics = [m for m in sensitivity_metrics(task) if m in results.columns]
     rows = []
     for axis in axes:
         for (value, setting, policy), group in results.groupby([axis, "setting", "policy"], sort=False):
@@ -133,7 +149,8 @@ def _point_findings(frame: pd.DataFrame, resamples: int, steps_per_day: int) -> 
         )
         add("rl_over_heuristics", f"{rl} - {heuristic}", "cumulative_reward", iv)
     no_physics = frame[frame["setting"] == "no_physics"]
-    for policy in sorted(set(learned) & set(no_physics["policy"])):
+    rise = sorted(set(learned) & set(no_physics["policy"])) if "artificial_liquidity_MWh" in frame.columns else []
+    for policy in rise:  # the solar market's finding: a task without artificial liquidity has none
         iv = _difference(
             no_physics[no_physics["policy"] == policy],
             main[main["policy"] == policy],
@@ -181,13 +198,15 @@ def write_sensitivity(
     axes: Sequence[str],
     out_dir: Path,
     resamples: int = 2000,
+    task: str = DEFAULT_TASK,
     *,
     steps_per_day: int = DEFAULT_STEPS_PER_DAY,
 ) -> dict:
-    """Write ``sensitivity.csv``, ``findings.csv`` and ``sensitivity.md`` into ``out_dir``
-    (``steps_per_day``: the sweep's task's, :func:`~solarchain_eval.tasks.base.steps_per_day_of`)."""
+    """Write ``sensitivity.csv``, ``findings.csv`` and ``sensitivity.md`` into ``out_dir`` (``task``:
+    the sweep's, whose metrics the tables cover; ``steps_per_day``: its steps per day,
+    :func:`~solarchain_eval.tasks.base.steps_per_day_of`)."""
     out = Path(out_dir)
-    table = sensitivity_table(results, axes, resamples, steps_per_day=steps_per_day)
+    table = sensitivity_table(results, axes, resamples, task, steps_per_day=steps_per_day)
     findings = findings_table(results, axes, resamples, steps_per_day=steps_per_day)
     atomic_write_with(out / SENSITIVITY_FILE, lambda tmp: table.to_csv(tmp, index=False))
     atomic_write_with(out / FINDINGS_FILE, lambda tmp: findings.to_csv(tmp, index=False))

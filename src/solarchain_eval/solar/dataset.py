@@ -42,7 +42,14 @@ from ..data.published import PAPER_WEATHER_SHA256, matches_published
 from ..data.sources import WeatherSource, choose_weather
 from ..data.splits import SPLIT_RULE, SPLITS
 from ..data.weather_files import FileWeather, etc_zone, parse_weather_file_spec, read_weather_file, weather_from_files
-from ..tasks.dataset import BuildDefaults, BuildProgress, FalseDataKnobs, FamilyMember, SplitSummary
+from ..tasks.dataset import (
+    SCENARIO_PARAMETERS,
+    BuildDefaults,
+    BuildProgress,
+    FalseDataKnobs,
+    FamilyMember,
+    SplitSummary,
+)
 
 #: The solar market's build defaults: the paper's seed, April 2026, Asia/Shanghai, ten nodes per city.
 SOLAR_BUILD_DEFAULTS = BuildDefaults(DEFAULT_SEED, DEFAULT_START, DEFAULT_END, DEFAULT_TIMEZONE, DEFAULT_NODES_PER_CITY)
@@ -66,6 +73,8 @@ class SolarDataset:
     families: tuple[str, ...] = (TMY_FAMILY,)
     #: The paper's five cities (the default of a build that names none).
     default_cities: tuple[City, ...] = PAPER_CITIES
+    #: What :meth:`build_point` reads: the scenario's parameters, the cities and their weather.
+    parameters: tuple[str, ...] = (*SCENARIO_PARAMETERS, "timezone", "nodes_per_city", "cities", "weather_cache")
 
     def cities(self, specs: Sequence[str] | int | None) -> tuple[City, ...]:
         if specs is None:
@@ -136,6 +145,34 @@ class SolarDataset:
             **extra,
         )
         return result.manifest
+
+    def build_point(self, out: Path, parameters: Mapping[str, Any]) -> dict[str, Any]:
+        """A sweep point's build: the paper's cities use the cached weather file when
+        ``weather_cache`` is given; any other cities (synthetic or listed) get synthetic weather."""
+        p = parameters
+        cities = self.cities(p["cities"])
+        cached = p["weather_cache"] is not None and p["cities"] is None
+        weather = self.choose_weather(
+            cities,
+            p["start"],
+            p["end"],
+            seed=p["seed"],
+            timezone=p["timezone"],
+            weather_cache=Path(p["weather_cache"]) if cached else None,
+            source="synthetic",
+        )
+        scenario = self.scenario(p["fdia_rate"], p["fdia_severity"], p["fdia_pattern"], p["fdia_burst_hours"])
+        return self.build(
+            weather,
+            out,
+            cities=cities,
+            seed=p["seed"],
+            start=p["start"],
+            end=p["end"],
+            nodes_per_city=p["nodes_per_city"],
+            timezone=p["timezone"],
+            scenario=scenario,
+        )
 
     def is_published(self, file_sha256: Mapping[str, str]) -> bool:
         return matches_published(file_sha256)

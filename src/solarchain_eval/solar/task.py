@@ -115,6 +115,8 @@ class SolarTask(BenchmarkConfigMethods):
     dataset_manifest: str | None = MANIFEST_FILE
     # --- data, sweep and bench-scale's concern: building and checking datasets (tasks/dataset.py) ---
     dataset: DatasetBuilder | None = SOLAR_DATASET
+    #: The sweep's episode cost, Σ_t (V_t + A_t), from these step fields (tasks/base.py episode_cost_fields).
+    episode_cost_fields: tuple[str, ...] = ("physics_violation_rate", "unsafe_backed_MWh")
 
     def data_dir(self, data_dir: str | Path | None, config: Any) -> Path:
         return resolve_data_dir(data_dir, getattr(config, "data_dir", None))

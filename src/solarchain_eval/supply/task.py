@@ -20,7 +20,9 @@ import numpy as np
 from ..config import BenchmarkConfig
 from ..tasks.base import Lever, MetricSpec
 from ..tasks.benchmark_config import BenchmarkConfigMethods
+from ..tasks.dataset import ScenarioDatasetBuilder
 from .baselines import SUPPLY_BASELINES, make_supply_baseline
+from .dataset import SUPPLY_DATASET
 from .env import OBSERVATION_NAMES, STEP_FIELDS, SupplyChainEnv
 from .governance_view import SupplyGovernanceView
 from .metrics import SUPPLY_METRICS, supply_episode_metrics
@@ -47,6 +49,8 @@ class SupplyChainTask(BenchmarkConfigMethods):
     #: One step is one day: an episode's ``start_hour`` (its first step) is its start day, the
     #: report's resampling unit (:func:`~solarchain_eval.tasks.base.steps_per_day_of`).
     steps_per_day: int = 1
+    # --- sweep's concern: datasets built from a seed, dates and a phantom-stock scenario (tasks/dataset.py)
+    dataset: ScenarioDatasetBuilder | None = SUPPLY_DATASET
 
     def data_dir(self, data_dir: str | Path | None, config: Any) -> Path:
         if data_dir:

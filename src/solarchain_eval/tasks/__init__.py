@@ -6,7 +6,7 @@ and :mod:`solarchain_eval.tasks.dataset` for its optional dataset builder.
 """
 
 from .base import DIMENSIONS, DIRECTIONS, Lever, MetricSpec, Task, metric_names, metrics_of
-from .dataset import DatasetBuilder, NoDatasetBuilderError, dataset_of, has_dataset_builder
+from .dataset import DatasetBuilder, NoDatasetBuilderError, ScenarioDatasetBuilder, dataset_of, has_dataset_builder
 from .governance_view import (
     EpisodeRisk,
     GovernancePrompts,
@@ -35,6 +35,7 @@ __all__ = [
     "MetricSpec",
     "NoDatasetBuilderError",
     "NoGovernanceViewError",
+    "ScenarioDatasetBuilder",
     "Task",
     "UnknownTaskError",
     "dataset_of",

@@ -339,3 +339,20 @@ def training_log_fields(task: Task) -> tuple[TrainLogField, ...]:
     """The task's ``training_log.csv`` columns beyond the return and length (its optional
     ``training_log`` attribute; none without it)."""
     return tuple(getattr(task, "training_log", ()))
+
+
+# --- the sweep's concern: the episode cost a constrained learner bounds (an optional attribute) ---
+
+
+def episode_cost_fields(task: Task) -> tuple[str, ...]:
+    """The step fields whose sum over an episode's steps is its ``episode_cost``, Σ_t (V_t + A_t),
+    the quantity PPO-Lagrangian constrains (the sweep's results carry it).
+
+    The task's optional ``episode_cost_fields`` attribute (the solar market: its violation rate and
+    unsafe-backed energy, added step by step); without it, ``("cost",)`` when the task records a
+    ``cost`` step field, else none (the results then have no ``episode_cost``).
+    """
+    declared = getattr(task, "episode_cost_fields", None)
+    if declared is not None:
+        return tuple(declared)
+    return ("cost",) if "cost" in task.step_fields else ()

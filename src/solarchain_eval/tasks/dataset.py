@@ -1,11 +1,18 @@
 """A task's dataset builder: an optional capability (its ``dataset`` attribute).
 
 ``solarchain-eval data``, ``sweep`` (its dataset axes) and ``bench-scale`` build, check and list
-datasets. They reach a market's dataset pipeline only through the :class:`DatasetBuilder` its task
-supplies as ``task.dataset``, read with :func:`dataset_of`; a task without one has no dataset
-commands (a one-line error). The interface follows the solar market's build: weather for a set of
-cities (or standard weather files), nodes per city, a seeded random stream and a false-data
-scenario (rate, pattern, severity), written as the builder's files and a manifest.
+datasets. They reach a market's dataset pipeline only through the builder its task supplies as
+``task.dataset``, read with :func:`dataset_of`; a task without one has no dataset commands (a
+one-line error). The interface has two layers:
+
+- :class:`ScenarioDatasetBuilder`, what every builder has and all ``sweep`` needs: build
+  parameters (a seed, a date range, and a false-data scenario of rate, pattern and severity) in,
+  a directory of files and a manifest out (:meth:`ScenarioDatasetBuilder.build_point`), byte for
+  byte the same for the same parameters. The supply-chain market's builder is one.
+- :class:`DatasetBuilder`, the full builder that ``data`` and ``bench-scale`` use, which adds what
+  only a weather-driven market has: cities, nodes per city, weather sources and files, named
+  splits and shipped families. The solar market's builder is one. A market without weather does
+  not fake these members; it supplies the smaller protocol.
 
 This module imports nothing from the package beyond the bottom layer, so every wing may use it.
 """
@@ -30,17 +37,17 @@ class BuildDefaults:
         Seed of the build's random stream.
     start, end : str
         First day and the day after the last one (local time), ``YYYY-MM-DD``.
-    timezone : str
-        IANA time zone of the dataset's hours.
-    nodes_per_city : int
-        Producing nodes per city.
+    timezone : str or None
+        IANA time zone of the dataset's hours (None: a builder whose records are whole days).
+    nodes_per_city : int or None
+        Producing nodes per city (None: a builder without cities and nodes).
     """
 
     seed: int
     start: str
     end: str
-    timezone: str
-    nodes_per_city: int
+    timezone: str | None
+    nodes_per_city: int | None
 
 
 @dataclass(frozen=True)
@@ -111,13 +118,13 @@ class FamilyMember:
 #: ``progress(stage, done, total)`` of a build; the ``"generation"`` stage counts nodes.
 BuildProgress = Callable[[str, int, int], None]
 
+#: The build parameters every builder takes (the keys of a sweep's ``dataset`` section and axes).
+SCENARIO_PARAMETERS = ("seed", "start", "end", "fdia_rate", "fdia_pattern", "fdia_severity", "fdia_burst_hours")
+
 
 @runtime_checkable
-class DatasetBuilder(Protocol):
-    """What a task supplies to build, check and list its datasets (see the module docstring).
-
-    Cities, weather and scenarios are the builder's own objects: generic code passes on what the
-    builder returned and reads nothing inside them.
+class ScenarioDatasetBuilder(Protocol):
+    """What every task's dataset builder supplies: a build from parameters (see the module docstring).
 
     Attributes
     ----------
@@ -125,12 +132,49 @@ class DatasetBuilder(Protocol):
         The data files of a dataset directory, beside its manifest (``manifest``).
     manifest : str
         The file written last, which marks a complete build.
-    node_records_file : str
-        The file with one row per node and hour (its rows measure a build's size).
     defaults : BuildDefaults
         The build parameters of a build that gives none.
     false_data : FalseDataKnobs
         The false-data scenario's patterns and defaults.
+    parameters : tuple of str
+        The build parameters :meth:`build_point` reads: :data:`SCENARIO_PARAMETERS` and the
+        builder's own (the solar market's ``cities``, ``nodes_per_city``, ``timezone``,
+        ``weather_cache``). A sweep refuses a dataset key or axis that is not among them.
+    """
+
+    files: tuple[str, ...]
+    manifest: str
+    defaults: BuildDefaults
+    false_data: FalseDataKnobs
+    parameters: tuple[str, ...]
+
+    def scenario(self, rate: float, severity: str | None, pattern: str, burst_hours: int) -> Any:
+        """The false-data scenario (``severity`` ``"LO:HI"`` or None); ``ValueError`` names the bad knob."""
+        ...
+
+    def build_point(self, out: Path, parameters: Mapping[str, Any]) -> dict[str, Any]:
+        """Build the dataset of ``parameters`` (the :attr:`parameters`' values; paths absolute) into
+        ``out``, the manifest written last; returns the manifest. ``ValueError``: a bad value."""
+        ...
+
+    def check(self, data_dir: Path) -> tuple[tuple[str, str], ...]:
+        """Validate the dataset in ``data_dir`` (a one-line error naming the file otherwise);
+        returns its summary as (what, value) rows."""
+        ...
+
+
+@runtime_checkable
+class DatasetBuilder(ScenarioDatasetBuilder, Protocol):
+    """The full builder ``data`` and ``bench-scale`` use: :class:`ScenarioDatasetBuilder` and a
+    weather-driven market's cities, weather, splits and families (see the module docstring).
+
+    Cities, weather and scenarios are the builder's own objects: generic code passes on what the
+    builder returned and reads nothing inside them.
+
+    Attributes
+    ----------
+    node_records_file : str
+        The file with one row per node and hour (its rows measure a build's size).
     weather_sources : tuple of str
         The named weather sources (``data build --weather``).
     downloaded_weather_sources : tuple of str
@@ -143,11 +187,7 @@ class DatasetBuilder(Protocol):
         The shipped dataset families (``data build-family``).
     """
 
-    files: tuple[str, ...]
-    manifest: str
     node_records_file: str
-    defaults: BuildDefaults
-    false_data: FalseDataKnobs
     weather_sources: tuple[str, ...]
     downloaded_weather_sources: tuple[str, ...]
     paper_weather_sha256: str | None
@@ -157,10 +197,6 @@ class DatasetBuilder(Protocol):
     def cities(self, specs: Sequence[str] | int | None) -> tuple[Any, ...]:
         """The cities of a build: None the default ones, a number that many synthetic ones,
         ``NAME:LAT:LON`` strings those cities. ``ValueError``: a bad spec or a shared node-id prefix."""
-        ...
-
-    def scenario(self, rate: float, severity: str | None, pattern: str, burst_hours: int) -> Any:
-        """The false-data scenario (``severity`` ``"LO:HI"`` or None); ``ValueError`` names the bad knob."""
         ...
 
     def choose_weather(self, cities: Sequence[Any], start: str, end: str, **options: Any) -> Any:
@@ -197,11 +233,6 @@ class DatasetBuilder(Protocol):
         """Whether the files' sha256 (name -> digest) are the paper's published dataset's."""
         ...
 
-    def check(self, data_dir: Path) -> tuple[tuple[str, str], ...]:
-        """Validate the dataset in ``data_dir`` (a one-line error naming the file otherwise);
-        returns its summary as (what, value) rows."""
-        ...
-
     def splits(self) -> tuple[SplitSummary, ...]:
         """The named splits, in order."""
         ...
@@ -220,7 +251,9 @@ class NoDatasetBuilderError(OptionsError, ValueError):
 
 
 def dataset_of(task: Any) -> DatasetBuilder:
-    """``task``'s dataset builder (its optional ``dataset`` attribute).
+    """``task``'s dataset builder (its optional ``dataset`` attribute). It may be a
+    :class:`ScenarioDatasetBuilder` only (a market without weather); ``data`` and ``bench-scale``
+    use the solar market's, which is a full :class:`DatasetBuilder`.
 
     Raises
     ------
