@@ -349,8 +349,15 @@ def test_grid_counts_on_the_pages_are_the_plans():
         if phrase not in _flat((ROOT / page).read_text(encoding="utf-8"))
     ]
     assert missing == []
+    # the supply-chain market's grid (docs/tasks/supply_chain_findings.md, docs/performance.md): its own baseline too
+    supply_trains, supply_evals = _units(GridSpec.from_preset("paper", backend="jax", task="supply-chain"))
+    assert len(supply_evals) == e + len(PAPER_SEEDS) * 2  # base-stock in main and no_physics, per seed
     # and no page states another count of the paper grid's units
-    allowed = {"train": {t, tj, sweep_t}, "eval": {e, sweep_e}, "evaluation": {e, sweep_e}}
+    allowed = {
+        "train": {t, tj, sweep_t, len(supply_trains)},
+        "eval": {e, sweep_e, len(supply_evals)},
+        "evaluation": {e, sweep_e, len(supply_evals)},
+    }
     wrong = [
         f"{page.relative_to(ROOT)}: {match.group(0)}"
         for page in [ROOT / "README.md", *sorted(DOCS.rglob("*.md"))]
