@@ -50,6 +50,11 @@ COMMANDS = {
         "18 models, 54 evaluation units in 4 settings) on --workers workers by simulating the grid scheduler.",
     ),
     "bench-scale": ("bench_scale", "Scale benchmark: build, load and step synthetic datasets of growing size."),
+    "bench-suite": (
+        "bench_suite",
+        "Time building every shipped suite's datasets into a fresh cache and evaluating Static, Random "
+        "and Myopic over the held-out suite, each beside a reference on the paper's dataset.",
+    ),
     "bench-agent": (
         "bench_agent",
         "Time evaluating the Static baseline, a Python agent object with the same action, that agent "
