@@ -79,20 +79,46 @@ def single_env_steps_per_s(data_dir: Path | None, steps: int, repeats: int, task
     Actions are drawn up front from a uniform generator so the figure measures the env, not
     ``Box.sample``.
     """
-    market = get_task(task)
-    env = with_make_wrappers(market.make_env(BenchmarkConfig(), task_data(market, data_dir)))
-    actions = uniform_actions(env.action_space, (steps,), 0)
-    samples = []
+    return single_envs_steps_per_s(data_dir, steps, repeats, (task,))[0]
+
+
+def single_envs_steps_per_s(
+    data_dir: Path | None, steps: int, repeats: int, tasks: tuple[str, ...]
+) -> list[Throughput]:
+    """:func:`single_env_steps_per_s` of several tasks in one run, their repeats interleaved.
+
+    Repeat r of every task runs before repeat r + 1 of any, so that a shared machine's load
+    weighs on them alike and the ratio of their medians compares like with like. ``data_dir``
+    is the first task's (the others run on their default datasets).
+    """
+    envs, actions = [], []
+    for index, task in enumerate(tasks):
+        market = get_task(task)
+        env = with_make_wrappers(
+            market.make_env(BenchmarkConfig(), task_data(market, data_dir if index == 0 else None))
+        )
+        envs.append(env)
+        actions.append(uniform_actions(env.action_space, (steps,), 0))
+    samples: list[list[float]] = [[] for _ in tasks]
     for repeat in range(repeats):
-        env.reset(seed=repeat)
-        start = time.perf_counter()
-        for action in actions:
-            _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                env.reset()
-        samples.append(steps / (time.perf_counter() - start))
-    env.close()
-    return Throughput("single env (gym.make, random actions, resets included)", "steps/s", tuple(samples))
+        for env, drawn, out in zip(envs, actions, samples, strict=True):
+            env.reset(seed=repeat)
+            start = time.perf_counter()
+            for action in drawn:
+                _, _, terminated, truncated, _ = env.step(action)
+                if terminated or truncated:
+                    env.reset()
+            out.append(steps / (time.perf_counter() - start))
+    for env in envs:
+        env.close()
+    return [
+        Throughput(
+            "single env (gym.make, random actions, resets included)" + (f", task {task}" if len(tasks) > 1 else ""),
+            "steps/s",
+            tuple(out),
+        )
+        for task, out in zip(tasks, samples, strict=True)
+    ]
 
 
 def vector_env_steps_per_s(
