@@ -173,3 +173,34 @@ def test_an_episode_longer_than_the_dataset_is_refused(supply_table):  # noqa: F
 
     with pytest.raises(ConfigError, match=r"episode_steps = 85 is longer than .*, which has 84 days"):
         SupplyChainEnv(table=supply_table, config=BenchmarkConfig(episode_steps=85))
+
+
+def test_the_single_envs_observation_clips_like_the_vector_envs_at_the_limits(supply_table):  # noqa: F811
+    from solarchain_eval.supply.dynamics import SCALAR
+    from solarchain_eval.supply.inputs import SupplyInputs
+
+    # Warehouses of 100 days of demand put a constant feature beyond the limit, which the single env clips
+    # once up front; the state features are clipped per step, NaN kept.
+    big = dataclasses.replace(supply_table, warehouse_capacity_units=supply_table.demand_mean_units * 100.0)
+    inputs = SupplyInputs(big, BenchmarkConfig())
+    assert inputs.template[:, 9].min() > 10.0
+    scale = inputs.params.scale_units
+    rng = np.random.default_rng(0)
+    regions = len(big.regions)
+    for day in (0, 5, 40):
+        for on_hand, reported, backlog, transit, price in (
+            rng.uniform(-30, 30, 5) * scale,
+            (11 * scale, -11 * scale, 10.5 * scale, 12 * scale, 10.5),  # each state feature beyond a limit
+            (-11 * scale, 11 * scale, -12 * scale, -13 * scale, -12.0),
+            (np.nan, np.inf, -np.inf, 0.5 * scale, np.nan),
+        ):
+            prev = tuple(np.float32(rng.random(3)).tolist())
+            expected = inputs.observe(
+                SCALAR, day, [True] + [False] * (regions - 1), [reported] + [0.0] * (regions - 1),
+                [on_hand] + [0.0] * (regions - 1), [[transit]] + [[]] * (regions - 1),
+                [backlog] + [0.0] * (regions - 1), price, prev,
+            )  # fmt: skip
+            got = inputs.observe_scalar(day, (on_hand, reported, backlog, transit), price, prev)
+            assert got.dtype == np.float32
+            np.testing.assert_array_equal(got, expected)
+    assert np.nanmax(np.abs(got)) == 10.0 and np.isnan(got).sum() == 2

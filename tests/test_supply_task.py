@@ -95,3 +95,17 @@ def test_without_a_directory_the_task_uses_the_default_build_made_once_into_the_
     manifest = json.loads((path / "manifest.json").read_text())
     assert manifest["seed"] == 20260511 and manifest["days"] == 364 and manifest["fdia"]["injected_records"] == 91
     assert task.data_dir(None, BenchmarkConfig()) == path and task.load_data(path).days == 364
+
+
+def test_the_task_gives_its_native_vector_env_which_the_bench_measures(supply_dir, supply_table):  # noqa: F811
+    from solarchain_eval.perf.env_bench import vector_env_steps_per_s
+    from solarchain_eval.supply.vector import SupplyChainVectorEnv
+    from solarchain_eval.tasks.base import make_vector_env
+
+    task = get_task("supply-chain")
+    envs = make_vector_env(task, BenchmarkConfig(), supply_table, 3, action_mode="discrete")
+    assert isinstance(envs, SupplyChainVectorEnv) and envs.num_envs == 3 and envs.single_action_space.n == 125
+    with pytest.raises(ValueError, match="NEXT_STEP only"):
+        make_vector_env(task, BenchmarkConfig(), supply_table, 3, autoreset_mode="SameStep")
+    result = vector_env_steps_per_s(supply_dir, 4, 25, 1, "supply-chain")
+    assert result.name == "vector env, 4 envs (resets included; NEXT_STEP autoreset)" and result.samples[0] > 0

@@ -147,6 +147,14 @@ def test_bench_measures_the_named_tasks_envs(toy_tasks):
     assert result.exit_code == 0, result.output
     assert "single env" in result.output and "vector env, 4 envs" in result.output
     assert "evaluation timing is the solar market's" in result.output
+    # Beside the solar market's single env in the same run, and the ratio of the medians.
+    rows = {
+        line.split("│")[1].strip(): line.split("│")[2].strip() for line in result.output.splitlines()[1:] if "│" in line
+    }
+    toy = float(rows["single env (gym.make, random actions, resets included), task toy-stock"].replace(",", ""))
+    solar = float(rows["single env (gym.make, random actions, resets included), task solar"].replace(",", ""))
+    ratio = rows["ratio single env toy-stock / solar (medians)"]
+    assert ratio.endswith("x") and abs(float(ratio[:-1]) - toy / solar) <= 0.006  # from the rounded medians
 
 
 def test_a_grid_names_its_task_only_when_it_is_not_the_solar_market(toy_tasks):

@@ -52,10 +52,12 @@ def bench(
 ) -> None:
     """Throughput of the single env, the vector env and the evaluation runner.
 
-    Measures (a) one env of --task with gym.make's wrappers and random actions, resets included,
-    (b) its vector env (the solar market's native one) at --num-envs sub-environments, (c) evaluating
-    1,620 baseline episodes with output files (the solar market only). Each figure is repeated;
-    median and best are shown (shared machines are noisy). Measured figures: docs/performance.md.
+    Measures (a) one env of --task with gym.make's wrappers and random actions, resets included
+    (for another task than the solar market, beside the solar market's single env, repeats
+    alternating, and the ratio of the two), (b) its vector env (the solar market's native one) at
+    --num-envs sub-environments, (c) evaluating 1,620 baseline episodes with output files (the
+    solar market only). Each figure is repeated; median and best are shown (shared machines are
+    noisy). Measured figures: docs/performance.md.
     """
     from ..perf import env_bench as measure
 
@@ -75,8 +77,15 @@ def bench(
     if backend == "jax":
         _bench_jax(data_dir, 4096 if num_envs == 1024 else num_envs, calls, episodes, repeats, jax_devices, task)
         return
-    err_console.print("measuring the single env...")
-    results.append((measure.single_env_steps_per_s(data_dir, steps, repeats, task), True))
+    ratio = None
+    if task == DEFAULT_TASK:
+        err_console.print("measuring the single env...")
+        results.append((measure.single_env_steps_per_s(data_dir, steps, repeats, task), True))
+    else:  # beside the solar market's single env, repeats interleaved: the ratio is the same run's
+        err_console.print(f"measuring the single env of {task} and of {DEFAULT_TASK} (alternating)...")
+        pair = measure.single_envs_steps_per_s(data_dir, steps, repeats, (task, DEFAULT_TASK))
+        results += [(result, True) for result in pair]
+        ratio = pair[0].median / pair[1].median
     err_console.print("measuring the vector env...")
     results.append((measure.vector_env_steps_per_s(data_dir, num_envs, calls, repeats, task), True))
     if task != DEFAULT_TASK:
@@ -93,6 +102,8 @@ def bench(
         else:
             median, best = f"{result.median:.2f}", f"{min(result.samples):.2f}"
         table.add_row(result.name, median, best, result.unit)
+        if ratio is not None and result.name.endswith(f"task {DEFAULT_TASK}"):
+            table.add_row(f"ratio single env {task} / {DEFAULT_TASK} (medians)", f"{ratio:.2f}x", "", "")
     console.print(table)
 
 

@@ -79,28 +79,62 @@ def single_env_steps_per_s(data_dir: Path | None, steps: int, repeats: int, task
     Actions are drawn up front from a uniform generator so the figure measures the env, not
     ``Box.sample``.
     """
-    market = get_task(task)
-    env = with_make_wrappers(market.make_env(BenchmarkConfig(), task_data(market, data_dir)))
-    actions = uniform_actions(env.action_space, (steps,), 0)
-    samples = []
+    return single_envs_steps_per_s(data_dir, steps, repeats, (task,))[0]
+
+
+def single_envs_steps_per_s(
+    data_dir: Path | None, steps: int, repeats: int, tasks: tuple[str, ...]
+) -> list[Throughput]:
+    """:func:`single_env_steps_per_s` of several tasks in one run, their repeats interleaved.
+
+    Repeat r of every task runs before repeat r + 1 of any, so that a shared machine's load
+    weighs on them alike and the ratio of their medians compares like with like. ``data_dir``
+    is the first task's (the others run on their default datasets).
+    """
+    envs, actions = [], []
+    for index, task in enumerate(tasks):
+        market = get_task(task)
+        env = with_make_wrappers(
+            market.make_env(BenchmarkConfig(), task_data(market, data_dir if index == 0 else None))
+        )
+        envs.append(env)
+        actions.append(uniform_actions(env.action_space, (steps,), 0))
+    samples: list[list[float]] = [[] for _ in tasks]
     for repeat in range(repeats):
-        env.reset(seed=repeat)
-        start = time.perf_counter()
-        for action in actions:
-            _, _, terminated, truncated, _ = env.step(action)
-            if terminated or truncated:
-                env.reset()
-        samples.append(steps / (time.perf_counter() - start))
-    env.close()
-    return Throughput("single env (gym.make, random actions, resets included)", "steps/s", tuple(samples))
+        for env, drawn, out in zip(envs, actions, samples, strict=True):
+            env.reset(seed=repeat)
+            start = time.perf_counter()
+            for action in drawn:
+                _, _, terminated, truncated, _ = env.step(action)
+                if terminated or truncated:
+                    env.reset()
+            out.append(steps / (time.perf_counter() - start))
+    for env in envs:
+        env.close()
+    return [
+        Throughput(
+            "single env (gym.make, random actions, resets included)" + (f", task {task}" if len(tasks) > 1 else ""),
+            "steps/s",
+            tuple(out),
+        )
+        for task, out in zip(tasks, samples, strict=True)
+    ]
 
 
 def vector_env_steps_per_s(
     data_dir: Path | None, num_envs: int, calls: int, repeats: int, task: str = DEFAULT_TASK
 ) -> Throughput:
-    """The task's vector env (SAME_STEP autoreset): every call is ``num_envs`` transitions."""
+    """The task's vector env (SAME_STEP autoreset): every call is ``num_envs`` transitions.
+
+    A vector env without SAME_STEP (its factory raises ValueError) runs with its default
+    (NEXT_STEP: a call that resets a sub-env is one of its calls all the same), and says so.
+    """
     market = get_task(task)
-    envs = make_vector_env(market, BenchmarkConfig(), task_data(market, data_dir), num_envs, autoreset_mode="SameStep")
+    data, mode = task_data(market, data_dir), ""
+    try:
+        envs = make_vector_env(market, BenchmarkConfig(), data, num_envs, autoreset_mode="SameStep")
+    except ValueError:
+        envs, mode = make_vector_env(market, BenchmarkConfig(), data, num_envs), "; NEXT_STEP autoreset"
     actions = uniform_actions(envs.single_action_space, (8, num_envs), 1)
     envs.reset(seed=0)
     for i in range(25):  # warm-up: one full episode with its autoreset
@@ -112,7 +146,7 @@ def vector_env_steps_per_s(
             envs.step(actions[i % 8])
         samples.append(calls * num_envs / (time.perf_counter() - start))
     envs.close()
-    return Throughput(f"vector env, {num_envs} envs (resets included)", "env-steps/s", tuple(samples))
+    return Throughput(f"vector env, {num_envs} envs (resets included{mode})", "env-steps/s", tuple(samples))
 
 
 def evaluation_seconds(data_dir: Path, repeats: int) -> Throughput:

@@ -11,7 +11,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..market.baselines import RandomPolicy
-from .env import INITIAL_ACTION, OBS
+from .inputs import INITIAL_ACTION, OBS
 
 
 @dataclass

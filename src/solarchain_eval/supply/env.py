@@ -1,15 +1,13 @@
 """The supply-chain Gymnasium environment ``SupplyChainEval-v0`` (docs/tasks/supply_chain.md).
 
 One step is one day; an episode is the config's ``episode_steps`` days from a Monday. The pieces
-both envs share (the action decoding, the observation, the per-step record) are here; the
-dynamics are :func:`~.dynamics.supply_step`, run on Python floats here and on (N,) arrays by
-:class:`~.vector.SupplyChainVectorEnv`.
+the envs share (the action decoding, the observation, the per-step record) are in :mod:`~.inputs`
+(and importable from here); the dynamics are :func:`~.dynamics.supply_step`, run on Python floats
+here and on (N,) arrays by :class:`~.vector.SupplyChainVectorEnv`.
 """
 
 from __future__ import annotations
 
-import datetime as dt
-import itertools
 from pathlib import Path
 from typing import Any
 
@@ -17,256 +15,27 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from ..config import BenchmarkConfig, ConfigError, load_config
-from .dynamics import PRICE_NOISE_STD, SCALAR, SupplyOutcome, SupplyParams, SupplyRewardWeights, supply_step
-from .table import SupplyTable, default_supply_dir, load_supply_table
-
-ENV_ID = "SupplyChainEval-v0"
-OBS_LIMIT = 10.0
-OBSERVATION_NAMES = (
-    "day_of_week_sin",
-    "day_of_week_cos",
-    "on_hand_days",  # true stock on hand, in days of mean network demand
-    "reported_stock_days",  # the day's stock reports (spoofed ones included)
-    "in_transit_days",
-    "orders_days",  # today's retailer orders
-    "backlog_days",
-    "price_index",
-    "capacity_check_rate",  # share of regions whose report exceeds the warehouse capacity
-    "warehouse_capacity_days",
-    "production_capacity_days",
-    "mean_lead_time_weeks",
-    "prev_supplier_incentive",
-    "prev_release_ratio",
-    "prev_demand_damping",
+from ..config import BenchmarkConfig
+from .dynamics import PRICE_NOISE_STD, SCALAR, SupplyOutcome, supply_step
+from .inputs import (  # noqa: F401  (ENV_ID, INITIAL_ACTION, LEVER_NAMES, OBS, STEP_FIELDS, action_grid: re-exported)
+    _INITIAL_PREV,
+    ENV_ID,
+    INITIAL_ACTION,
+    LEVER_NAMES,
+    OBS,
+    OBS_LIMIT,
+    OBSERVATION_NAMES,
+    STEP_FIELDS,
+    SupplyInputs,
+    action_grid,
+    clip_unit,
+    decode_actions,
+    jitter_of,
+    observation_totals,
+    resolve,
+    step_record,
 )
-OBS = {name: i for i, name in enumerate(OBSERVATION_NAMES)}
-_ON_HAND, _REPORTED, _TRANSIT, _BACKLOG, _PRICE = (
-    OBS[n] for n in ("on_hand_days", "reported_stock_days", "in_transit_days", "backlog_days", "price_index")
-)
-_PREV = OBS["prev_supplier_incentive"]
-LEVER_NAMES = ("supplier_incentive", "release_ratio", "demand_damping")
-#: The previous action of an episode's first step (the static baseline's action).
-INITIAL_ACTION = (0.25, 0.75, 0.05)
-#: Per-step quantities in ``info`` (the ``actions.csv`` columns of a run); units in their names.
-STEP_FIELDS = (
-    "reward",
-    "day",
-    "episode_start_day",
-    *LEVER_NAMES,
-    "orders_units",
-    "effective_demand_units",
-    "reported_stock_units",
-    "phantom_stock_units",
-    "feasible_units",
-    "filled_units",
-    "delivered_units",
-    "unsafe_units",
-    "phantom_fill_volume_units",
-    "unmet_units",
-    "backlog_units",
-    "on_hand_units",
-    "in_transit_units",
-    "production_units",
-    "spoiled_units",
-    "violation_rate",
-    "capacity_check_rate",
-    "price_index",
-    "price_drawdown",
-    "action_jitter",
-    "fairness_variance",
-    "cost",
-)
-
-
-#: INITIAL_ACTION as the executed (float32-valued) levers of the single env.
-_INITIAL_PREV = tuple(np.array(INITIAL_ACTION, dtype=np.float32).tolist())
-
-
-def decode_actions(action: Any, action_mode: str, grid: np.ndarray | None) -> np.ndarray:
-    """Executed levers, float32 (..., 3): NaN -> 0, clipped to [0, 1]; a discrete index picks a grid point."""
-    if action_mode == "discrete":
-        return grid[np.asarray(action, dtype=np.int64)]
-    u = np.asarray(action, dtype=np.float32)
-    if u.shape[-1:] != (3,):
-        raise ValueError(f"a continuous action has 3 components, got shape {u.shape}")
-    return np.fmin(np.fmax(u, np.float32(0.0)), np.float32(1.0))  # fmax takes NaN to 0
-
-
-def action_grid(levels: int) -> np.ndarray:
-    """The discrete actions: {0, 1/(levels-1), ..., 1}^3 in ``itertools.product`` order, float32."""
-    values = np.linspace(0.0, 1.0, levels, dtype=np.float32)
-    return np.array(list(itertools.product(values, repeat=3)), dtype=np.float32)
-
-
-class SupplyInputs:
-    """A table's constants as the envs use them (built once per env)."""
-
-    def __init__(self, table: SupplyTable, config: BenchmarkConfig) -> None:
-        if config.episode_steps > table.days:
-            raise ConfigError(
-                f"episode_steps = {config.episode_steps} is longer than {table.source}, which has {table.days} days"
-            )
-        self.table, self.params = table, SupplyParams.from_table(table)
-        self.weights = SupplyRewardWeights.from_config(config)
-        self.steps = config.episode_steps
-        first = dt.date.fromisoformat(table.dates[0])
-        # Episodes start on Mondays with a whole episode after them (every day if there is no Monday).
-        offset = (7 - first.weekday()) % 7
-        last = table.days - self.steps
-        self.starts = np.arange(offset, last + 1, 7) if offset <= last else np.arange(0, last + 1)
-        weekday = (first.weekday() + np.arange(table.days)) % 7
-        self.check_rate = table.capacity_check_rate
-        self.check_rate_list = self.check_rate.tolist()
-        scale = self.params.scale_units
-        # The day's features that do not depend on the state, one row per day; the rest is filled per step.
-        template = np.zeros((table.days, len(OBSERVATION_NAMES)))
-        template[:, OBS["day_of_week_sin"]] = np.sin(2 * np.pi * weekday / 7)
-        template[:, OBS["day_of_week_cos"]] = np.cos(2 * np.pi * weekday / 7)
-        template[:, OBS["orders_days"]] = table.orders_units.sum(axis=1) / scale
-        template[:, OBS["capacity_check_rate"]] = self.check_rate
-        template[:, OBS["warehouse_capacity_days"]] = table.warehouse_capacity_units.sum() / scale
-        template[:, OBS["production_capacity_days"]] = table.production_capacity_units.sum() / scale
-        lead_weeks = float(np.average(table.lead_time_days, weights=table.demand_mean_units)) / 7.0
-        template[:, OBS["mean_lead_time_weeks"]] = lead_weeks
-        template.setflags(write=False)
-        self.template = template
-        self.template_rows = template.tolist()  # the single env assembles its observation in Python
-        # In steady flow every pipeline slot before the lead time carries a day of mean demand. A region
-        # holds only its lead time's slots: production enters the last of them, so later ones stay empty.
-        self.initial_pipeline = tuple(
-            np.full(lead, mean) for lead, mean in zip(self.params.lead_time_days, table.demand_mean_units, strict=True)
-        )
-        self.grid = action_grid(config.discrete_levels) if config.action_mode == "discrete" else None
-        # The day's inputs per region: Python lists for the single env, region-major arrays for gathers.
-        self.orders = table.orders_units.tolist()
-        self.spoofed = table.spoofed.tolist()
-        self.levels = table.reported_level_units.tolist()
-        self.orders_by_region = np.ascontiguousarray(table.orders_units.T)
-        self.spoofed_by_region = np.ascontiguousarray(table.spoofed.T)
-        self.levels_by_region = np.ascontiguousarray(table.reported_level_units.T)
-
-    def observe(
-        self,
-        ops: Any,
-        day: Any,
-        spoofed: list,
-        levels: list,
-        on_hand: list,
-        pipeline: list,
-        backlog: list,
-        price: Any,
-        prev: Any,
-    ) -> np.ndarray:
-        """The observation(s) at the start of ``day`` (an int, or an (N,) array with per-env arrays).
-
-        ``spoofed`` and ``levels`` are the day's reports per region (see :func:`observation_totals`).
-        """
-        on_hand_t, reported_t, backlog_t, transit_t = observation_totals(
-            ops, spoofed, levels, on_hand, pipeline, backlog
-        )
-        scale = self.params.scale_units
-        obs = self.template[day].copy()
-        obs[..., _ON_HAND] = on_hand_t / scale
-        obs[..., _REPORTED] = reported_t / scale
-        obs[..., _BACKLOG] = backlog_t / scale
-        obs[..., _TRANSIT] = transit_t / scale
-        obs[..., _PRICE] = price
-        obs[..., _PREV:] = prev
-        return np.minimum(np.maximum(obs, -OBS_LIMIT), OBS_LIMIT).astype(np.float32)
-
-    def observe_scalar(self, day: int, totals: tuple, price: float, prev: tuple) -> np.ndarray:
-        """:meth:`observe` for one env from its :func:`observation_totals`, assembled on Python floats.
-
-        The same values (float64, clipped, then rounded to float32) without numpy's per-call cost.
-        """
-        on_hand_t, reported_t, backlog_t, transit_t = totals
-        scale = self.params.scale_units
-        row = self.template_rows[day].copy()
-        row[_ON_HAND] = on_hand_t / scale
-        row[_REPORTED] = reported_t / scale
-        row[_BACKLOG] = backlog_t / scale
-        row[_TRANSIT] = transit_t / scale
-        row[_PRICE] = price
-        row[_PREV], row[_PREV + 1], row[_PREV + 2] = prev
-        lo, hi = -OBS_LIMIT, OBS_LIMIT  # np.maximum then np.minimum: NaN stays NaN
-        return np.array([lo if v < lo else (hi if v > hi else v) for v in row], dtype=np.float32)
-
-
-def observation_totals(ops: Any, spoofed: list, levels: list, on_hand: list, pipeline: list, backlog: list) -> tuple:
-    """Network totals the observation shows: (on hand, reported, backlog, in transit) units.
-
-    Summed over regions left to right, the same operations on floats, numpy arrays and JAX values.
-    """
-    on_hand_t = reported_t = backlog_t = transit_t = 0.0
-    for r, stock in enumerate(on_hand):
-        on_hand_t = on_hand_t + stock
-        reported_t = reported_t + ops.where(spoofed[r], levels[r], stock)
-        backlog_t = backlog_t + backlog[r]
-        for slot in pipeline[r]:
-            transit_t = transit_t + slot
-    return on_hand_t, reported_t, backlog_t, transit_t
-
-
-def clip_unit(x: float) -> float:
-    """``np.fmin(np.fmax(x, 0), 1)`` on a Python float: NaN -> 0, -0.0 -> 0.0, ±inf -> 0 or 1."""
-    x = x if x > 0.0 else 0.0
-    return x if x < 1.0 else 1.0
-
-
-def jitter_of(executed: tuple, previous: tuple) -> Any:
-    """|a - a_prev|_1 of float32-valued levers, in float64 (floats or (N,) arrays)."""
-    return abs(executed[0] - previous[0]) + abs(executed[1] - previous[1]) + abs(executed[2] - previous[2])
-
-
-def step_record(
-    out: SupplyOutcome, executed: tuple, day: Any, start: Any, check_rate: Any, jitter: Any, scale: float
-) -> dict:
-    """The :data:`STEP_FIELDS` of one step (floats, or (N,) arrays for the vector env); ``cost`` is the
-    feasibility term V + A (A in days of mean network demand) for safe-RL algorithms."""
-    return {
-        "reward": out.reward,
-        "day": day,
-        "episode_start_day": start,
-        "supplier_incentive": executed[0],
-        "release_ratio": executed[1],
-        "demand_damping": executed[2],
-        "orders_units": out.orders_units,
-        "effective_demand_units": out.effective_demand_units,
-        "reported_stock_units": out.reported_stock_units,
-        "phantom_stock_units": out.phantom_stock_units,
-        "feasible_units": out.feasible_units,
-        "filled_units": out.filled_units,
-        "delivered_units": out.delivered_units,
-        "unsafe_units": out.unsafe_units,
-        "phantom_fill_volume_units": out.phantom_fill_volume_units,
-        "unmet_units": out.unmet_units,
-        "backlog_units": out.unmet_units,
-        "on_hand_units": out.on_hand_total_units,
-        "in_transit_units": out.in_transit_units,
-        "production_units": out.production_units,
-        "spoiled_units": out.spoiled_units,
-        "violation_rate": out.violation_rate,
-        "capacity_check_rate": check_rate,
-        "price_index": out.price_index,
-        "price_drawdown": out.price_drawdown,
-        "action_jitter": jitter,
-        "fairness_variance": out.fairness_variance,
-        "cost": out.violation_rate + out.unsafe_units / scale,
-    }
-
-
-def resolve(
-    data_dir: str | Path | None, config: BenchmarkConfig | str | Path | None, table: SupplyTable | None, **updates: Any
-) -> tuple[BenchmarkConfig, SupplyTable]:
-    """The config (``config`` with the constructor's overrides) and the table an env runs on."""
-    cfg = config if isinstance(config, BenchmarkConfig) else load_config(config) if config else BenchmarkConfig()
-    if updates.get("action_mode") not in (None, "continuous", "discrete"):
-        raise ValueError(f"unknown action_mode {updates['action_mode']!r} (continuous or discrete)")
-    cfg = cfg.with_updates(**updates)
-    if table is None:
-        table = load_supply_table(data_dir or cfg.data_dir or default_supply_dir())
-    return cfg, table
+from .table import SupplyTable
 
 
 class SupplyChainEnv(gym.Env):
@@ -329,13 +98,16 @@ class SupplyChainEnv(gym.Env):
         self._backlog = [0.0] * len(self.regions)
         self._price = self._peak = 1.0
         self._prev = _INITIAL_PREV
-        self._filled = [0.0] * len(self.regions)
-        self._effective = [0.0] * len(self.regions)
+        self._outcomes: list[SupplyOutcome] = []  # this episode's steps, summed when region_totals is read
 
     @property
     def region_totals(self) -> dict[str, tuple[float, float]]:
         """Each region's (filled, effective demand) units this episode."""
-        return {r: (a, b) for r, a, b in zip(self.regions, self._filled, self._effective, strict=True)}
+        filled, effective = [0.0] * len(self.regions), [0.0] * len(self.regions)
+        for out in self._outcomes:  # the steps in order, as a running total would add them
+            filled = [a + b for a, b in zip(filled, out.region_filled_units, strict=True)]
+            effective = [a + b for a, b in zip(effective, out.region_effective_units, strict=True)]
+        return {r: (a, b) for r, a, b in zip(self.regions, filled, effective, strict=True)}
 
     def _observation(self, out: SupplyOutcome | None = None) -> np.ndarray:
         """The observation of the current state; after a step, its totals are the step's ``out``'s."""
@@ -419,19 +191,19 @@ class SupplyChainEnv(gym.Env):
         if not self._open:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
         executed = self._executed(action)
-        day = self._start + self._k
+        k = self._k
+        day = self._start + k
         i = self.inputs
         jitter = jitter_of(executed, self._prev)
         out = self._outcome(executed, jitter)
         self._on_hand, self._pipeline, self._backlog = out.on_hand_units, out.pipeline_units, out.backlog_units
         self._price, self._peak = out.price_index, out.peak_price_index
-        self._filled = [a + b for a, b in zip(self._filled, out.region_filled_units, strict=True)]
-        self._effective = [a + b for a, b in zip(self._effective, out.region_effective_units, strict=True)]
+        self._outcomes.append(out)
         self._prev = executed
-        self._k += 1
-        truncated = self._k >= self.episode_steps
+        self._k = k + 1
+        truncated = k + 1 >= self.episode_steps
         self._open = not truncated
         info = step_record(out, executed, day, self._start, i.check_rate_list[day], jitter, i.params.scale_units)
-        info["step"] = self._k - 1
+        info["step"] = k
         info["region_fill_rates"] = dict(zip(self.regions, out.region_fill_rates, strict=True))
         return self._observation(out), out.reward, False, truncated, info

@@ -29,7 +29,7 @@ from ..records_schema import Column
 from ..tasks.governance_view import Action, EpisodeRisk, GovernancePrompts
 from . import governance_prompts as text
 from .dynamics import SupplyOutcome
-from .env import INITIAL_ACTION, LEVER_NAMES, OBS, OBSERVATION_NAMES, action_grid, decode_actions
+from .inputs import INITIAL_ACTION, LEVER_NAMES, OBS, OBSERVATION_NAMES, action_grid, decode_actions
 
 _F32 = np.float32
 _ON_HAND, _REPORTED, _ORDERS, _BACKLOG = (

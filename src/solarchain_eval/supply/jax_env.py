@@ -2,7 +2,7 @@
 
 The step is :func:`~.dynamics.supply_step` itself, run with :class:`SupplyJaxOps` (a jax.numpy
 back-end next to the dynamics' Python-float and numpy ones), the observation sums the same
-:func:`~.env.observation_totals`, and ``info`` is built by the numpy envs' :func:`~.env.step_record`:
+:func:`~.inputs.observation_totals`, and ``info`` is built by the numpy envs' :func:`~.inputs.step_record`:
 one formula, three back-ends. The day's inputs live in :class:`SupplyEnvParams` as arrays; the
 network's constants, reward weights, action mode and episode length are static fields (changing
 them recompiles).
@@ -26,7 +26,7 @@ from gymnax.environments import environment, spaces
 from ..config import BenchmarkConfig
 from ..envs.jax_env import float_dtype, overwrite_columns
 from .dynamics import PRICE_NOISE_STD, SupplyParams, SupplyRewardWeights, supply_step
-from .env import (
+from .inputs import (
     _BACKLOG,
     _ON_HAND,
     _PREV,
@@ -140,7 +140,7 @@ def make_supply_env_params(
 
 
 def decode_action(action: Any, params: SupplyEnvParams) -> tuple:
-    """Executed (κ, ρ, δ) as three float32 scalars; mirrors :func:`~.env.decode_actions`."""
+    """Executed (κ, ρ, δ) as three float32 scalars; mirrors :func:`~.inputs.decode_actions`."""
     if params.action_mode == "discrete":
         index = jnp.asarray(action).reshape(-1)[0].astype(jnp.int32)
         row = jnp.take(params.grid, index, axis=0, mode="clip")
@@ -154,7 +154,7 @@ class SupplyChainJaxEnv(environment.Environment[SupplyEnvState, SupplyEnvParams]
     """gymnax environment of the supply-chain market: ``episode_steps`` daily decisions per episode.
 
     ``step`` auto-resets after the last day (gymnax convention) and returns ``done`` = True there;
-    episodes truncate, they never terminate. ``info`` holds the numpy env's :data:`~.env.STEP_FIELDS`,
+    episodes truncate, they never terminate. ``info`` holds the numpy env's :data:`~.inputs.STEP_FIELDS`,
     ``step``, ``region_fill_rates`` (R,), ``truncated`` (= ``done``) and ``terminal_obs`` (the
     observation after the step, before any auto-reset).
     """

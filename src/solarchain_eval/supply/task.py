@@ -69,6 +69,30 @@ class SupplyChainTask(BenchmarkConfigMethods):
     ) -> SupplyChainEnv:
         return SupplyChainEnv(config=config, table=data, action_mode=action_mode)
 
+    def make_vector_env(
+        self,
+        config: BenchmarkConfig | None,
+        data: SupplyTable,
+        n_envs: int,
+        *,
+        action_mode: str | None = None,
+        autoreset_mode: str | None = None,
+    ) -> Any:
+        """The native batched env (:class:`~.vector.SupplyChainVectorEnv`).
+
+        Raises
+        ------
+        ValueError
+            ``autoreset_mode`` is not ``"NextStep"`` (the only mode it implements).
+        """
+        from gymnasium.vector import AutoresetMode
+
+        from .vector import SupplyChainVectorEnv
+
+        if autoreset_mode is not None and AutoresetMode(autoreset_mode) != AutoresetMode.NEXT_STEP:
+            raise ValueError(f"the supply-chain vector env autoresets NEXT_STEP only, not {autoreset_mode}")
+        return SupplyChainVectorEnv(n_envs, config=config, table=data, action_mode=action_mode)
+
     def make_jax_env(self, config: BenchmarkConfig | None, data: SupplyTable, *, action_mode: str | None = None) -> Any:
         """The env's JAX twin (a gymnax :class:`~.jax_env.SupplyChainJaxEnv`; its params are ``default_params``).
 

@@ -20,7 +20,7 @@ from gymnasium.vector.utils import batch_space
 
 from ..config import BenchmarkConfig
 from .dynamics import PRICE_NOISE_STD, BatchOps, supply_step
-from .env import (
+from .inputs import (
     INITIAL_ACTION,
     OBS_LIMIT,
     OBSERVATION_NAMES,
@@ -30,14 +30,14 @@ from .env import (
     jitter_of,
     resolve,
 )
-from .env import step_record as _step_record
+from .inputs import step_record as _step_record
 from .table import SupplyTable
 
 
 class SupplyChainVectorEnv(VectorEnv):
     """``num_envs`` supply networks stepped together; the single env's arguments plus ``num_envs``.
 
-    ``info`` maps each of :data:`~.env.STEP_FIELDS` to an (N,) array (with Gymnasium's ``_key``
+    ``info`` maps each of :data:`~.inputs.STEP_FIELDS` to an (N,) array (with Gymnasium's ``_key``
     masks, False for a sub-env that was reset this step).
     """
 
