@@ -275,7 +275,8 @@ def _train_jax_unit(task: UnitTask, log: _UnitLog, on_progress: Callable[[UnitPr
 
 
 def _evaluate_unit(task: UnitTask) -> None:
-    from ..evaluation.runner import EvaluationSpec, run_evaluation
+    from ..evaluation.run_spec import EvaluationSpec
+    from ..evaluation.runner import run_evaluation
 
     unit = task.unit
     # Only another task is named: the evaluation of a solar unit is the one before tasks.

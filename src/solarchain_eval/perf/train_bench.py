@@ -200,7 +200,8 @@ def measured_unit_times(data_dir: Path, steps_per_s: dict[str, float], episodes:
     policy with an untrained model), train overhead = a 1-step training's wall time."""
     import tempfile
 
-    from ..evaluation.runner import EvaluationSpec, run_evaluation
+    from ..evaluation.run_spec import EvaluationSpec
+    from ..evaluation.runner import run_evaluation
     from ..training.sb3_trainer import TrainSpec, train
 
     evals: dict[str, float] = {}
