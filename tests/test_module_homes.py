@@ -1,5 +1,6 @@
 """Names that moved out of a module too long to read keep their old import paths, and each has one
-home: the module that defines it (``runner``, ``verify`` and ``envs.env`` were split by concern)."""
+home: the module that defines it (``runner``, ``verify``, ``envs.env`` and ``sb3_trainer`` were
+split by concern)."""
 
 from __future__ import annotations
 
@@ -37,6 +38,14 @@ MOVED = [
     ("solarchain_eval.envs.env", "setup_market", "solarchain_eval.envs.market_setup"),
     ("solarchain_eval.envs.env", "market_inputs", "solarchain_eval.envs.market_setup"),
     ("solarchain_eval.envs.env", "start_hours", "solarchain_eval.envs.market_setup"),
+    ("solarchain_eval.training.sb3_trainer", "TrainSpec", "solarchain_eval.training.sb3_spec"),
+    ("solarchain_eval.training.sb3_trainer", "TrainOutcome", "solarchain_eval.training.sb3_spec"),
+    ("solarchain_eval.training.sb3_trainer", "hyperparameters", "solarchain_eval.training.sb3_spec"),
+    ("solarchain_eval.training.sb3_trainer", "dqn_learning_starts", "solarchain_eval.training.sb3_spec"),
+    ("solarchain_eval.training.sb3_trainer", "quiet_logger", "solarchain_eval.training.sb3_session"),
+    ("solarchain_eval.training.sb3_trainer", "set_torch_threads", "solarchain_eval.training.sb3_session"),
+    ("solarchain_eval.training.sb3_trainer", "train", "solarchain_eval.training.sb3_trainer"),
+    ("solarchain_eval.training.sb3_trainer", "differences", "solarchain_eval.training.sb3_trainer"),
 ]
 
 
@@ -55,6 +64,10 @@ def test_a_moved_name_is_its_homes_object_under_the_old_path(old, name, home):
         ("solarchain_eval.evaluation.verify", "CANNOT_REBUILD", "cannot rebuild"),
         ("solarchain_eval.evaluation.verify", "DEFAULT_VERIFY_EPISODES", 3),
         ("solarchain_eval.evaluation.verify_outcome", "VERIFIED", "verified"),
+        ("solarchain_eval.training.sb3_trainer", "TRAIN_LOG_FILE", "training_log.csv"),
+        ("solarchain_eval.training.sb3_trainer", "TRAIN_METADATA_FILE", "train_metadata.json"),
+        ("solarchain_eval.training.sb3_trainer", "CHECKPOINT_DIR", "checkpoints"),
+        ("solarchain_eval.training.sb3_trainer", "DEFAULT_CHECKPOINT_EVERY", 25_000),
         ("solarchain_eval.envs.env", "STEP_INFO_KEYS", ("reward", "absolute_hour", "episode_start_hour", "hour")),
     ],
 )
