@@ -18,7 +18,7 @@ from solarchain_eval.cli import app
 from solarchain_eval.cli.common import EXIT_USAGE, reports_errors
 from solarchain_eval.common import errors
 from solarchain_eval.common.errors import OptionsError, SolarChainError
-from solarchain_eval.evaluation.verify import VerifyOptions, _agentic
+from solarchain_eval.evaluation.verify_rebuild import recorded_agentic
 from solarchain_eval.governance.auditor import AUDITOR_KINDS
 from solarchain_eval.governance.controls import TRIGGER_SETS, SchedulerControls
 from solarchain_eval.governance.errors import GovernanceConfigError
@@ -202,7 +202,7 @@ def test_governance_options_raise_the_governance_type(build, message):
 
 def test_verify_reports_a_recorded_unknown_planner_instead_of_raising():
     recorded = SimpleNamespace(agentic={"planner": "wizard", "auditor": "rule"})  # a run's metadata, as far as read
-    reason = _agentic(recorded, VerifyOptions())
+    reason = recorded_agentic(recorded, llm_cache=None)
     assert (
         reason
         == f"the recorded Planner/Auditor options: unknown planner 'wizard' (choose from {', '.join(PLANNER_KINDS)})"

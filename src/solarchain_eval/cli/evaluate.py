@@ -13,8 +13,10 @@ from ..agents.registry import known_policies, parse_agents
 from ..agents.sb3 import parse_models
 from ..agents.specs import LLM_AGENT, parse_agent_args, parse_agent_list, parse_vecnormalize
 from ..config import BenchmarkConfig, load_config
+from ..evaluation.agent_setup import check_agents
+from ..evaluation.run_spec import EvaluationSpec
 from ..evaluation.rundir import RunDirError, check_target
-from ..evaluation.runner import EvaluationSpec, check_agents, run_evaluation
+from ..evaluation.runner import run_evaluation
 from ..evaluation.settings import SETTINGS
 from ..evaluation.settings_file import load_settings
 from ..governance.request import GovernanceRequest

@@ -305,7 +305,7 @@ def governance(
 def _check_agents(spec: GovernanceSpec) -> list[str]:
     """The policies' names; unknown policies, missing models, imports, names used twice and
     actions of the wrong shape fail before any work."""
-    from ..evaluation.runner import check_agent_requests
+    from ..evaluation.agent_setup import check_agent_requests
 
     try:
         requests = agent_requests(

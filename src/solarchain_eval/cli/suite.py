@@ -9,7 +9,9 @@ from typing import Any
 
 from rich.table import Table
 
-from ..evaluation.runner import EvaluationSpec, check_agents, run_evaluation
+from ..evaluation.agent_setup import check_agents
+from ..evaluation.run_spec import EvaluationSpec
+from ..evaluation.runner import run_evaluation
 from ..evaluation.suite_run import PROFILE_FILE, SUITE_METADATA_FILE, SUITE_SCORES_FILE, SuiteEvaluation, run_suite
 from ..evaluation.suite_stats import AGGREGATE_NAMES
 from ..tasks.suites import Suite, SuiteEntry

@@ -15,14 +15,8 @@ from ..tasks.base import has_jax_env
 from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.jax_progress import DEFAULT_CHUNK_STEPS
 from ..training.lagrangian import DEFAULT_MULTIPLIER_LR, LAGRANGIAN_ALGO, LAGRANGIAN_LOG_FILE, LagrangianSettings
-from ..training.sb3_trainer import (
-    DEFAULT_CHECKPOINT_EVERY,
-    TRAIN_LOG_FILE,
-    TrainingError,
-    TrainSpec,
-    check_algo,
-    train,
-)
+from ..training.sb3_spec import DEFAULT_CHECKPOINT_EVERY, TRAIN_LOG_FILE, TrainSpec
+from ..training.sb3_trainer import TrainingError, check_algo, train
 from . import app
 from .common import (
     CliError,

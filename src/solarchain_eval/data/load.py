@@ -19,6 +19,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from .columns import boolean_column, first_true, numeric_column, timestamp_column, whole_hours
 from .errors import DatasetError
 from .files import GENERATION_FILE, MARKET_FILE, NODES_FILE, TRADES_FILE
 
@@ -44,8 +45,6 @@ MAX_NODE_POWER_W = 1e9  # 1 GW, more than any single solar plant
 MAX_MARKET_MW = 1e6
 MAX_SLIPPAGE_PCT = 100.0
 
-# An ISO date and time that ends in a UTC offset ("Z", "+08:00", "-0500").
-_HAS_OFFSET = re.compile(r"^\s*\d{4}-\d{2}-\d{2}[T ].*(?:Z|[+-]\d{2}:?\d{2})\s*$")
 # Control characters, which no CSV text holds: C0 but tab, LF and CR; DEL; C1.
 _CONTROL = re.compile(r"[\x00-\x08\x0b\x0c\x0e-\x1f\x7f-\x9f]")
 _LINE_BREAK = re.compile(r"\r\n|\r|\n")
@@ -156,74 +155,12 @@ def _read(root: Path, name: str) -> pd.DataFrame:
     return pd.DataFrame(rows, columns=header, dtype=str)
 
 
-# --- columns -----------------------------------------------------------------------------------
-def _first(mask: np.ndarray) -> int | None:
-    hits = np.flatnonzero(mask)
-    return int(hits[0]) if hits.size else None
-
-
-def _numeric(frame: pd.DataFrame, path: Path, column: str, *, maximum: float, what: str) -> np.ndarray:
-    """A non-negative finite column, at most ``maximum`` (a plausibility ceiling in the column's unit)."""
-    text = frame[column]
-    values = pd.to_numeric(text, errors="coerce").to_numpy(dtype=np.float64)
-    bad = _first(~np.isfinite(values))
-    if bad is not None:
-        shown = text.iloc[bad]
-        shown = "empty" if shown.strip() == "" else f"'{shown}'"
-        raise DatasetError(path, f"value is {shown}, not a finite number", column, bad)
-    bad = _first(values < 0)
-    if bad is not None:
-        raise DatasetError(path, f"negative value {float(values[bad])!r} ({what} cannot be negative)", column, bad)
-    bad = _first(values > maximum)
-    if bad is not None:
-        raise DatasetError(
-            path, f"value {float(values[bad])!r} is implausibly large ({what} above {maximum:g})", column, bad
-        )
-    return values
-
-
-def _timestamps(frame: pd.DataFrame, path: Path) -> pd.DatetimeIndex:
-    text = frame["timestamp"]
-    parsed = pd.to_datetime(text, format="ISO8601", errors="coerce", utc=True)
-    unparsed = parsed.isna().to_numpy()
-    naive = ~text.str.match(_HAS_OFFSET).to_numpy()
-    bad = _first(unparsed | naive)
-    if bad is not None:
-        if unparsed[bad]:
-            raise DatasetError(path, f"'{text.iloc[bad]}' is not an ISO timestamp", "timestamp", bad)
-        raise DatasetError(
-            path,
-            f"'{text.iloc[bad]}' has no UTC offset (a naive time is ambiguous; write e.g. 2026-04-01T00:00:00+08:00)",
-            "timestamp",
-            bad,
-        )
-    return pd.DatetimeIndex(parsed)
-
-
-def _whole_hours(stamps: pd.DatetimeIndex, first: pd.Timestamp, frame: pd.DataFrame, path: Path) -> np.ndarray:
-    """Whole hours since ``first``; a time between two hours is an error, never rounded."""
-    hours = ((stamps - first) / pd.Timedelta(hours=1)).to_numpy(dtype=np.float64)
-    bad = _first(hours != np.round(hours))
-    if bad is not None:
-        raise DatasetError(path, f"'{frame['timestamp'].iloc[bad]}' is not on the hour", "timestamp", bad)
-    return hours.astype(np.int64)
-
-
-def _booleans(frame: pd.DataFrame, path: Path, column: str) -> np.ndarray:
-    text = frame[column].str.strip().str.lower()
-    known = text.isin(["true", "false", "1", "0"]).to_numpy()
-    bad = _first(~known)
-    if bad is not None:
-        raise DatasetError(path, f"'{frame[column].iloc[bad]}' is not True or False", column, bad)
-    return text.isin(["true", "1"]).to_numpy()
-
-
 # --- generation --------------------------------------------------------------------------------
 def _data_window(generation: pd.DataFrame, path: Path) -> tuple[pd.Timestamp, np.ndarray]:
     """The first hour (in the data's own UTC offset, that of its first record) and each row's hour."""
     if len(generation) == 0:
         raise DatasetError(path, "the file has no data rows")
-    stamps = _timestamps(generation, path)
+    stamps = timestamp_column(generation, path)
     earliest = int(np.argmin(stamps.asi8))
     first = stamps[earliest].tz_convert(pd.Timestamp(generation["timestamp"].iloc[0]).tzinfo)
     if first != first.normalize():
@@ -231,22 +168,22 @@ def _data_window(generation: pd.DataFrame, path: Path) -> tuple[pd.Timestamp, np
         raise DatasetError(
             path, f"the data starts at {first.isoformat()}, not at local midnight", "timestamp", earliest
         )
-    return first, _whole_hours(stamps, first, generation, path)
+    return first, whole_hours(stamps, first, generation, path)
 
 
 def _check_nodes(nodes: pd.DataFrame, generation: pd.DataFrame, nodes_path: Path, gen_path: Path) -> None:
     """Every generation row names a listed node in that node's city; every node has records."""
-    duplicated = _first(nodes["node_id"].duplicated().to_numpy())
+    duplicated = first_true(nodes["node_id"].duplicated().to_numpy())
     if duplicated is not None:
         raise DatasetError(
             nodes_path, f"node '{nodes['node_id'].iloc[duplicated]}' is listed twice", "node_id", duplicated
         )
-    unknown = _first(~generation["node_id"].isin(nodes["node_id"]).to_numpy())
+    unknown = first_true(~generation["node_id"].isin(nodes["node_id"]).to_numpy())
     if unknown is not None:
         raise DatasetError(
             gen_path, f"node '{generation['node_id'].iloc[unknown]}' is not in {NODES_FILE}", "node_id", unknown
         )
-    absent = _first(~nodes["node_id"].isin(generation["node_id"]).to_numpy())
+    absent = first_true(~nodes["node_id"].isin(generation["node_id"]).to_numpy())
     if absent is not None:
         raise DatasetError(
             nodes_path, f"node '{nodes['node_id'].iloc[absent]}' has no records in {GENERATION_FILE}", "node_id", absent
@@ -260,7 +197,7 @@ def _check_nodes(nodes: pd.DataFrame, generation: pd.DataFrame, nodes_path: Path
     )
     # A node whose rows all agree on another city: the nodes file is the one at fault.
     wrong_in_nodes_file = by_node["bad"].all() & (by_node["city"].nunique() == 1)
-    blamed = _first(nodes["node_id"].map(wrong_in_nodes_file).fillna(False).to_numpy(dtype=bool))
+    blamed = first_true(nodes["node_id"].map(wrong_in_nodes_file).fillna(False).to_numpy(dtype=bool))
     if blamed is not None:
         node = nodes["node_id"].iloc[blamed]
         other = generation["city"][generation["node_id"] == node].iloc[0]
@@ -270,7 +207,7 @@ def _check_nodes(nodes: pd.DataFrame, generation: pd.DataFrame, nodes_path: Path
             "city",
             blamed,
         )
-    row = _first(contradicts)
+    row = first_true(contradicts)
     raise DatasetError(
         gen_path,
         f"city '{generation['city'].iloc[row]}' contradicts node '{generation['node_id'].iloc[row]}''s city "
@@ -283,13 +220,13 @@ def _check_nodes(nodes: pd.DataFrame, generation: pd.DataFrame, nodes_path: Path
 def _first_gap(hours_present: np.ndarray, hours: int) -> int | None:
     present = np.zeros(hours, dtype=bool)
     present[hours_present] = True
-    return _first(~present)
+    return first_true(~present)
 
 
 def _check_coverage(generation: pd.DataFrame, absolute_hour: np.ndarray, first: pd.Timestamp, path: Path) -> int:
     """One record per node and hour over the whole window; returns the number of hours."""
     keys = pd.DataFrame({"node": generation["node_id"].to_numpy(), "hour": absolute_hour})
-    duplicated = _first(keys.duplicated().to_numpy())
+    duplicated = first_true(keys.duplicated().to_numpy())
     if duplicated is not None:
         raise DatasetError(
             path,
@@ -315,11 +252,11 @@ def _check_coverage(generation: pd.DataFrame, absolute_hour: np.ndarray, first: 
 
 
 def _generation_table(generation: pd.DataFrame, absolute_hour: np.ndarray, path: Path) -> pd.DataFrame:
-    p_max = _numeric(generation, path, "P_max_W", maximum=MAX_NODE_POWER_W, what="power, W,")
-    p_reported = _numeric(generation, path, "P_reported_W", maximum=MAX_NODE_POWER_W, what="power, W,")
-    fdia = _booleans(generation, path, "fdia_detected")
+    p_max = numeric_column(generation, path, "P_max_W", maximum=MAX_NODE_POWER_W, what="power, W,")
+    p_reported = numeric_column(generation, path, "P_reported_W", maximum=MAX_NODE_POWER_W, what="power, W,")
+    fdia = boolean_column(generation, path, "fdia_detected")
     status = generation["verification_status"].str.strip()
-    bad = _first(~status.isin(VALID_STATUSES).to_numpy())
+    bad = first_true(~status.isin(VALID_STATUSES).to_numpy())
     if bad is not None:
         raise DatasetError(
             path,
@@ -344,13 +281,13 @@ def _generation_table(generation: pd.DataFrame, absolute_hour: np.ndarray, path:
 # --- market and trades -------------------------------------------------------------------------
 def _market_table(market: pd.DataFrame, first: pd.Timestamp, hours: int, path: Path) -> pd.DataFrame:
     """Exactly one market row per hour of the window."""
-    market_hours = _whole_hours(_timestamps(market, path), first, market, path)
-    outside = _first((market_hours < 0) | (market_hours > hours - 1))
+    market_hours = whole_hours(timestamp_column(market, path), first, market, path)
+    outside = first_true((market_hours < 0) | (market_hours > hours - 1))
     if outside is not None:
         raise DatasetError(
             path, f"timestamp {market['timestamp'].iloc[outside]} is outside the data window", "timestamp", outside
         )
-    duplicated = _first(pd.Series(market_hours).duplicated().to_numpy())
+    duplicated = first_true(pd.Series(market_hours).duplicated().to_numpy())
     if duplicated is not None:
         raise DatasetError(path, f"hour {market['timestamp'].iloc[duplicated]} appears twice", "timestamp", duplicated)
     gap = _first_gap(market_hours, hours)
@@ -359,8 +296,10 @@ def _market_table(market: pd.DataFrame, first: pd.Timestamp, hours: int, path: P
     return pd.DataFrame(
         {
             "absolute_hour": market_hours,
-            "total_verified_MW": _numeric(market, path, "total_verified_MW", maximum=MAX_MARKET_MW, what="power, MW,"),
-            "slippage_solarchain_pct": _numeric(
+            "total_verified_MW": numeric_column(
+                market, path, "total_verified_MW", maximum=MAX_MARKET_MW, what="power, MW,"
+            ),
+            "slippage_solarchain_pct": numeric_column(
                 market, path, "slippage_solarchain_pct", maximum=MAX_SLIPPAGE_PCT, what="slippage, %,"
             ),
         }
@@ -371,8 +310,8 @@ def _trades_table(trades: pd.DataFrame, first: pd.Timestamp, hours: int, path: P
     """Trades on the hour inside the window, non-negative energy."""
     if len(trades) == 0:
         return pd.DataFrame({"absolute_hour": np.zeros(0, dtype=np.int64), "energy_purchased_MW": np.zeros(0)})
-    trade_hours = _whole_hours(_timestamps(trades, path), first, trades, path)
-    outside = _first((trade_hours < 0) | (trade_hours > hours - 1))
+    trade_hours = whole_hours(timestamp_column(trades, path), first, trades, path)
+    outside = first_true((trade_hours < 0) | (trade_hours > hours - 1))
     if outside is not None:
         last = (first + pd.Timedelta(hours=hours - 1)).isoformat()
         raise DatasetError(
@@ -381,7 +320,7 @@ def _trades_table(trades: pd.DataFrame, first: pd.Timestamp, hours: int, path: P
             "timestamp",
             outside,
         )
-    energy = _numeric(trades, path, "energy_purchased_MW", maximum=MAX_MARKET_MW, what="energy, MWh,")
+    energy = numeric_column(trades, path, "energy_purchased_MW", maximum=MAX_MARKET_MW, what="energy, MWh,")
     return pd.DataFrame({"absolute_hour": trade_hours, "energy_purchased_MW": energy})
 
 

@@ -8,189 +8,26 @@ from typing import Any
 import gymnasium as gym
 import numpy as np
 
-from ..config import BenchmarkConfig, check_episode_fits, load_config
-from ..data.default import resolve_data_dir
-from ..data.table import HourlyTable, load_table
-from ..market.actions import ActionCodec, DiscreteActions, action_jitter_f32, check_action_mode, initial_action
-from ..market.dynamics import MarketHours, RewardWeights, StepOutcome, market_step
-from ..market.observation import (
-    OBS_LIMIT,
-    OBS_LIQUIDITY,
-    OBS_PREV_ALPHA,
-    OBS_PREV_ELL,
-    OBS_PRICE,
-    OBSERVATION_NAMES,
-    observation_template,
-)
+from ..config import BenchmarkConfig
+from ..data.table import HourlyTable
+from ..market.actions import action_jitter_f32
+from ..market.dynamics import StepOutcome, market_step
+from ..market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE
 from ..market.ops import SCALAR
-from ..market.spaces import action_space, observation_space
+
+# The set-up every back-end shares and the step's info live in market_setup and step_info; the
+# `x as x` imports keep their names importable from here.
+from .market_setup import env_config as env_config
+from .market_setup import market_inputs as market_inputs
+from .market_setup import resolve_config as resolve_config
+from .market_setup import resolve_table as resolve_table
+from .market_setup import setup_market
+from .market_setup import start_hours as start_hours
 from .rng_stream import PRICE_NOISE_STD, EpisodeStream
+from .step_info import STEP_INFO_KEYS as STEP_INFO_KEYS
+from .step_info import step_info
 
 ActionMode = str  # "continuous" | "discrete"
-
-
-#: Per-step quantities in ``info`` (docs/environment.md#info, the original release's names), plus
-#: ``fairness_variance`` (F) and ``cost`` = V + A. ``info`` also has ``step`` and ``city_rewards``.
-STEP_INFO_KEYS = (
-    "reward",
-    "absolute_hour",
-    "episode_start_hour",
-    "hour",
-    "reward_ratio",
-    "liquidity_ratio",
-    "burn_rate",
-    "verified_supply_MWh",
-    "reported_supply_MWh",
-    "physics_excess_MWh",
-    "unsafe_backed_MWh",
-    "artificial_liquidity_MWh",
-    "physics_violation_rate",
-    "raw_physics_record_rate",
-    "demand_MWh",
-    "matched_energy_MWh",
-    "unmet_demand_MWh",
-    "liquidity",
-    "liquidity_depth",
-    "token_price",
-    "drawdown",
-    "token_drawdown",
-    "action_jitter",
-    "slippage",
-    "fairness_variance",
-    "cost",
-)
-
-
-def step_info(
-    out: StepOutcome, executed: tuple, hour: Any, start: Any, hour_inputs: tuple, depth_scale: float
-) -> dict[str, Any]:
-    """The ``info`` entries of :data:`STEP_INFO_KEYS` for one step (floats or per-sub-env arrays).
-
-    ``hour_inputs`` is (G_v, G_r, X, ν, Q_c) of the step's hour.
-    """
-    verified, reported, unsafe, raw_rate, demand = hour_inputs
-    return {
-        "reward": out.reward,
-        "absolute_hour": hour,
-        "episode_start_hour": start,
-        "hour": hour % 24,
-        "reward_ratio": executed[0],
-        "liquidity_ratio": executed[1],
-        "burn_rate": executed[2],
-        "verified_supply_MWh": verified,
-        "reported_supply_MWh": reported,
-        "physics_excess_MWh": unsafe,
-        "unsafe_backed_MWh": out.unsafe_backed_mwh,
-        "artificial_liquidity_MWh": out.artificial_liquidity_mwh,
-        "physics_violation_rate": out.violation_rate,
-        "raw_physics_record_rate": raw_rate,
-        "demand_MWh": demand,
-        "matched_energy_MWh": out.matched_mwh,
-        "unmet_demand_MWh": out.unmet_mwh,
-        "liquidity": out.liquidity,
-        "liquidity_depth": out.liquidity / depth_scale,
-        "token_price": out.token_price,
-        "drawdown": out.drawdown,
-        "token_drawdown": out.token_drawdown,
-        "action_jitter": out.jitter,
-        "slippage": out.slippage,
-        "fairness_variance": out.fairness_variance,
-        "cost": out.violation_rate + out.unsafe_backed_mwh,
-    }
-
-
-def resolve_config(config: BenchmarkConfig | str | Path | None) -> BenchmarkConfig:
-    if config is None:
-        return BenchmarkConfig()
-    if isinstance(config, BenchmarkConfig):
-        return config
-    return load_config(config)
-
-
-def resolve_table(data_dir: str | Path | None, config: BenchmarkConfig) -> HourlyTable:
-    """Explicit ``data_dir``, else the config's, else the embedded default dataset."""
-    return load_table(resolve_data_dir(data_dir, config.data_dir))
-
-
-def env_config(
-    config: BenchmarkConfig | str | Path | None,
-    *,
-    no_physics_penalty: bool | None,
-    action_mode: str | None,
-    episode_steps: int | None = None,
-) -> BenchmarkConfig:
-    """The configuration an env runs with: the one argument validation of every env constructor.
-
-    ``config`` (default ``BenchmarkConfig()``) with the constructor's overrides applied; an
-    unknown ``action_mode`` is a ValueError.
-    """
-    cfg = resolve_config(config).with_updates(
-        action_mode=check_action_mode(action_mode), no_physics_penalty=no_physics_penalty
-    )
-    if episode_steps is not None:
-        cfg = cfg.with_updates(episode_steps=episode_steps)
-    return cfg
-
-
-def setup_market(
-    env: Any,
-    data_dir: str | Path | None,
-    config: BenchmarkConfig | str | Path | None,
-    *,
-    no_physics_penalty: bool | None,
-    action_mode: str | None,
-    table: HourlyTable | None,
-    episode_steps: int | None = None,
-) -> None:
-    """Set the attributes :class:`SolarChainEnv` and the vector env share, from their arguments.
-
-    ``config``, ``table``, ``market_hours``, ``codec``, ``weights``, ``action_mode``,
-    ``episode_steps``, ``cities``, ``observation_names``, ``single_observation_space`` and
-    ``single_action_space``, plus the derived per-table inputs (start hours, observation
-    template, the discrete action table, the initial previous action).
-    """
-    cfg = env_config(
-        config, no_physics_penalty=no_physics_penalty, action_mode=action_mode, episode_steps=episode_steps
-    )
-    env.config = cfg
-    env.table = table if table is not None else resolve_table(data_dir, cfg)
-    check_episode_fits(cfg, env.table.hours, str(env.table.source))
-    env.market_hours, env._obs_template = market_inputs(env.table)
-    env.codec = ActionCodec.from_config(cfg.market)
-    env.weights = RewardWeights.from_config(cfg)
-    env.action_mode = cfg.action_mode
-    env.episode_steps = cfg.episode_steps
-    env.cities = env.table.cities
-    env.observation_names = OBSERVATION_NAMES
-    env._n_hours = env.table.hours
-    env._starts = start_hours(env.table.hours, cfg.episode_steps)
-    env._depth_scale = max(cfg.market.initial_liquidity, 1e-9)
-    env._initial_action = initial_action(cfg.market)
-    env.single_observation_space = observation_space()
-    env.single_action_space = action_space(cfg.action_mode, cfg.discrete_levels)
-    env._discrete_actions = (
-        DiscreteActions.from_codec(env.codec, cfg.discrete_levels) if cfg.action_mode == "discrete" else None
-    )
-
-
-_HOURS_CACHE: dict[int, tuple[HourlyTable, MarketHours, np.ndarray]] = {}
-
-
-def market_inputs(table: HourlyTable) -> tuple[MarketHours, np.ndarray]:
-    """Derived per-hour inputs and observation template of a table (computed once per table)."""
-    cached = _HOURS_CACHE.get(id(table))
-    if cached is None or cached[0] is not table:
-        hours = MarketHours.from_table(table)
-        cached = (table, hours, observation_template(hours))
-        _HOURS_CACHE[id(table)] = cached
-    return cached[1], cached[2]
-
-
-def start_hours(n_hours: int, episode_steps: int) -> np.ndarray:
-    """Admissible episode starts: midnights with a full episode after them."""
-    if n_hours <= episode_steps:
-        return np.zeros(1, dtype=np.int64)
-    return np.arange(0, n_hours - episode_steps + 1, 24, dtype=np.int64)
 
 
 class SolarChainEnv(gym.Env):

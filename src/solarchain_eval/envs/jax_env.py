@@ -3,7 +3,7 @@
 The step is :func:`~solarchain_eval.market.dynamics.market_step` itself, run with
 :data:`JAX_OPS` (the third arithmetic back-end next to ``SCALAR`` and ``BATCH`` of
 :mod:`solarchain_eval.market.ops`), and ``info`` is built by the numpy env's
-:func:`~solarchain_eval.envs.env.step_info`: one formula, three back-ends. Everything that depends
+:func:`~solarchain_eval.envs.step_info.step_info`: one formula, three back-ends. Everything that depends
 on the hourly table lives in :class:`EnvParams` as arrays; the reward weights, action mode
 and episode length are static fields of the params (changing them recompiles).
 
@@ -30,8 +30,9 @@ from ..market.actions import ActionCodec, initial_action
 from ..market.dynamics import RewardWeights, market_step
 from ..market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE, OBSERVATION_SHAPE
 from ..market.spaces import ACTION_HIGH, ACTION_LOW, ACTION_SHAPE
-from .env import env_config, market_inputs, resolve_table, start_hours, step_info
+from .market_setup import env_config, market_inputs, resolve_table, start_hours
 from .rng_stream import PRICE_NOISE_STD
+from .step_info import step_info
 
 
 class JaxOps:

@@ -22,8 +22,9 @@ from ..market.actions import action_jitter_f32_batch
 from ..market.dynamics import market_step
 from ..market.observation import OBS_LIMIT, OBS_LIQUIDITY, OBS_PREV_ALPHA, OBS_PREV_ELL, OBS_PRICE
 from ..market.ops import BATCH
-from .env import STEP_INFO_KEYS, setup_market, step_info
+from .market_setup import setup_market
 from .rng_stream import CHECKPOINT_EVERY, PRICE_NOISE_STD, EpisodeStream
+from .step_info import STEP_INFO_KEYS, step_info
 
 #: The market state carried between steps: market_step's state arguments in their order and
 #: the StepOutcome fields that update them. The vector env keeps it as one (4, N) array.

@@ -34,7 +34,8 @@ from ..tasks.registry import DEFAULT_TASK, get_task
 from ..tasks.suites import SuiteEntry, SuiteError, get_suite
 from .records import metrics_frame, summarize
 from .rollout import EpisodeResult
-from .runner import EvaluationSpec, run_evaluation
+from .run_spec import EvaluationSpec
+from .runner import run_evaluation
 from .settings import SETTING_MAIN, Setting
 from .suite_run import SuiteEvaluation, run_suite
 

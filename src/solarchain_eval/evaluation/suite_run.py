@@ -33,8 +33,8 @@ from ..tasks.registry import get_task
 from ..tasks.suites import Suite, SuiteEntry, get_suite
 from .fingerprint import canonical_json, sha256_text
 from .records import METADATA_FILE, METRICS_FILE
+from .run_spec import EvaluationOutcome, EvaluationSpec
 from .rundir import check_target
-from .runner import EvaluationOutcome, EvaluationSpec
 from .suite_stats import BOOTSTRAP_REPS, BOOTSTRAP_SEED, aggregate_table, improvement_table, performance_profile_figure
 
 SUITE_METADATA_FILE = "suite_metadata.json"

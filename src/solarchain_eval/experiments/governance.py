@@ -40,7 +40,8 @@ from ..common.redaction import redact_command
 from ..config import BenchmarkConfig
 from ..evaluation.records import diagnostics_frame
 from ..evaluation.rollout import EpisodeResult
-from ..evaluation.runner import EvaluationSpec, run_evaluation
+from ..evaluation.run_spec import EvaluationSpec
+from ..evaluation.runner import run_evaluation
 from ..evaluation.settings import SETTING_AGENTIC, setting_has_physics_penalty
 from ..governance.counterfactual import DEFAULT_UNSAFE_THRESHOLD
 from ..governance.factory import AgenticOptions

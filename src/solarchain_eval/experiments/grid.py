@@ -46,7 +46,7 @@ from ..tasks.base import has_jax_env
 from ..tasks.governance_view import GovernedTask
 from ..tasks.registry import DEFAULT_TASK, get_task
 from ..training.lagrangian import DEFAULT_COST_LIMIT, LagrangianSettings
-from ..training.sb3_trainer import DEFAULT_CHECKPOINT_EVERY
+from ..training.sb3_spec import DEFAULT_CHECKPOINT_EVERY
 from .layout import UNITS_DIR, eval_unit_dir, seed_model_dir, train_unit_dir
 
 #: Training backends of the grid's train units.

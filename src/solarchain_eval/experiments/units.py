@@ -30,7 +30,9 @@ from ..protocol import EPISODE_SEED_RULES
 from ..tasks.registry import DEFAULT_TASK
 from ..training.jax_progress import ChunkProgress
 from ..training.lagrangian import LagrangianSettings
-from ..training.sb3_trainer import CHECKPOINT_DIR, TrainSpec, set_torch_threads, train
+from ..training.sb3_session import set_torch_threads
+from ..training.sb3_spec import CHECKPOINT_DIR, TrainSpec
+from ..training.sb3_trainer import train
 from .grid import Unit
 from .layout import DONE_MARKER, seed_model_dir
 
@@ -275,7 +277,8 @@ def _train_jax_unit(task: UnitTask, log: _UnitLog, on_progress: Callable[[UnitPr
 
 
 def _evaluate_unit(task: UnitTask) -> None:
-    from ..evaluation.runner import EvaluationSpec, run_evaluation
+    from ..evaluation.run_spec import EvaluationSpec
+    from ..evaluation.runner import run_evaluation
 
     unit = task.unit
     # Only another task is named: the evaluation of a solar unit is the one before tasks.

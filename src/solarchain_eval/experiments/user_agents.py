@@ -39,8 +39,8 @@ from ..agents.specs import (
 from ..common.atomic_files import sha256_file
 from ..common.redaction import redact_options, redact_spec
 from ..config import BenchmarkConfig
+from ..evaluation.agent_setup import check_agent_requests
 from ..evaluation.reserved import check_reserved, reserved_names
-from ..evaluation.runner import check_agent_requests
 from ..protocol import PAPER_SEED
 
 #: A grid's user agents: (name, spec text) in the order given.

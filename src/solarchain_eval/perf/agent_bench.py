@@ -34,7 +34,8 @@ from ..agents.base import Policy
 from ..agents.http_agent import HttpAgent
 from ..agents.isolated import IsolatedAgent
 from ..config import BenchmarkConfig, MarketConfig
-from ..evaluation.runner import EvaluationSpec, run_evaluation
+from ..evaluation.run_spec import EvaluationSpec
+from ..evaluation.runner import run_evaluation
 from ..protocol import PAPER_EPISODES, PAPER_SEEDS
 from ..tasks.registry import get_task
 

@@ -151,7 +151,8 @@ def vector_env_steps_per_s(
 
 def evaluation_seconds(data_dir: Path, repeats: int) -> Throughput:
     """Wall time of 1,620 baseline episodes (3 policies × 2 settings × 9 seeds × 30 episodes), files written."""
-    from ..evaluation.runner import EvaluationSpec, run_evaluation
+    from ..evaluation.run_spec import EvaluationSpec
+    from ..evaluation.runner import run_evaluation
 
     samples = []
     seeds = tuple(PAPER_SEED + i for i in range(9))

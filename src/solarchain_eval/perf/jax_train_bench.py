@@ -122,7 +122,8 @@ def jax_training_steps_per_s(
 
 def jax_eval_unit_s(algo: str, model_dir: Path, data_dir: Path, episodes: int = 30) -> float:
     """Seconds of one eval unit (one run seed × ``episodes``) of a JAX checkpoint, loading included."""
-    from ..evaluation.runner import EvaluationSpec, run_evaluation
+    from ..evaluation.run_spec import EvaluationSpec
+    from ..evaluation.runner import run_evaluation
 
     spec = EvaluationSpec(
         policies=[algo], run_seeds=[PAPER_SEED], episodes=episodes, data_dir=data_dir, models={algo: model_dir}

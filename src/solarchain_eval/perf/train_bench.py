@@ -33,12 +33,8 @@ from ..experiments.grid import GridSpec, Unit, plan_units
 from ..experiments.layout import PAPER_METADATA_FILE, UNITS_DIR
 from ..protocol import PAPER_SEED
 from ..tasks.registry import DEFAULT_TASK, get_task
-from ..training.sb3_trainer import (
-    TRAIN_METADATA_FILE,
-    hyperparameters,
-    quiet_logger,
-    set_torch_threads,
-)
+from ..training.sb3_session import quiet_logger, set_torch_threads
+from ..training.sb3_spec import TRAIN_METADATA_FILE, hyperparameters
 from .env_bench import Throughput, task_data
 
 #: Timed steps per repeat and warm-up steps (past learning starts / one PPO rollout).
@@ -200,8 +196,10 @@ def measured_unit_times(data_dir: Path, steps_per_s: dict[str, float], episodes:
     policy with an untrained model), train overhead = a 1-step training's wall time."""
     import tempfile
 
-    from ..evaluation.runner import EvaluationSpec, run_evaluation
-    from ..training.sb3_trainer import TrainSpec, train
+    from ..evaluation.run_spec import EvaluationSpec
+    from ..evaluation.runner import run_evaluation
+    from ..training.sb3_spec import TrainSpec
+    from ..training.sb3_trainer import train
 
     evals: dict[str, float] = {}
     with tempfile.TemporaryDirectory() as tmp:

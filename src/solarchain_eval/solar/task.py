@@ -22,8 +22,9 @@ from ..data.files import MANIFEST_FILE
 from ..data.provenance import dataset_provenance
 from ..data.published import PAPER_DATASET_SHA256
 from ..data.table import HourlyTable, load_table
-from ..envs.env import STEP_INFO_KEYS, SolarChainEnv
+from ..envs.env import SolarChainEnv
 from ..envs.registration import ENV_ID
+from ..envs.step_info import STEP_INFO_KEYS
 from ..market.baselines import BASELINES, make_baseline
 from ..market.observation import OBSERVATION_NAMES
 from ..records_schema import EPISODE_METRIC_COLUMNS

@@ -1,6 +1,6 @@
 """What happens during an SB3 training run: episode log, progress, TensorBoard scalars, checkpoints.
 
-Imported only by :func:`solarchain_eval.training.sb3_trainer.train` (it imports Stable-Baselines3).
+Imported only by the training session (:mod:`solarchain_eval.training.sb3_session`, which imports Stable-Baselines3).
 
 Checkpoints are taken when a rollout starts, i.e. right after the previous update: the saved
 parameters, step counter and (SAC/DQN) replay buffer are then mutually consistent. Each

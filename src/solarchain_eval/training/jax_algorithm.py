@@ -18,7 +18,7 @@ import numpy as np
 from ..common.cache import cache_dir
 from ..config import BenchmarkConfig
 from .jax_alignment import sb3_variant
-from .sb3_trainer import dqn_learning_starts
+from .sb3_spec import dqn_learning_starts
 
 
 def rejax_config(

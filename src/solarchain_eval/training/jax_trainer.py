@@ -48,7 +48,8 @@ from .jax_algorithm import use_compilation_cache as use_compilation_cache
 from .jax_alignment import SB3_ALIGNMENT
 from .jax_chunks import CHECKPOINT_FILE, ChunkedTraining, config_sha256, run_chunks
 from .jax_progress import ChunkProgress
-from .sb3_trainer import CHECKPOINT_DIR, TRAIN_METADATA_FILE, TrainSpec, differences
+from .sb3_spec import CHECKPOINT_DIR, TRAIN_METADATA_FILE, TrainSpec
+from .sb3_trainer import differences
 
 
 @dataclass(frozen=True)
