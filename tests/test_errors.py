@@ -55,6 +55,7 @@ BUILTIN_BASES = {
     "SuiteScoreError": "ValueError",
     "SettingError": "ValueError",
     "NoGovernanceViewError": "ValueError",
+    "NoDatasetBuilderError": "ValueError",
     "HttpAgentError": "ValueError",
     "InvalidRequest": "ValueError",
     "IsolatedAgentError": "ValueError",
