@@ -20,6 +20,7 @@ from rich.text import Text
 from ..common.errors import NamesOptions, OptionsError, SolarChainError, flag_of
 from ..common.redaction import redact_text
 from ..config import check_seeds
+from ..tasks.base import headline_metrics_of
 from ..tasks.registry import DEFAULT_TASK, get_task
 from .help import get_current_context
 
@@ -171,11 +172,12 @@ RESULT_COLUMNS = (
 
 
 def result_columns(task: str) -> Sequence[tuple[str, str, int]]:
-    """The results table's columns for ``task``: the paper's for the solar market, else every
-    metric the task declares (by column name)."""
+    """The results table's columns for ``task``: the paper's for the solar market, else the task's
+    headline metrics (:func:`~solarchain_eval.tasks.base.headline_metrics_of`; every declared metric
+    is in ``metrics.csv``)."""
     if task == DEFAULT_TASK:
         return RESULT_COLUMNS
-    return [(m.name, m.name, 4) for m in get_task(task).metrics]
+    return [(m.name, m.name, 4) for m in headline_metrics_of(get_task(task))]
 
 
 def results_table(

@@ -45,6 +45,16 @@ class SupplyChainTask(BenchmarkConfigMethods):
     levers: tuple[Lever, ...] = SUPPLY_LEVERS
     step_fields: tuple[str, ...] = STEP_FIELDS
     metrics: tuple[MetricSpec, ...] = SUPPLY_METRICS
+    #: What a results table in the terminal shows: reward, the oracle's two safety measures, the
+    #: bullwhip ratio and the fairness measure (``metrics.csv`` has every metric).
+    headline_metrics: tuple[str, ...] = (
+        "cumulative_reward",
+        "fill_volume_units",
+        "violation_rate",
+        "phantom_backed_units",
+        "bullwhip_ratio",
+        "fill_rate_variance",
+    )
     observation_names: tuple[str, ...] = OBSERVATION_NAMES
     #: One step is one day: an episode's ``start_hour`` (its first step) is its start day, the
     #: report's resampling unit (:func:`~solarchain_eval.tasks.base.steps_per_day_of`).

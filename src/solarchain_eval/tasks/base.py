@@ -193,6 +193,28 @@ def metric_names(task: Task) -> tuple[str, ...]:
     return tuple(m.name for m in task.metrics)
 
 
+def headline_metrics_of(task: Task) -> tuple[MetricSpec, ...]:
+    """The metrics a results table printed in a terminal shows (all of them stay in ``metrics.csv``).
+
+    The task's optional ``headline_metrics`` attribute (metric names, in order), else the first
+    ranked metric (direction ``higher`` or ``lower``) of each template dimension.
+
+    Raises
+    ------
+    ValueError
+        ``headline_metrics`` names a metric the task does not declare.
+    """
+    declared = {m.name: m for m in task.metrics}
+    names = getattr(task, "headline_metrics", None)
+    if names is not None:
+        unknown = [n for n in names if n not in declared]
+        if unknown:
+            raise ValueError(f"task {task.name!r}: headline_metrics names undeclared metric(s) {', '.join(unknown)}")
+        return tuple(declared[n] for n in names)
+    firsts = (next((m for m in metrics_of(task, d) if m.direction != "none"), None) for d in DIMENSIONS)
+    return tuple(m for m in firsts if m is not None)
+
+
 def metrics_of(task: Task, dimension: str) -> tuple[MetricSpec, ...]:
     """The task's metrics of one template dimension (:data:`DIMENSIONS`)."""
     if dimension not in DIMENSIONS:
