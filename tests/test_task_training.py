@@ -168,7 +168,7 @@ def test_a_grid_names_its_task_only_when_it_is_not_the_solar_market(toy_tasks):
         GridSpec.from_preset("smoke", task="toy-stock").validate()
 
 
-def test_sweep_takes_a_task_and_builds_only_the_solar_markets_datasets(toy_tasks, tmp_path):
+def test_sweep_takes_a_task_and_builds_datasets_only_with_its_builder(toy_tasks, tmp_path):
     spec = tmp_path / "sweep.yaml"
     spec.write_text(
         """
@@ -181,7 +181,8 @@ axes:
     )
     result = runner.invoke(app, ["sweep", str(spec), "--out", str(tmp_path / "out"), "--task", "toy-stock"])
     assert result.exit_code == 2, result.output
-    assert "builds the solar market's datasets" in result.output and str(spec.name) in result.output
+    assert "task 'toy-stock' has no dataset builder; its sweep takes its dataset as dataset.data" in result.output
+    assert str(spec.name) in result.output
     assert not (tmp_path / "out" / "datasets").exists()
     result = runner.invoke(app, ["sweep", str(spec), "--out", str(tmp_path / "u"), "--task", "no-such-market"])
     assert result.exit_code == 2 and "unknown task 'no-such-market'" in result.output
