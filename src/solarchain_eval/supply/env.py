@@ -16,7 +16,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ..config import BenchmarkConfig
-from .dynamics import PRICE_NOISE_STD, SCALAR, SupplyOutcome, supply_step
+from .dynamics import PRICE_NOISE_STD, SCALAR, SupplyOutcome
 from .inputs import (  # noqa: F401  (ENV_ID, INITIAL_ACTION, LEVER_NAMES, OBS, STEP_FIELDS, action_grid: re-exported)
     _INITIAL_PREV,
     ENV_ID,
@@ -28,13 +28,13 @@ from .inputs import (  # noqa: F401  (ENV_ID, INITIAL_ACTION, LEVER_NAMES, OBS, 
     STEP_FIELDS,
     SupplyInputs,
     action_grid,
-    clip_unit,
     decode_actions,
     jitter_of,
     observation_totals,
     resolve,
     step_record,
 )
+from .scalar import ScalarSupplyStep
 from .table import SupplyTable
 
 
@@ -78,7 +78,11 @@ class SupplyChainEnv(gym.Env):
         super().__init__()
         cfg, table = resolve(data_dir, config, table, no_physics_penalty=no_physics_penalty, action_mode=action_mode)
         self.config, self.table, self.inputs = cfg, table, SupplyInputs(table, cfg)
+        i = self.inputs
+        # supply_step(SCALAR, ...) specialised for Python floats (equal to it bit for bit)
+        self._supply_step = ScalarSupplyStep(i.params, i.weights, i.orders, i.spoofed, i.levels)
         self.action_mode, self.episode_steps, self.regions = cfg.action_mode, cfg.episode_steps, table.regions
+        self._days = table.days
         self.observation_names = OBSERVATION_NAMES
         self.observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (len(OBSERVATION_NAMES),), np.float32)
         self.action_space = (
@@ -160,19 +164,13 @@ class SupplyChainEnv(gym.Env):
 
     def _outcome(self, executed: tuple, jitter: Any) -> SupplyOutcome:
         """:func:`~.dynamics.supply_step` of ``executed`` on the current day from the current state (pure)."""
-        i, day = self.inputs, self._start + self._k
-        return supply_step(
-            SCALAR,
-            i.params,
-            i.weights,
+        return self._supply_step(
             self._on_hand,
             self._pipeline,
             self._backlog,
             self._price,
             self._peak,
-            i.orders[day],
-            i.spoofed[day],
-            i.levels[day],
+            self._start + self._k,
             executed,
             jitter,
             self._noise[self._k],
@@ -184,26 +182,41 @@ class SupplyChainEnv(gym.Env):
             u = np.asarray(action, dtype=np.float32)
             if u.shape == (3,):
                 a, b, c = u.tolist()
-                return clip_unit(a), clip_unit(b), clip_unit(c)
+                # clip_unit of each, written out (the single env's per-step cost)
+                a = a if a > 0.0 else 0.0
+                b = b if b > 0.0 else 0.0
+                c = c if c > 0.0 else 0.0
+                return (a if a < 1.0 else 1.0), (b if b < 1.0 else 1.0), (c if c < 1.0 else 1.0)
         return tuple(self.decode_action(action).tolist())
 
     def step(self, action: Any):
         if not self._open:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
         executed = self._executed(action)
-        k = self._k
-        day = self._start + k
-        i = self.inputs
-        jitter = jitter_of(executed, self._prev)
-        out = self._outcome(executed, jitter)
-        self._on_hand, self._pipeline, self._backlog = out.on_hand_units, out.pipeline_units, out.backlog_units
-        self._price, self._peak = out.price_index, out.peak_price_index
+        k, start, prev, i = self._k, self._start, self._prev, self.inputs
+        day = start + k
+        # jitter_of(executed, prev), written out
+        jitter = abs(executed[0] - prev[0]) + abs(executed[1] - prev[1]) + abs(executed[2] - prev[2])
+        out = self._supply_step(
+            self._on_hand, self._pipeline, self._backlog, self._price, self._peak, day, executed, jitter, self._noise[k]
+        )
+        on_hand = self._on_hand = out.on_hand_units
+        self._pipeline, self._backlog = out.pipeline_units, out.backlog_units
+        price = self._price = out.price_index
+        self._peak = out.peak_price_index
         self._outcomes.append(out)
         self._prev = executed
         self._k = k + 1
         truncated = k + 1 >= self.episode_steps
         self._open = not truncated
-        info = step_record(out, executed, day, self._start, i.check_rate_list[day], jitter, i.params.scale_units)
+        info = step_record(out, executed, day, start, i.check_rate_list[day], jitter, i.params.scale_units)
         info["step"] = k
-        info["region_fill_rates"] = dict(zip(self.regions, out.region_fill_rates, strict=True))
-        return self._observation(out), out.reward, False, truncated, info
+        # (zips not strict: the state has one entry per region by construction; a strict zip costs a keyword call)
+        info["region_fill_rates"] = dict(zip(self.regions, out.region_fill_rates))  # noqa: B905
+        # _observation(out), written out: only the next day's reports are summed anew
+        day = day + 1 if day + 1 < self._days else self._days - 1
+        reported_t = 0.0
+        for spoof, level, stock in zip(i.spoofed[day], i.levels[day], on_hand):  # noqa: B905
+            reported_t = reported_t + (level if spoof else stock)
+        totals = (out.on_hand_total_units, reported_t, out.unmet_units, out.in_transit_units)
+        return i.observe_scalar(day, totals, price, executed), out.reward, False, truncated, info
