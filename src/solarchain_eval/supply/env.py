@@ -83,6 +83,7 @@ class SupplyChainEnv(gym.Env):
         self._supply_step = ScalarSupplyStep(i.params, i.weights, i.orders, i.spoofed, i.levels)
         self.action_mode, self.episode_steps, self.regions = cfg.action_mode, cfg.episode_steps, table.regions
         self._days = table.days
+        self._any_spoofed = table.spoofed.any(axis=1).tolist()  # per day: is any stock report spoofed?
         self.observation_names = OBSERVATION_NAMES
         self.observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (len(OBSERVATION_NAMES),), np.float32)
         self.action_space = (
@@ -113,22 +114,11 @@ class SupplyChainEnv(gym.Env):
             effective = [a + b for a, b in zip(effective, out.region_effective_units, strict=True)]
         return {r: (a, b) for r, a, b in zip(self.regions, filled, effective, strict=True)}
 
-    def _observation(self, out: SupplyOutcome | None = None) -> np.ndarray:
-        """The observation of the current state; after a step, its totals are the step's ``out``'s."""
+    def _observation(self) -> np.ndarray:
+        """The observation of the current state (the step assembles its own from the step's totals)."""
         day = min(self._start + self._k, self.table.days - 1)
         i = self.inputs
-        if out is None:
-            totals = observation_totals(
-                SCALAR, i.spoofed[day], i.levels[day], self._on_hand, self._pipeline, self._backlog
-            )
-        else:
-            # The step summed stock on hand, backlog and stock in transit over the new state in
-            # observation_totals' order; only the day's reports are new (the vector env, which
-            # sums them all again, is held equal to this one bit for bit).
-            reported_t = 0.0
-            for spoof, level, stock in zip(i.spoofed[day], i.levels[day], self._on_hand, strict=True):
-                reported_t = reported_t + (level if spoof else stock)
-            totals = (out.on_hand_total_units, reported_t, out.unmet_units, out.in_transit_units)
+        totals = observation_totals(SCALAR, i.spoofed[day], i.levels[day], self._on_hand, self._pipeline, self._backlog)
         return i.observe_scalar(day, totals, self._price, self._prev)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -215,8 +205,11 @@ class SupplyChainEnv(gym.Env):
         info["region_fill_rates"] = dict(zip(self.regions, out.region_fill_rates))  # noqa: B905
         # _observation(out), written out: only the next day's reports are summed anew
         day = day + 1 if day + 1 < self._days else self._days - 1
-        reported_t = 0.0
-        for spoof, level, stock in zip(i.spoofed[day], i.levels[day], on_hand):  # noqa: B905
-            reported_t = reported_t + (level if spoof else stock)
+        if self._any_spoofed[day]:
+            reported_t = 0.0
+            for spoof, level, stock in zip(i.spoofed[day], i.levels[day], on_hand):  # noqa: B905
+                reported_t = reported_t + (level if spoof else stock)
+        else:  # every report honest: the sum is the step's on-hand total, the same additions in the same order
+            reported_t = out.on_hand_total_units
         totals = (out.on_hand_total_units, reported_t, out.unmet_units, out.in_transit_units)
         return i.observe_scalar(day, totals, price, executed), out.reward, False, truncated, info
