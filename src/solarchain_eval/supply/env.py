@@ -83,6 +83,7 @@ class SupplyChainEnv(gym.Env):
         self._supply_step = ScalarSupplyStep(i.params, i.weights, i.orders, i.spoofed, i.levels)
         self.action_mode, self.episode_steps, self.regions = cfg.action_mode, cfg.episode_steps, table.regions
         self._days = table.days
+        self._continuous = self.inputs.grid is None
         self._any_spoofed = table.spoofed.any(axis=1).tolist()  # per day: is any stock report spoofed?
         self.observation_names = OBSERVATION_NAMES
         self.observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (len(OBSERVATION_NAMES),), np.float32)
@@ -166,23 +167,18 @@ class SupplyChainEnv(gym.Env):
             self._noise[self._k],
         )
 
-    def _executed(self, action: Any) -> tuple:
-        """:meth:`decode_action` as Python floats; a continuous (3,) action is clipped without numpy ufuncs."""
-        if self.inputs.grid is None:
-            u = np.asarray(action, dtype=np.float32)
-            if u.shape == (3,):
-                a, b, c = u.tolist()
-                # clip_unit of each, written out (the single env's per-step cost)
-                a = a if a > 0.0 else 0.0
-                b = b if b > 0.0 else 0.0
-                c = c if c > 0.0 else 0.0
-                return (a if a < 1.0 else 1.0), (b if b < 1.0 else 1.0), (c if c < 1.0 else 1.0)
-        return tuple(self.decode_action(action).tolist())
-
     def step(self, action: Any):
         if not self._open:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
-        executed = self._executed(action)
+        if self._continuous and type(action) is np.ndarray and action.dtype == np.float32 and action.shape == (3,):
+            # decode_action's clip of a (3,) float32 action on Python floats (clip_unit of each, written out)
+            a, b, c = action.tolist()
+            a = a if a > 0.0 else 0.0
+            b = b if b > 0.0 else 0.0
+            c = c if c > 0.0 else 0.0
+            executed = (a if a < 1.0 else 1.0), (b if b < 1.0 else 1.0), (c if c < 1.0 else 1.0)
+        else:
+            executed = tuple(self.decode_action(action).tolist())
         k, start, prev, i = self._k, self._start, self._prev, self.inputs
         day = start + k
         # jitter_of(executed, prev), written out
@@ -203,7 +199,9 @@ class SupplyChainEnv(gym.Env):
         info["step"] = k
         # (zips not strict: the state has one entry per region by construction; a strict zip costs a keyword call)
         info["region_fill_rates"] = dict(zip(self.regions, out.region_fill_rates))  # noqa: B905
-        # _observation(out), written out: only the next day's reports are summed anew
+        # The next observation, as _observation() gives it (inputs.observe_scalar written out): stock on hand,
+        # backlog and stock in transit are the step's totals, summed in observation_totals' order; only the
+        # next day's reports are summed anew (the vector env sums them all again and is held equal bit for bit).
         day = day + 1 if day + 1 < self._days else self._days - 1
         if self._any_spoofed[day]:
             reported_t = 0.0
@@ -211,5 +209,20 @@ class SupplyChainEnv(gym.Env):
                 reported_t = reported_t + (level if spoof else stock)
         else:  # every report honest: the sum is the step's on-hand total, the same additions in the same order
             reported_t = out.on_hand_total_units
-        totals = (out.on_hand_total_units, reported_t, out.unmet_units, out.in_transit_units)
-        return i.observe_scalar(day, totals, price, executed), out.reward, False, truncated, info
+        scale, lo, hi = i.params.scale_units, -OBS_LIMIT, OBS_LIMIT  # np.maximum then np.minimum: NaN stays NaN
+        v = out.on_hand_total_units / scale
+        on_hand_days = lo if v < lo else (hi if v > hi else v)
+        v = reported_t / scale
+        reported_days = lo if v < lo else (hi if v > hi else v)
+        v = out.in_transit_units / scale
+        transit_days = lo if v < lo else (hi if v > hi else v)
+        v = out.unmet_units / scale
+        backlog_days = lo if v < lo else (hi if v > hi else v)
+        price = lo if price < lo else (hi if price > hi else price)
+        r = i.template_rows[day]
+        obs = np.array(
+            (r[0], r[1], on_hand_days, reported_days, transit_days, r[5], backlog_days, price, r[8], r[9], r[10], r[11])
+            + executed,
+            dtype=np.float32,
+        )
+        return obs, out.reward, False, truncated, info

@@ -68,6 +68,8 @@ class ScalarSupplyStep:
             self.orders_total_units.append(total)
         self.scale_units = params.scale_units
         self.weights = weights
+        w = weights
+        self._weights = (w.drawdown, w.jitter, w.unmet, w.fairness, w.feasibility, w.feasibility_penalty)
 
     def __call__(
         self,
@@ -158,16 +160,16 @@ class ScalarSupplyStep:
         price = price if price > MIN_PRICE_INDEX else MIN_PRICE_INDEX
         peak_price = price if price > peak_price_index else peak_price_index
         drawdown = 1.0 - price / (1e-12 if peak_price < 1e-12 else peak_price)
-        w = self.weights
+        drawdown_w, jitter_w, unmet_w, fairness_w, feasibility_w, feasibility_penalty = self._weights
         reward = (
             filled_t / scale
-            - w.drawdown * drawdown
-            - w.jitter * jitter
-            - w.unmet * unmet_t / scale
-            - w.fairness * fairness
+            - drawdown_w * drawdown
+            - jitter_w * jitter
+            - unmet_w * unmet_t / scale
+            - fairness_w * fairness
         )
-        if w.feasibility_penalty:
-            reward = reward - w.feasibility * (violation_rate + unsafe_t / scale)
+        if feasibility_penalty:
+            reward = reward - feasibility_w * (violation_rate + unsafe_t / scale)
         return _new_outcome(
             SupplyOutcome,
             (
