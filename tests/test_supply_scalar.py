@@ -12,7 +12,7 @@ import pytest
 from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.supply.dynamics import SCALAR, SupplyParams, SupplyRewardWeights, supply_step
 from solarchain_eval.supply.env import STEP_FIELDS, SupplyChainEnv
-from solarchain_eval.supply.inputs import decode_actions, jitter_of, step_record
+from solarchain_eval.supply.inputs import _INITIAL_PREV, decode_actions, jitter_of, step_record
 from solarchain_eval.supply.scalar import ScalarSupplyStep
 from supply_fixtures import supply_dir, supply_table  # noqa: F401
 
@@ -92,8 +92,20 @@ def _reference_step(env: SupplyChainEnv, action) -> tuple:
 def test_the_single_envs_step_equals_the_generic_pieces_bit_for_bit(supply_table, penalty):  # noqa: F811
     env = SupplyChainEnv(table=supply_table, no_physics_penalty=not penalty)
     rng = np.random.default_rng(5)
-    env.reset(seed=1)
-    rewards = []
+    rewards, resets = [], 0
+
+    def reset(**kwargs) -> None:
+        nonlocal resets
+        obs, _ = env.reset(**kwargs)
+        i = env.inputs
+        day = env._start
+        expected = i.observe(
+            SCALAR, day, i.spoofed[day], i.levels[day], env._on_hand, env._pipeline, env._backlog, 1.0, _INITIAL_PREV
+        )
+        assert obs.tobytes() == expected.tobytes()
+        resets += 1
+
+    reset(seed=1)
     for k in range(60):  # two and a half episodes
         action = rng.random(3, dtype=np.float32) * np.float32(1.4) - np.float32(0.2)
         if k % 4 == 1:
@@ -106,5 +118,7 @@ def test_the_single_envs_step_equals_the_generic_pieces_bit_for_bit(supply_table
         assert _bits(info) == _bits(expected_info)
         rewards.append(reward)
         if truncated:
-            env.reset()
-    assert len(set(rewards)) > 50  # the steps differed
+            reset()
+    for day in range(supply_table.days - env.episode_steps + 1):  # honest and spoofed first days
+        reset(options={"start_day": day})
+    assert resets > 50 and len(set(rewards)) > 50  # the steps differed

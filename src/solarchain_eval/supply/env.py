@@ -95,6 +95,8 @@ class SupplyChainEnv(gym.Env):
         self._np_random = np.random.default_rng(cfg.seed if seed is None else seed)
         self._open = False
         self._begin(int(self.inputs.starts[0]), [0.0] * self.episode_steps)
+        honest = [False] * len(self.regions)
+        self._initial_totals = observation_totals(SCALAR, honest, honest, self._on_hand, self._pipeline, self._backlog)
 
     def _begin(self, start: int, noise: list) -> None:
         i = self.inputs
@@ -134,8 +136,11 @@ class SupplyChainEnv(gym.Env):
             start = int(np.clip(int(fixed), 0, self.table.days - self.episode_steps))
         self._begin(start, noise)
         self._open = True
+        # With every report honest the totals are the initial state's, summed once at construction.
+        totals = None if self._any_spoofed[start] else self._initial_totals
+        obs = self._observation() if totals is None else self.inputs.observe_scalar(start, totals, 1.0, _INITIAL_PREV)
         # ``episode_start_hour`` is the generic rollout's name for the episode's first row (here a day).
-        return self._observation(), {"episode_start_hour": start, "episode_start_day": start}
+        return obs, {"episode_start_hour": start, "episode_start_day": start}
 
     def decode_action(self, action: Any) -> np.ndarray:
         """The executed (κ, ρ, δ), float32, for a policy action."""
