@@ -20,9 +20,14 @@ _ODD = (math.nan, math.inf, -math.inf, -0.0, 0.0, 1e-300)
 
 
 def _bits(value):
-    """A value with every float replaced by its IEEE bytes (NaN == NaN, -0.0 != 0.0), lists and dicts kept."""
+    """A value with every float replaced by its IEEE bytes (-0.0 != 0.0), lists and dicts kept.
+
+    Every NaN maps to one value: IEEE 754 leaves which operand's NaN (payload and sign) an addition of
+    two NaNs returns unspecified, and a C compiler may commute the operands (CPython's float ``+`` and
+    its builtin ``sum`` are compiled separately), so only NaN-ness is reproducible.
+    """
     if isinstance(value, float):
-        return struct.pack("<d", value)
+        return b"nan" if math.isnan(value) else struct.pack("<d", value)
     if isinstance(value, (list, tuple)):
         return type(value)(_bits(v) for v in value)
     if isinstance(value, dict):

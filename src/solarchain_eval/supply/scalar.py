@@ -12,6 +12,8 @@ inputs and the network's constants zipped once per env. Its outcome equals
 
 from __future__ import annotations
 
+import sys
+
 from .dynamics import (
     DAMPING_ELASTICITY,
     MAX_PRICE_RETURN,
@@ -27,6 +29,9 @@ from .dynamics import (
     SupplyRewardWeights,
 )
 
+#: Whether the builtin ``sum`` of floats adds left to right in plain double arithmetic, as the loops of
+#: ``supply_step`` do (CPython before 3.12; 3.12 made it a compensated sum, which rounds differently).
+_SEQUENTIAL_SUM = sys.version_info < (3, 12)
 _new_outcome = tuple.__new__  # SupplyOutcome from one tuple, without its Python-level __new__
 
 
@@ -132,13 +137,19 @@ class ScalarSupplyStep:
             arrivals_t = arrivals_t + arrivals
             spoiled_t = spoiled_t + spoiled
             on_hand_t = on_hand_t + stock
-            for slot in slots:
-                transit_t = transit_t + slot
+            if _SEQUENTIAL_SUM:
+                transit_t = sum(slots, transit_t)
+            else:
+                for slot in slots:
+                    transit_t = transit_t + slot
         n = len(region_rate)
-        mean_rate = 0.0
-        for rate in region_rate:
-            mean_rate = mean_rate + rate
-        mean_rate = mean_rate / n
+        if _SEQUENTIAL_SUM:
+            mean_rate = sum(region_rate, 0.0) / n
+        else:
+            mean_rate = 0.0
+            for rate in region_rate:
+                mean_rate = mean_rate + rate
+            mean_rate = mean_rate / n
         fairness = 0.0
         for rate in region_rate:
             fairness = fairness + (rate - mean_rate) * (rate - mean_rate)
