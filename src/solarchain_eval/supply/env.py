@@ -3,7 +3,8 @@
 One step is one day; an episode is the config's ``episode_steps`` days from a Monday. The pieces
 the envs share (the action decoding, the observation, the per-step record) are in :mod:`~.inputs`
 (and importable from here); the dynamics are :func:`~.dynamics.supply_step`, run on Python floats
-here and on (N,) arrays by :class:`~.vector.SupplyChainVectorEnv`.
+here (through its specialised copy :class:`~.scalar.ScalarSupplyStep`, equal to it bit for bit) and
+on (N,) arrays by :class:`~.vector.SupplyChainVectorEnv`.
 """
 
 from __future__ import annotations
@@ -36,6 +37,8 @@ from .inputs import (  # noqa: F401  (ENV_ID, INITIAL_ACTION, LEVER_NAMES, OBS, 
 )
 from .scalar import ScalarSupplyStep
 from .table import SupplyTable
+
+_FLOAT32 = np.dtype(np.float32)  # the native float32 dtype; numpy hands out this one instance
 
 
 class SupplyChainEnv(gym.Env):
@@ -80,7 +83,8 @@ class SupplyChainEnv(gym.Env):
         self.config, self.table, self.inputs = cfg, table, SupplyInputs(table, cfg)
         i = self.inputs
         # supply_step(SCALAR, ...) specialised for Python floats (equal to it bit for bit)
-        self._supply_step = ScalarSupplyStep(i.params, i.weights, i.orders, i.spoofed, i.levels)
+        # (its bound __call__: a call through the instance costs a slot lookup per step)
+        self._supply_step = ScalarSupplyStep(i.params, i.weights, i.orders, i.spoofed, i.levels).__call__
         self.action_mode, self.episode_steps, self.regions = cfg.action_mode, cfg.episode_steps, table.regions
         self._days = table.days
         self._continuous = self.inputs.grid is None
@@ -175,7 +179,7 @@ class SupplyChainEnv(gym.Env):
     def step(self, action: Any):
         if not self._open:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
-        if self._continuous and type(action) is np.ndarray and action.dtype == np.float32 and action.shape == (3,):
+        if self._continuous and type(action) is np.ndarray and action.dtype is _FLOAT32 and action.shape == (3,):
             # decode_action's clip of a (3,) float32 action on Python floats (clip_unit of each, written out)
             a, b, c = action.tolist()
             a = a if a > 0.0 else 0.0
