@@ -5,11 +5,13 @@ from __future__ import annotations
 
 import math
 import struct
+import sys
 
 import numpy as np
 import pytest
 
 from solarchain_eval.config import BenchmarkConfig
+from solarchain_eval.supply import scalar
 from solarchain_eval.supply.dynamics import SCALAR, SupplyParams, SupplyRewardWeights, supply_step
 from solarchain_eval.supply.env import STEP_FIELDS, SupplyChainEnv
 from solarchain_eval.supply.inputs import _INITIAL_PREV, decode_actions, jitter_of, step_record
@@ -42,8 +44,10 @@ def _value(rng: np.random.Generator, low: float, high: float) -> float:
     return float(rng.uniform(low, high))
 
 
+@pytest.mark.parametrize("builtin_sum", [True, False])  # the builtin sum (CPython < 3.12) or the loops
 @pytest.mark.parametrize("penalty", [True, False])
-def test_the_scalar_step_equals_the_generic_one_bit_for_bit(supply_table, penalty):  # noqa: F811
+def test_the_scalar_step_equals_the_generic_one_bit_for_bit(supply_table, penalty, builtin_sum, monkeypatch):  # noqa: F811
+    monkeypatch.setattr(scalar, "_SEQUENTIAL_SUM", builtin_sum and sys.version_info < (3, 12))
     params = SupplyParams.from_table(supply_table)
     weights = SupplyRewardWeights.from_config(BenchmarkConfig(no_physics_penalty=not penalty))
     rng = np.random.default_rng(11)
