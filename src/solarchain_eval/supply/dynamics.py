@@ -4,7 +4,8 @@
 allocation of retailer orders from *reported* stock, the feasibility oracle (stock on hand plus
 stock arriving by tomorrow, within the outbound lane's capacity), the price index and the reward.
 It is written per region against an arithmetic back-end, as the solar market's ``market_step``
-is: :data:`SCALAR` runs it on Python floats (the single env: no per-step numpy overhead),
+is: :data:`SCALAR` runs it on Python floats (the single env, through a copy specialised for floats,
+:class:`~.scalar.ScalarSupplyStep`, held equal to it bit for bit: a change here is made there too),
 :class:`BatchOps` on (N,) float64 arrays, one element per sub-env (the vector env), and
 :class:`~.jax_env.SupplyJaxOps` on JAX values (the JAX twin). A region
 quantity is a list with one such value per region (regions in the table's order); both back-ends

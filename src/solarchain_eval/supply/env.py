@@ -3,7 +3,8 @@
 One step is one day; an episode is the config's ``episode_steps`` days from a Monday. The pieces
 the envs share (the action decoding, the observation, the per-step record) are in :mod:`~.inputs`
 (and importable from here); the dynamics are :func:`~.dynamics.supply_step`, run on Python floats
-here and on (N,) arrays by :class:`~.vector.SupplyChainVectorEnv`.
+here (through its specialised copy :class:`~.scalar.ScalarSupplyStep`, equal to it bit for bit) and
+on (N,) arrays by :class:`~.vector.SupplyChainVectorEnv`.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import numpy as np
 from gymnasium import spaces
 
 from ..config import BenchmarkConfig
-from .dynamics import PRICE_NOISE_STD, SCALAR, SupplyOutcome, supply_step
+from .dynamics import PRICE_NOISE_STD, SCALAR, SupplyOutcome
 from .inputs import (  # noqa: F401  (ENV_ID, INITIAL_ACTION, LEVER_NAMES, OBS, STEP_FIELDS, action_grid: re-exported)
     _INITIAL_PREV,
     ENV_ID,
@@ -28,14 +29,16 @@ from .inputs import (  # noqa: F401  (ENV_ID, INITIAL_ACTION, LEVER_NAMES, OBS, 
     STEP_FIELDS,
     SupplyInputs,
     action_grid,
-    clip_unit,
     decode_actions,
     jitter_of,
     observation_totals,
     resolve,
     step_record,
 )
+from .scalar import ScalarSupplyStep
 from .table import SupplyTable
+
+_FLOAT32 = np.dtype(np.float32)  # the native float32 dtype; numpy hands out this one instance
 
 
 class SupplyChainEnv(gym.Env):
@@ -78,7 +81,14 @@ class SupplyChainEnv(gym.Env):
         super().__init__()
         cfg, table = resolve(data_dir, config, table, no_physics_penalty=no_physics_penalty, action_mode=action_mode)
         self.config, self.table, self.inputs = cfg, table, SupplyInputs(table, cfg)
+        i = self.inputs
+        # supply_step(SCALAR, ...) specialised for Python floats (equal to it bit for bit)
+        # (its bound __call__: a call through the instance costs a slot lookup per step)
+        self._supply_step = ScalarSupplyStep(i.params, i.weights, i.orders, i.spoofed, i.levels).__call__
         self.action_mode, self.episode_steps, self.regions = cfg.action_mode, cfg.episode_steps, table.regions
+        self._days = table.days
+        self._continuous = self.inputs.grid is None
+        self._any_spoofed = table.spoofed.any(axis=1).tolist()  # per day: is any stock report spoofed?
         self.observation_names = OBSERVATION_NAMES
         self.observation_space = spaces.Box(-OBS_LIMIT, OBS_LIMIT, (len(OBSERVATION_NAMES),), np.float32)
         self.action_space = (
@@ -89,6 +99,8 @@ class SupplyChainEnv(gym.Env):
         self._np_random = np.random.default_rng(cfg.seed if seed is None else seed)
         self._open = False
         self._begin(int(self.inputs.starts[0]), [0.0] * self.episode_steps)
+        honest = [False] * len(self.regions)
+        self._initial_totals = observation_totals(SCALAR, honest, honest, self._on_hand, self._pipeline, self._backlog)
 
     def _begin(self, start: int, noise: list) -> None:
         i = self.inputs
@@ -109,22 +121,11 @@ class SupplyChainEnv(gym.Env):
             effective = [a + b for a, b in zip(effective, out.region_effective_units, strict=True)]
         return {r: (a, b) for r, a, b in zip(self.regions, filled, effective, strict=True)}
 
-    def _observation(self, out: SupplyOutcome | None = None) -> np.ndarray:
-        """The observation of the current state; after a step, its totals are the step's ``out``'s."""
+    def _observation(self) -> np.ndarray:
+        """The observation of the current state (the step assembles its own from the step's totals)."""
         day = min(self._start + self._k, self.table.days - 1)
         i = self.inputs
-        if out is None:
-            totals = observation_totals(
-                SCALAR, i.spoofed[day], i.levels[day], self._on_hand, self._pipeline, self._backlog
-            )
-        else:
-            # The step summed stock on hand, backlog and stock in transit over the new state in
-            # observation_totals' order; only the day's reports are new (the vector env, which
-            # sums them all again, is held equal to this one bit for bit).
-            reported_t = 0.0
-            for spoof, level, stock in zip(i.spoofed[day], i.levels[day], self._on_hand, strict=True):
-                reported_t = reported_t + (level if spoof else stock)
-            totals = (out.on_hand_total_units, reported_t, out.unmet_units, out.in_transit_units)
+        totals = observation_totals(SCALAR, i.spoofed[day], i.levels[day], self._on_hand, self._pipeline, self._backlog)
         return i.observe_scalar(day, totals, self._price, self._prev)
 
     def reset(self, *, seed: int | None = None, options: dict[str, Any] | None = None):
@@ -139,8 +140,11 @@ class SupplyChainEnv(gym.Env):
             start = int(np.clip(int(fixed), 0, self.table.days - self.episode_steps))
         self._begin(start, noise)
         self._open = True
+        # With every report honest the totals are the initial state's, summed once at construction.
+        totals = None if self._any_spoofed[start] else self._initial_totals
+        obs = self._observation() if totals is None else self.inputs.observe_scalar(start, totals, 1.0, _INITIAL_PREV)
         # ``episode_start_hour`` is the generic rollout's name for the episode's first row (here a day).
-        return self._observation(), {"episode_start_hour": start, "episode_start_day": start}
+        return obs, {"episode_start_hour": start, "episode_start_day": start}
 
     def decode_action(self, action: Any) -> np.ndarray:
         """The executed (κ, ρ, δ), float32, for a policy action."""
@@ -160,50 +164,74 @@ class SupplyChainEnv(gym.Env):
 
     def _outcome(self, executed: tuple, jitter: Any) -> SupplyOutcome:
         """:func:`~.dynamics.supply_step` of ``executed`` on the current day from the current state (pure)."""
-        i, day = self.inputs, self._start + self._k
-        return supply_step(
-            SCALAR,
-            i.params,
-            i.weights,
+        return self._supply_step(
             self._on_hand,
             self._pipeline,
             self._backlog,
             self._price,
             self._peak,
-            i.orders[day],
-            i.spoofed[day],
-            i.levels[day],
+            self._start + self._k,
             executed,
             jitter,
             self._noise[self._k],
         )
 
-    def _executed(self, action: Any) -> tuple:
-        """:meth:`decode_action` as Python floats; a continuous (3,) action is clipped without numpy ufuncs."""
-        if self.inputs.grid is None:
-            u = np.asarray(action, dtype=np.float32)
-            if u.shape == (3,):
-                a, b, c = u.tolist()
-                return clip_unit(a), clip_unit(b), clip_unit(c)
-        return tuple(self.decode_action(action).tolist())
-
     def step(self, action: Any):
         if not self._open:
             raise RuntimeError("the episode is over (or was never started): call reset() first")
-        executed = self._executed(action)
-        k = self._k
-        day = self._start + k
-        i = self.inputs
-        jitter = jitter_of(executed, self._prev)
-        out = self._outcome(executed, jitter)
-        self._on_hand, self._pipeline, self._backlog = out.on_hand_units, out.pipeline_units, out.backlog_units
-        self._price, self._peak = out.price_index, out.peak_price_index
+        if self._continuous and type(action) is np.ndarray and action.dtype is _FLOAT32 and action.shape == (3,):
+            # decode_action's clip of a (3,) float32 action on Python floats (clip_unit of each, written out)
+            a, b, c = action.tolist()
+            a = a if a > 0.0 else 0.0
+            b = b if b > 0.0 else 0.0
+            c = c if c > 0.0 else 0.0
+            executed = (a if a < 1.0 else 1.0), (b if b < 1.0 else 1.0), (c if c < 1.0 else 1.0)
+        else:
+            executed = tuple(self.decode_action(action).tolist())
+        k, start, prev, i = self._k, self._start, self._prev, self.inputs
+        day = start + k
+        # jitter_of(executed, prev), written out
+        jitter = abs(executed[0] - prev[0]) + abs(executed[1] - prev[1]) + abs(executed[2] - prev[2])
+        out = self._supply_step(
+            self._on_hand, self._pipeline, self._backlog, self._price, self._peak, day, executed, jitter, self._noise[k]
+        )
+        on_hand = self._on_hand = out.on_hand_units
+        self._pipeline, self._backlog = out.pipeline_units, out.backlog_units
+        price = self._price = out.price_index
+        self._peak = out.peak_price_index
         self._outcomes.append(out)
         self._prev = executed
         self._k = k + 1
         truncated = k + 1 >= self.episode_steps
         self._open = not truncated
-        info = step_record(out, executed, day, self._start, i.check_rate_list[day], jitter, i.params.scale_units)
+        info = step_record(out, executed, day, start, i.check_rate_list[day], jitter, i.params.scale_units)
         info["step"] = k
-        info["region_fill_rates"] = dict(zip(self.regions, out.region_fill_rates, strict=True))
-        return self._observation(out), out.reward, False, truncated, info
+        # (zips not strict: the state has one entry per region by construction; a strict zip costs a keyword call)
+        info["region_fill_rates"] = dict(zip(self.regions, out.region_fill_rates))  # noqa: B905
+        # The next observation, as _observation() gives it (inputs.observe_scalar written out): stock on hand,
+        # backlog and stock in transit are the step's totals, summed in observation_totals' order; only the
+        # next day's reports are summed anew (the vector env sums them all again and is held equal bit for bit).
+        day = day + 1 if day + 1 < self._days else self._days - 1
+        if self._any_spoofed[day]:
+            reported_t = 0.0
+            for spoof, level, stock in zip(i.spoofed[day], i.levels[day], on_hand):  # noqa: B905
+                reported_t = reported_t + (level if spoof else stock)
+        else:  # every report honest: the sum is the step's on-hand total, the same additions in the same order
+            reported_t = out.on_hand_total_units
+        scale, lo, hi = i.params.scale_units, -OBS_LIMIT, OBS_LIMIT  # np.maximum then np.minimum: NaN stays NaN
+        v = out.on_hand_total_units / scale
+        on_hand_days = lo if v < lo else (hi if v > hi else v)
+        v = reported_t / scale
+        reported_days = lo if v < lo else (hi if v > hi else v)
+        v = out.in_transit_units / scale
+        transit_days = lo if v < lo else (hi if v > hi else v)
+        v = out.unmet_units / scale
+        backlog_days = lo if v < lo else (hi if v > hi else v)
+        price = lo if price < lo else (hi if price > hi else price)
+        r = i.template_rows[day]
+        obs = np.array(
+            (r[0], r[1], on_hand_days, reported_days, transit_days, r[5], backlog_days, price, r[8], r[9], r[10], r[11])
+            + executed,
+            dtype=np.float32,
+        )
+        return obs, out.reward, False, truncated, info
