@@ -11,7 +11,6 @@ from ..experiments.grid import Unit
 from ..experiments.grid_root import GridError
 from ..experiments.sweep_spec import SweepError, load_sweep
 from ..experiments.units import UnitResult
-from ..tasks.base import steps_per_day_of
 from ..tasks.registry import DEFAULT_TASK, get_task
 from . import app
 from .common import cli_error, console, err_console, invoked_command, register_user_error, reports_errors
@@ -111,10 +110,7 @@ def sweep(
 
         results = pd.read_csv(outcome.root / RESULTS_FILE)
         resamples = sweep_spec.spec.bootstrap_resamples
-        steps_per_day = steps_per_day_of(get_task(task))
-        write_sensitivity(
-            results, sweep_spec.axes, outcome.root / "sensitivity", resamples, task, steps_per_day=steps_per_day
-        )
+        write_sensitivity(results, sweep_spec.axes, outcome.root / "sensitivity", resamples, task)
         console.print(f"results: {outcome.root / RESULTS_FILE}; sensitivity: {outcome.root / 'sensitivity'}")
     if outcome.report.failed:
         for r in outcome.report.failed:

@@ -112,6 +112,17 @@ def parse_severity(text: str) -> tuple[float, float]:
     return lo, hi
 
 
+def scenario_from_knobs(rate: float, severity: str | None, pattern: str, burst_hours: int) -> FdiaScenario:
+    """The scenario the command line's and a sweep's knobs describe (``severity`` as ``"LO:HI"``,
+    None: the paper's multipliers); a one-line error names a bad value."""
+    return FdiaScenario(
+        rate=rate,
+        severity=parse_severity(severity) if severity is not None else None,
+        pattern=pattern,
+        burst_hours=burst_hours,
+    )
+
+
 def _multiplier(rng: np.random.Generator, scenario: FdiaScenario) -> float:
     if scenario.severity is None:
         return rng.choice(FDIA_MULTIPLIERS)

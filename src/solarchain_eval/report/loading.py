@@ -324,7 +324,8 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     records = {Path(r.where): r for r in [run_metadata, *units.values()] if r is not None}
     task = _task_of(root, records)
     # The metric columns are the task's declared ones (the solar market's for every run before tasks).
-    names = metric_names(get_task(task))
+    task_spec = get_task(task)
+    names = metric_names(task_spec)
     metrics, metric_paths = read_tables(root, METRICS_FILE, (*EPISODE_KEYS, *names), kind, names)
     if not metric_paths:
         where = f"{root}/{COMBINED_DIR}/<setting>/{METRICS_FILE}" if kind == "paper" else f"{root}/{METRICS_FILE}"
@@ -339,7 +340,7 @@ def load_report_data(root: Path, *, allow_unverified: bool = False) -> ReportDat
     log_frame = pd.concat(logs, ignore_index=True) if logs else pd.DataFrame(columns=[*LOG_KEYS, *LLM_CALL_FIELDS])
     # Steps are consecutive hours, so the episode's start hour is absolute_hour - step.
     log_frame["start_hour"] = pd.to_numeric(log_frame["absolute_hour"]) - pd.to_numeric(log_frame["step"])
-    diagnostics, diagnostic_paths = read_tables(root, DIAGNOSTICS_FILE, _diagnostics_required(get_task(task)), kind)
+    diagnostics, diagnostic_paths = read_tables(root, DIAGNOSTICS_FILE, _diagnostics_required(task_spec), kind)
     # Checked after the files parse, so a malformed file gets the message naming its row.
     unverified = verify_report_inputs(root, kind)
     if unverified and not allow_unverified:

@@ -28,7 +28,7 @@ import numpy as np
 import pandas as pd
 
 from ..common.atomic_files import atomic_write_text, atomic_write_with
-from ..tasks.base import DEFAULT_STEPS_PER_DAY
+from ..tasks.base import DEFAULT_STEPS_PER_DAY, steps_per_day_of
 from ..tasks.registry import DEFAULT_TASK, get_task
 from .naming import is_trained
 from .statistics import Interval, bootstrap_mean, bootstrap_mean_difference, start_days
@@ -199,13 +199,12 @@ def write_sensitivity(
     out_dir: Path,
     resamples: int = 2000,
     task: str = DEFAULT_TASK,
-    *,
-    steps_per_day: int = DEFAULT_STEPS_PER_DAY,
 ) -> dict:
     """Write ``sensitivity.csv``, ``findings.csv`` and ``sensitivity.md`` into ``out_dir`` (``task``:
-    the sweep's, whose metrics the tables cover; ``steps_per_day``: its steps per day,
+    the sweep's, whose metrics the tables cover and whose start days the intervals resample,
     :func:`~solarchain_eval.tasks.base.steps_per_day_of`)."""
     out = Path(out_dir)
+    steps_per_day = steps_per_day_of(get_task(task))
     table = sensitivity_table(results, axes, resamples, task, steps_per_day=steps_per_day)
     findings = findings_table(results, axes, resamples, steps_per_day=steps_per_day)
     atomic_write_with(out / SENSITIVITY_FILE, lambda tmp: table.to_csv(tmp, index=False))

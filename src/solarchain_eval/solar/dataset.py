@@ -34,7 +34,7 @@ from ..data.fdia import (
     FDIA_FRACTION,
     FDIA_PATTERN_LINES,
     FdiaScenario,
-    parse_severity,
+    scenario_from_knobs,
 )
 from ..data.files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE
 from ..data.heldout import MONTHS, TMY_FAMILY, build_checked, heldout_dataset
@@ -84,12 +84,7 @@ class SolarDataset:
         return cities
 
     def scenario(self, rate: float, severity: str | None, pattern: str, burst_hours: int) -> FdiaScenario:
-        return FdiaScenario(
-            rate=rate,
-            severity=parse_severity(severity) if severity is not None else None,
-            pattern=pattern,
-            burst_hours=burst_hours,
-        )
+        return scenario_from_knobs(rate, severity, pattern, burst_hours)
 
     def choose_weather(self, cities: Sequence[City], start: str, end: str, **options: Any) -> Any:
         return choose_weather(cities, start, end, **options)

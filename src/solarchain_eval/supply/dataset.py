@@ -16,7 +16,7 @@ from dataclasses import dataclass
 from pathlib import Path
 from typing import Any
 
-from ..data.fdia import DEFAULT_BURST_HOURS, DEFAULT_FDIA_PATTERN, FDIA_FRACTION, FdiaScenario, parse_severity
+from ..data.fdia import DEFAULT_BURST_HOURS, DEFAULT_FDIA_PATTERN, FDIA_FRACTION, FdiaScenario, scenario_from_knobs
 from ..tasks.dataset import SCENARIO_PARAMETERS, BuildDefaults, FalseDataKnobs
 from . import files as f
 from .build import MAX_DAYS, build_supply_dataset
@@ -60,12 +60,7 @@ class SupplyDataset:
     parameters: tuple[str, ...] = SCENARIO_PARAMETERS
 
     def scenario(self, rate: float, severity: str | None, pattern: str, burst_hours: int) -> FdiaScenario:
-        return FdiaScenario(
-            rate=rate,
-            severity=parse_severity(severity) if severity is not None else None,
-            pattern=pattern,
-            burst_hours=burst_hours,
-        )
+        return scenario_from_knobs(rate, severity, pattern, burst_hours)
 
     def build_point(self, out: Path, parameters: Mapping[str, Any]) -> dict[str, Any]:
         p = parameters
