@@ -161,7 +161,9 @@ def test_a_bad_suite_name_fails_in_one_line_and_writes_nothing(two_months, tmp_p
     out = tmp_path / "never"
     done = runner.invoke(app, ["evaluate", "--suite", "nope", "--out", str(out)])
     assert done.exit_code == 2
-    assert done.output.strip().splitlines() == ["error: unknown suite 'nope' (available: heldout, train, two-months)"]
+    assert done.output.strip().splitlines() == [
+        "error: unknown suite 'nope' (available: heldout, train, paper-early, paper-late, two-months)"
+    ]
     assert not out.exists()
     with pytest.raises(UnknownSuiteError, match="unknown suite 'nope'"):
         solarchain_eval.evaluate("static", suite="nope", out=out)

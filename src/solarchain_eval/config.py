@@ -11,8 +11,9 @@ import warnings
 from pathlib import Path
 from typing import Any, Literal
 
+import numpy as np
 import yaml
-from pydantic import BaseModel, ConfigDict, Field, ValidationError, model_validator
+from pydantic import BaseModel, ConfigDict, Field, ValidationError, field_validator, model_validator
 
 from .common.errors import OptionsError
 from .protocol import PAPER_EPISODES, PAPER_SEED
@@ -95,8 +96,50 @@ class EvaluationConfig(_Section):
 
 
 #: The :class:`BenchmarkConfig` fields that decide the solar market's task (hashed into a run's protocol);
-#: paths, training budgets and evaluation defaults do not.
-TASK_CONFIG_FIELDS = ("episode_steps", "discrete_levels", "no_physics_penalty", "market", "reward")
+#: paths, training budgets and evaluation defaults do not. ``start_days`` is hashed only when set, so
+#: that a run on every start day keeps the protocol id it had before the field existed.
+TASK_CONFIG_FIELDS = ("episode_steps", "discrete_levels", "no_physics_penalty", "market", "reward", "start_days")
+#: The largest day number ``start_days`` accepts (a dataset of 27 years of days).
+MAX_START_DAY = 10_000
+
+
+def parse_start_days(value: Any) -> list[int] | None:
+    """``start_days`` as sorted day numbers: a list of integers, or text such as ``"1-21"`` or ``"1-7,15"``.
+
+    Raises
+    ------
+    ValueError
+        A day below 1 or above :data:`MAX_START_DAY`, a day given twice, an empty list, a reversed
+        range or text that is not days and ranges (the message names the part at fault).
+    """
+    if value is None:
+        return None
+    if isinstance(value, str):
+        days: list[int] = []
+        for part in value.replace(" ", "").split(","):
+            first, dash, last = part.partition("-")
+            if not first.isdigit() or (dash and not last.isdigit()):
+                raise ValueError(f"'{part}' is neither a day nor a range of days such as 1-21")
+            low, high = int(first), int(last) if dash else int(first)
+            if high < low:
+                raise ValueError(f"the range '{part}' ends before it starts")
+            days.extend(range(low, min(high, MAX_START_DAY + 1) + 1))
+        value = days
+    if isinstance(value, (bool, int)) or not isinstance(value, (list, tuple)):
+        raise ValueError("give a list of day numbers or text such as '1-21'")
+    days = []
+    for day in value:
+        if isinstance(day, bool) or not isinstance(day, int):
+            raise ValueError(f"{day!r} is not a day number (1 = the dataset's first day)")
+        if not 1 <= day <= MAX_START_DAY:
+            raise ValueError(f"day {day} is outside 1..{MAX_START_DAY} (1 = the dataset's first day)")
+        days.append(int(day))
+    if not days:
+        raise ValueError("give at least one day (or leave start_days unset for every day)")
+    repeated = sorted({day for day in days if days.count(day) > 1})
+    if repeated:
+        raise ValueError(f"day(s) {', '.join(map(str, repeated))} given twice")
+    return sorted(days)
 
 
 class BenchmarkConfig(_Section):
@@ -109,10 +152,20 @@ class BenchmarkConfig(_Section):
     action_mode: Literal["continuous", "discrete"] = "continuous"
     discrete_levels: int = Field(5, ge=2, le=MAX_DISCRETE_LEVELS)
     no_physics_penalty: bool = False
+    start_days: list[int] | None = Field(
+        None,
+        description="Days an episode may start on (1 = the dataset's first day; a list or text such as "
+        "'1-21'); None: every day with a full episode after it.",
+    )
     market: MarketConfig = Field(default_factory=MarketConfig)
     reward: RewardConfig = Field(default_factory=RewardConfig)
     training: TrainingConfig = Field(default_factory=TrainingConfig)
     evaluation: EvaluationConfig = Field(default_factory=EvaluationConfig)
+
+    @field_validator("start_days", mode="before")
+    @classmethod
+    def _start_days(cls, value: Any) -> list[int] | None:
+        return parse_start_days(value)
 
     def with_updates(self, **updates: Any) -> BenchmarkConfig:
         """A validated copy with top-level fields replaced (``None`` values are ignored)."""
@@ -156,6 +209,44 @@ def check_episode_fits(config: BenchmarkConfig, hours: int, source: str = "the d
     """Refuse an ``episode_steps`` longer than the dataset (it would repeat the last hour)."""
     if config.episode_steps > hours:
         raise ConfigError(f"episode_steps = {config.episode_steps} is longer than {source}, which has {hours} hours")
+
+
+def select_starts(
+    starts: np.ndarray, start_days: list[int] | None, steps_per_day: int, source: str = "the dataset"
+) -> np.ndarray:
+    """The admissible episode starts (row indices) on ``start_days`` (all of ``starts`` when None).
+
+    A start's day is ``start // steps_per_day + 1``. Every listed day must be one of the starts'
+    days: a day without a full episode after it (or, for a market whose episodes start on given
+    weekdays, another day) is refused, naming the day and the days there are.
+
+    Raises
+    ------
+    ConfigError
+        A listed day that is not an admissible start day of ``source``.
+    """
+    if start_days is None:
+        return starts
+    days = starts // int(steps_per_day) + 1
+    missing = sorted(set(start_days) - set(days.tolist()))
+    if missing:
+        shown = ", ".join(map(str, missing[:5])) + (", ..." if len(missing) > 5 else "")
+        raise ConfigError(
+            f"start_days: day(s) {shown} of {source} have no episode start (its start days are "
+            f"{_day_ranges(days.tolist())}: days with a full episode after them)"
+        )
+    return starts[np.isin(days, start_days)]
+
+
+def _day_ranges(days: list[int]) -> str:
+    """``[1, 2, 3, 8]`` -> ``"1-3, 8"``."""
+    out: list[str] = []
+    for day in days:
+        if out and day == int(out[-1].rpartition("-")[2]) + 1:
+            out[-1] = f"{out[-1].partition('-')[0]}-{day}"
+        else:
+            out.append(str(day))
+    return ", ".join(out)
 
 
 def check_seeds(seeds: list[int] | tuple[int, ...]) -> None:

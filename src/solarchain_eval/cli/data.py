@@ -12,6 +12,7 @@ from ..common.atomic_files import sha256_file
 from ..common.errors import SolarChainError
 from ..tasks.dataset import dataset_of
 from ..tasks.registry import DEFAULT_TASK, get_task
+from ..tasks.suites import get_suite, suite_names
 from . import app
 from .common import CliError, cli_error, console, progress_bar, reports_errors, say
 from .help import HelpGroup
@@ -261,17 +262,28 @@ def splits() -> None:
     the test split (docs/dataset.md#splits).
     """
     table = Table(title="splits", title_justify="left")
-    for column in ("split", "role", "datasets", "start days", "what"):
+    for column in ("split", "role", "datasets", "start days", "suite", "what"):
         table.add_column(column)
+    suites: dict[str, list[str]] = {}  # split -> the suites on it alone (evaluate --suite NAME)
+    for name in suite_names():
+        (only, *more) = get_suite(name).splits
+        if not more:
+            suites.setdefault(only, []).append(name)
     for split in DATASET.splits():
         names = split.datasets
         shown = names[0] if len(names) == 1 else f"{names[0]} ... {names[-1]} ({len(names)})"
         days = split.start_days
         table.add_row(
-            split.name, split.role, shown, "all" if days is None else f"{days[0]}-{days[-1]}", split.description
+            split.name,
+            split.role,
+            shown,
+            "all" if days is None else f"{days[0]}-{days[-1]}",
+            ", ".join(suites.get(split.name, [])) or "-",
+            split.description,
         )
     console.print(table)
     say(f"rule: {DATASET.split_rule}", err=False)
+    say("evaluate an agent on a split: solarchain-eval evaluate --suite SUITE (docs/suites.md)", err=False)
 
 
 @data_app.command("check")

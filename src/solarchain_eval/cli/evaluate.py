@@ -257,7 +257,8 @@ def evaluate(
                     data_dir=data_dir,
                     task=entry.task,
                     # --config is the solar market's: another task's entry takes its own defaults
-                    **{**spec_options, "config": cfg if entry.task == DEFAULT_TASK else None},
+                    # the entry's own fields (a within-month split's start days) on top
+                    **{**spec_options, "config": entry.configure(cfg if entry.task == DEFAULT_TASK else None)},
                 ),
                 [s.text for s in specs],
                 out or _default_run_dir(cfg, f"suite-{chosen.name}"),

@@ -178,7 +178,9 @@ def make_env_params(
             ),
             f,
         ),
-        start_hours=jnp.asarray(start_hours(table.hours, cfg.episode_steps), jnp.int32),
+        start_hours=jnp.asarray(
+            start_hours(table.hours, cfg.episode_steps, cfg.start_days, str(table.source)), jnp.int32
+        ),
         discrete_actions=jnp.asarray(np.array(codec.discrete_table(cfg.discrete_levels), dtype=f32)),
         action_lo=jnp.asarray(codec.lo32, jnp.float32),
         action_hi=jnp.asarray(codec.hi32, jnp.float32),

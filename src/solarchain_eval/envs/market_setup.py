@@ -10,7 +10,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import BenchmarkConfig, check_episode_fits, load_config
+from ..config import BenchmarkConfig, check_episode_fits, load_config, select_starts
 from ..data.default import resolve_data_dir
 from ..data.table import HourlyTable, load_table
 from ..market.actions import ActionCodec, DiscreteActions, check_action_mode, initial_action
@@ -83,7 +83,7 @@ def setup_market(
     env.cities = env.table.cities
     env.observation_names = OBSERVATION_NAMES
     env._n_hours = env.table.hours
-    env._starts = start_hours(env.table.hours, cfg.episode_steps)
+    env._starts = start_hours(env.table.hours, cfg.episode_steps, cfg.start_days, str(env.table.source))
     env._depth_scale = max(cfg.market.initial_liquidity, 1e-9)
     env._initial_action = initial_action(cfg.market)
     env.single_observation_space = observation_space()
@@ -106,8 +106,11 @@ def market_inputs(table: HourlyTable) -> tuple[MarketHours, np.ndarray]:
     return cached[1], cached[2]
 
 
-def start_hours(n_hours: int, episode_steps: int) -> np.ndarray:
-    """Admissible episode starts: midnights with a full episode after them."""
-    if n_hours <= episode_steps:
-        return np.zeros(1, dtype=np.int64)
-    return np.arange(0, n_hours - episode_steps + 1, 24, dtype=np.int64)
+def start_hours(
+    n_hours: int, episode_steps: int, start_days: list[int] | None = None, source: str = "the dataset"
+) -> np.ndarray:
+    """Admissible episode starts: midnights with a full episode after them, on ``start_days`` when
+    given (day 1 = hour 0; a day without a full episode after it is a ConfigError)."""
+    last = max(n_hours - episode_steps, 0)  # a dataset no longer than an episode: one start, hour 0
+    starts = np.arange(0, last + 1, 24, dtype=np.int64)
+    return select_starts(starts, start_days, 24, source)

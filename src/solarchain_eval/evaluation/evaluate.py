@@ -274,7 +274,8 @@ def _evaluate_suite(
         raise SuiteError(f"suite={suite!r} names its tasks and datasets; give neither data= nor task=")
 
     def make_spec(entry: SuiteEntry, data_dir: Path, policies: list[Any]) -> EvaluationSpec:
-        return EvaluationSpec(policies=policies, data_dir=data_dir, task=entry.task, **spec_options)
+        options = {**spec_options, "config": entry.configure(spec_options.get("config"))}
+        return EvaluationSpec(policies=policies, data_dir=data_dir, task=entry.task, **options)
 
     def run(spec: EvaluationSpec, run_dir: Path):
         command = ["solarchain_eval.evaluate", f"suite={suite}"]

@@ -143,7 +143,7 @@ class SolarTask(BenchmarkConfigMethods):
         return SolarGovernanceView.from_config(config)
 
     def identity(self, config: BenchmarkConfig) -> dict[str, Any]:
-        return {"env": self.env_id}
+        return {"env": self.env_id, **self.start_days_identity(config)}
 
     def baselines(self) -> Mapping[str, Callable[..., Any]]:
         return {name: (lambda config, _name=name: make_baseline(_name, config.market)) for name in BASELINES}

@@ -15,7 +15,7 @@ from typing import Any
 
 import numpy as np
 
-from ..config import BenchmarkConfig, ConfigError, load_config
+from ..config import BenchmarkConfig, ConfigError, load_config, select_starts
 from .dynamics import SupplyOutcome, SupplyParams, SupplyRewardWeights
 from .table import SupplyTable, default_supply_dir, load_supply_table
 
@@ -112,7 +112,8 @@ class SupplyInputs:
         # Episodes start on Mondays with a whole episode after them (every day if there is no Monday).
         offset = (7 - first.weekday()) % 7
         last = table.days - self.steps
-        self.starts = np.arange(offset, last + 1, 7) if offset <= last else np.arange(0, last + 1)
+        starts = np.arange(offset, last + 1, 7) if offset <= last else np.arange(0, last + 1)
+        self.starts = select_starts(starts, config.start_days, 1, str(table.source))
         weekday = (first.weekday() + np.arange(table.days)) % 7
         self.check_rate = table.capacity_check_rate
         self.check_rate_list = self.check_rate.tolist()

@@ -119,7 +119,7 @@ class SupplyChainTask(BenchmarkConfigMethods):
         return tuple(info["region_fill_rates"].values())
 
     def identity(self, config: Any) -> dict[str, Any]:
-        return {"env": self.env_id}
+        return {"env": self.env_id, **self.start_days_identity(config)}
 
     def step_extra_names(self, data: SupplyTable) -> tuple[str, ...]:
         return tuple(data.regions)

@@ -29,7 +29,15 @@ class BenchmarkConfigMethods:
         return BenchmarkConfig.model_validate(record)
 
     def protocol_config(self, config: BenchmarkConfig) -> dict[str, Any]:
-        return config.model_dump(include=set(TASK_CONFIG_FIELDS))
+        fields = config.model_dump(include=set(TASK_CONFIG_FIELDS))
+        if fields.get("start_days") is None:  # every start day: the protocol as before the field existed
+            fields.pop("start_days", None)
+        return fields
+
+    def start_days_identity(self, config: BenchmarkConfig) -> dict[str, Any]:
+        """``{"start_days": [...]}`` for a run restricted to some start days, else nothing: the fingerprint
+        shows the restriction by name (and a run on every day keeps the fields it had before)."""
+        return {} if config.start_days is None else {"start_days": list(config.start_days)}
 
     def episode_steps(self, config: BenchmarkConfig) -> int:
         return config.episode_steps

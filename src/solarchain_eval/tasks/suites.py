@@ -15,8 +15,8 @@ from __future__ import annotations
 
 import importlib
 import re
-from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from collections.abc import Callable, Mapping, Sequence
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any
 
@@ -26,6 +26,8 @@ from ..common.errors import OptionsError
 BUILTIN_SUITES = {
     "heldout": "solarchain_eval.solar.suites:HELDOUT_SUITE",
     "train": "solarchain_eval.solar.suites:TRAIN_SUITE",
+    "paper-early": "solarchain_eval.solar.suites:PAPER_EARLY_SUITE",
+    "paper-late": "solarchain_eval.solar.suites:PAPER_LATE_SUITE",
 }
 _NAME = re.compile(r"^[a-z][a-z0-9-]{0,39}$")
 
@@ -55,16 +57,45 @@ class SuiteEntry:
     data : path or callable
         The dataset directory, or a function returning it (called when the suite runs, so that a
         dataset built on first use is built only then).
+    config_overrides : mapping
+        Top-level fields of the task's configuration the entry fixes (``{"start_days": [22, ...]}``
+        for a split that keeps some start days): they enter the entry's run protocol.
     """
 
     name: str
     task: str
     split: str
     data: Path | str | Callable[[], Path]
+    config_overrides: Mapping[str, Any] = field(default_factory=dict, hash=False)
 
     def data_dir(self) -> Path:
         """The entry's dataset directory (building it when ``data`` is a function that does)."""
         return Path(self.data() if callable(self.data) else self.data)
+
+    def configure(self, config: Any) -> Any:
+        """The configuration the entry runs: ``config`` (None: the task's default) with the entry's
+        overrides applied; None stays None when the entry has none.
+
+        Raises
+        ------
+        SuiteError
+            ``config`` itself sets a field the entry fixes, to another value (say, ``start_days``
+            from ``--config`` on a suite of a within-month split).
+        """
+        if not self.config_overrides:
+            return config
+        from .registry import get_task
+
+        task = get_task(self.task)
+        default = task.config_record(task.default_config())
+        record = task.config_record(task.default_config() if config is None else config)
+        for key, value in self.config_overrides.items():
+            if record.get(key) != default.get(key) and record.get(key) != value:
+                raise SuiteError(
+                    f"entry {self.name!r} fixes {key} = {value!r}; the configuration given sets {key} = "
+                    f"{record.get(key)!r} (leave {key} out of it to run this suite)"
+                )
+        return task.config_from_record({**record, **self.config_overrides})
 
 
 @dataclass(frozen=True)
