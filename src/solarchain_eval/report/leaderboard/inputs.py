@@ -29,7 +29,7 @@ from .sections import run_protocol as run_protocol
 from .suite_inputs import read_suite_input
 from .tarballs import TarballLimits, TarballRefused, unpack_tarball
 
-#: Names of inputs read as tarballs of a run directory or a paper root.
+#: Names of inputs read as tarballs of a run directory, a paper root or a suite root.
 TARBALL_SUFFIXES = (".tar", ".tar.gz", ".tgz", ".tar.bz2", ".tbz2", ".tar.xz", ".txz")
 
 
@@ -78,7 +78,11 @@ def open_inputs(paths: Sequence[Path | str], limits: TarballLimits | None = None
             path = Path(given)
             if _is_tarball(path):
                 scratch = Path(stack.enter_context(tempfile.TemporaryDirectory(prefix="solarchain-board-")))
-                sections += read_input(_unpack(path, scratch, limits), source=str(given))
+                unpacked = _unpack(path, scratch, limits)
+                if is_suite_root(unpacked):
+                    sections.append(read_suite_input(unpacked, source=str(given)))
+                else:
+                    sections += read_input(unpacked, source=str(given))
             elif path.is_dir() and is_suite_root(path):
                 sections.append(read_suite_input(path, source=str(given)))
             elif path.is_dir():

@@ -7,9 +7,11 @@ a member that is neither a file nor a folder (a link, a device), or a file that 
 it vouches for. Vouched for are, in a run directory, ``run_metadata.json`` and the files whose
 sha256 it records; in a paper root, ``paper_metadata.json``, the combined files whose sha256 it
 records, and each evaluation unit's ``run_metadata.json``, the files it records and the grid's
-own bookkeeping (``unit.json``, ``unit.log``, ``DONE``). The metadata is read from the archive
-in memory. Only then are the members extracted (with tarfile's ``data`` filter), and the
-leaderboard verifies every file against its sha256 as for a folder.
+own bookkeeping (``unit.json``, ``unit.log``, ``DONE``); in a suite root, ``suite_metadata.json``,
+the files whose sha256 it records (each entry's ``run_metadata.json`` among them) and the files
+each of those run metadata records. The metadata is read from the archive in memory. Only then
+are the members extracted (with tarfile's ``data`` filter), and the leaderboard verifies every
+file against its sha256 as for a folder.
 """
 
 from __future__ import annotations
@@ -23,6 +25,7 @@ from typing import Any
 
 from ...common.errors import RefusedError
 from ...evaluation.run_metadata import RunMetadata, RunMetadataError
+from ...evaluation.suite_run import SUITE_METADATA_FILE
 from ...experiments.layout import COMBINED_DIR, DONE_MARKER, METADATA_FILE, PAPER_METADATA_FILE, UNITS_DIR
 from ..options import DEFAULT_MAX_MEMBERS, DEFAULT_MAX_UNPACKED_MB
 
@@ -102,6 +105,9 @@ def vouched_files(read_json: Callable[[str], Any], folders: set[str]) -> set[str
     ``read_json(path)`` gives a metadata file's JSON (None when absent); ``folders`` are the
     folders the archive holds (to find a paper root's evaluation units).
     """
+    suite = read_json(SUITE_METADATA_FILE)
+    if suite is not None:
+        return _suite_files(read_json, suite)
     paper = read_json(PAPER_METADATA_FILE)
     if paper is None:
         return {METADATA_FILE, *(_run_files(read_json, METADATA_FILE) or [])}
@@ -116,6 +122,21 @@ def vouched_files(read_json: Callable[[str], Any], folders: set[str]) -> set[str
         if unit is not None:
             names = [METADATA_FILE, *unit, *UNIT_BOOKKEEPING]
             vouched |= {f"{folder}/{name}" for name in names}
+    return vouched
+
+
+def _suite_files(read_json: Callable[[str], Any], suite: Any) -> set[str]:
+    """What a suite root's ``suite_metadata.json`` vouches for: itself, the files whose sha256 it
+    records and, for each entry's ``run_metadata.json`` among them, the files that one records."""
+    vouched = {SUITE_METADATA_FILE}
+    recorded = suite.get("sha256") if isinstance(suite, dict) else None
+    for path in recorded if isinstance(recorded, dict) else ():
+        if not isinstance(path, str):
+            continue
+        vouched.add(path)
+        folder, _, name = path.rpartition("/")
+        if folder and name == METADATA_FILE:
+            vouched |= {f"{folder}/{file}" for file in _run_files(read_json, path) or []}
     return vouched
 
 
@@ -154,10 +175,10 @@ def unpack_tarball(tarball: Path, into: Path, limits: TarballLimits | None = Non
 
             folders = {rel for name, rel in relative.items() if archive.getmember(name).isdir()}
             folders |= {str(PurePosixPath(rel).parent) for rel in files}
-            if read_json(METADATA_FILE) is None and read_json(PAPER_METADATA_FILE) is None:
+            if all(read_json(name) is None for name in (METADATA_FILE, PAPER_METADATA_FILE, SUITE_METADATA_FILE)):
                 raise TarballRefused(
-                    f"{tarball}: holds no {METADATA_FILE} or {PAPER_METADATA_FILE} at its top or in its one folder; "
-                    "pack one run directory or paper root (tar czf run.tar.gz RUN_DIR)"
+                    f"{tarball}: holds no {METADATA_FILE}, {PAPER_METADATA_FILE} or {SUITE_METADATA_FILE} at its top "
+                    "or in its one folder; pack one run directory, paper root or suite root (tar czf run.tar.gz RUN_DIR)"
                 )
             try:
                 vouched = vouched_files(read_json, folders)
@@ -166,11 +187,12 @@ def unpack_tarball(tarball: Path, into: Path, limits: TarballLimits | None = Non
             stray = sorted(rel for rel in files if rel not in vouched)
             if stray:
                 more = f" (and {len(stray) - 1} more)" if len(stray) > 1 else ""
-                pack = (
-                    f"pack a paper root's {PAPER_METADATA_FILE}, {COMBINED_DIR}/ and {UNITS_DIR}/eval/ only"
-                    if PAPER_METADATA_FILE in files
-                    else "pack only the run directory (tar czf run.tar.gz RUN_DIR)"
-                )
+                if SUITE_METADATA_FILE in files:
+                    pack = "pack only the suite root (tar czf suite.tar.gz SUITE_ROOT)"
+                elif PAPER_METADATA_FILE in files:
+                    pack = f"pack a paper root's {PAPER_METADATA_FILE}, {COMBINED_DIR}/ and {UNITS_DIR}/eval/ only"
+                else:
+                    pack = "pack only the run directory (tar czf run.tar.gz RUN_DIR)"
                 raise TarballRefused(
                     f"{tarball}: {top / stray[0]}{more} is not vouched for by the run's metadata; refused before "
                     f"unpacking ({pack})"
