@@ -99,7 +99,7 @@ def test_a_month_is_byte_reproducible_and_pinned(april, tmp_path):
 def test_the_manifest_records_source_sites_and_licence(april):
     manifest = json.loads((april.out_dir / MANIFEST_FILE).read_text())
     assert (manifest["start"], manifest["end"], manifest["timezone"]) == ("2027-04-01", "2027-05-01", "Etc/GMT+9")
-    assert manifest["seed"] == DEFAULT_SEED + 4 and manifest["hours"] == 720
+    assert manifest["seed"] == DEFAULT_SEED + 4 and manifest["hours"] == 720 and manifest["family"] == TMY_FAMILY
     assert [c["name"] for c in manifest["cities"]] == ["Greensboro", "Sand Point", "Miami"]
     assert [(e["file"], e["format"], e["site"]["utc_offset_h"]) for e in manifest["weather_files"]] == [
         ("723170TYA.CSV", "tmy3", -5.0),

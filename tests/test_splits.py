@@ -7,8 +7,8 @@ import pytest
 from solarchain_eval.data.splits import PAPER_DATASET, SPLITS, dataset_dir, get_split
 
 
-def test_the_four_splits_and_their_datasets():
-    assert list(SPLITS) == ["train", "test", "paper-early", "paper-late"]
+def test_the_five_splits_and_their_datasets():
+    assert list(SPLITS) == ["train", "test", "paper-early", "paper-late", "paper-cities"]
     assert get_split("train").datasets == (PAPER_DATASET,)
     assert get_split("test").datasets == tuple(f"tmy-3sites-{m:02d}" for m in range(1, 13))
     assert {s.name: s.role for s in SPLITS.values()} == {
@@ -16,8 +16,10 @@ def test_the_four_splits_and_their_datasets():
         "test": "test",
         "paper-early": "train",
         "paper-late": "test",
+        "paper-cities": "test",
     }
-    with pytest.raises(KeyError, match="unknown split 'dev'.*train, test, paper-early, paper-late"):
+    assert get_split("paper-cities").datasets == tuple(f"paper-cities-2026-{m:02d}" for m in range(5, 11))
+    with pytest.raises(KeyError, match="unknown split 'dev'.*train, test, paper-early, paper-late, paper-cities"):
         get_split("dev")
 
 
@@ -43,6 +45,7 @@ def test_split_datasets_resolve_to_directories(tmp_path, monkeypatch):
     monkeypatch.setenv("SOLARCHAIN_CACHE_DIR", str(tmp_path))
     assert dataset_dir(PAPER_DATASET, build=False) == default_dataset_dir(build=False)
     assert dataset_dir("tmy-3sites-07", build=False) == tmp_path / "datasets" / "tmy-3sites-07"
+    assert dataset_dir("paper-cities-2026-09", build=False) == tmp_path / "datasets" / "paper-cities-2026-09"
     with pytest.raises(KeyError, match="unknown dataset 'paper'"):
         dataset_dir("paper", build=False)
 
@@ -57,4 +60,5 @@ def test_the_cli_lists_the_splits_and_the_rule():
     rows = {line.split("│")[1].strip(): line for line in result.output.splitlines() if line.count("│") >= 5}
     assert "22-30" in rows["paper-late"] and "1-21" in rows["paper-early"]
     assert "tmy-3sites-01 ... tmy-3sites-12 (12)" in rows["test"]
+    assert "paper-cities-2026-05 ..." in rows["paper-cities"] and "paper-cities-2026-10 (6)" in result.output
     assert "rule: train and tune on the train split only; report the test split" in result.output

@@ -162,7 +162,7 @@ def test_a_bad_suite_name_fails_in_one_line_and_writes_nothing(two_months, tmp_p
     done = runner.invoke(app, ["evaluate", "--suite", "nope", "--out", str(out)])
     assert done.exit_code == 2
     assert done.output.strip().splitlines() == [
-        "error: unknown suite 'nope' (available: heldout, train, paper-early, paper-late, two-months)"
+        "error: unknown suite 'nope' (available: heldout, train, paper-early, paper-late, paper-cities, two-months)"
     ]
     assert not out.exists()
     with pytest.raises(UnknownSuiteError, match="unknown suite 'nope'"):

@@ -52,7 +52,7 @@ COMMANDS = {
     "bench-scale": ("bench_scale", "Scale benchmark: build, load and step synthetic datasets of growing size."),
     "bench-suite": (
         "bench_suite",
-        "Time building every shipped suite's datasets into a fresh cache and evaluating Static, Random "
+        "Time building every shipped offline suite's datasets into a fresh cache and evaluating Static, Random "
         "and Myopic over the held-out suite, each beside a reference on the paper's dataset.",
     ),
     "bench-agent": (

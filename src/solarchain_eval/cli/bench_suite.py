@@ -25,7 +25,10 @@ def _met(wall_s: float, cpu_s: float, target_s: float | None, complete: bool) ->
 @reports_errors
 def bench_suite(
     build: str | None = typer.Option(
-        None, "--build", help="Comma-separated suites whose datasets are built (default: every shipped suite)."
+        None,
+        "--build",
+        help="Comma-separated suites whose datasets are built (default: every shipped suite built offline, so "
+        "not paper-cities).",
     ),
     suite: str = typer.Option("heldout", "--suite", help="The suite evaluated."),
     entries: int | None = typer.Option(
@@ -43,7 +46,7 @@ def bench_suite(
     ),
     json_out: Path | None = typer.Option(None, "--json", help="Also write the figures to this JSON file."),
 ) -> None:
-    """Time building every shipped suite's datasets into a fresh cache and evaluating Static, Random
+    """Time building every shipped offline suite's datasets into a fresh cache and evaluating Static, Random
     and Myopic over the held-out suite, each beside a reference on the paper's dataset.
 
     The build goes into an empty cache, as a first `evaluate --suite` builds; its reference is the

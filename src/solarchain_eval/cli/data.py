@@ -220,19 +220,33 @@ def _show_build(manifest: dict, out: Path, seed: int, n_cities: int) -> None:
 @data_app.command("build-family")
 @reports_errors
 def build_family(
-    family: str = typer.Argument(..., metavar="FAMILY", help="The held-out family: tmy-3sites."),
+    family: str = typer.Argument(..., metavar="FAMILY", help="The held-out family: tmy-3sites or paper-cities."),
     out: Path = typer.Option(..., "--out", help="Directory to write one dataset directory per month into."),
-    month: list[int] | None = typer.Option(
-        None, "--month", min=1, max=12, help="A month to build (1-12); repeat for several. Default: all twelve."
+    month: list[str] | None = typer.Option(
+        None,
+        "--month",
+        help="A month to build: 1-12 for tmy-3sites, YYYY-MM for paper-cities; repeat for several. "
+        "Default: the family's months (tmy-3sites: all twelve; paper-cities: 2026-05 to 2026-10).",
+        show_default=False,
     ),
     force: bool = typer.Option(False, "--force", help="Overwrite datasets already in --out."),
+    open_meteo_url: str | None = typer.Option(
+        None,
+        help="Archive endpoint for paper-cities (default: $SOLARCHAIN_OPEN_METEO_URL or the public API).",
+    ),
+    retries: int = typer.Option(4, min=0, help="Retries per Open-Meteo request (paper-cities)."),
 ) -> None:
-    """Build a held-out dataset family offline from the weather shipped with the package.
+    """Build a held-out dataset family: tmy-3sites offline, paper-cities online once.
 
-    Writes OUT/FAMILY-MM/ (four CSVs and manifest.json) per month and checks each against the
-    sha256s shipped with the package; a month that differs is not written (exit 2). The family's
-    design and licence are in docs/dataset.md#held-out-family-tmy-3sites.
+    Writes OUT/NAME/ (four CSVs and manifest.json) per month. tmy-3sites (OUT/tmy-3sites-MM/) is
+    built from the weather shipped with the package and checked against the sha256s shipped with
+    it; a month that differs is not written (exit 2). paper-cities (OUT/paper-cities-YYYY-MM/) is
+    the paper's five cities in other months, with Open-Meteo weather fetched once and cached, so a
+    rebuild is byte-identical; April 2026, the paper's month, is refused. A failure removes what
+    the command wrote. The families' cards are in docs/dataset.md#held-out-family-tmy-3sites and
+    docs/dataset.md#held-out-family-paper-cities.
     """
+    import shutil
     import time
 
     datasets = DATASET.family(family, month)
@@ -242,15 +256,26 @@ def build_family(
     table = Table(title=f"{family} written to {out}", title_justify="left")
     for column in ("dataset", "dates", "hours", "sha256 (4 CSVs)"):
         table.add_column(column)
-    with progress_bar(f"building {family}", len(datasets)) as advance:
-        for dataset in datasets:
-            hours = DATASET.build_family_member(dataset, out / dataset.name, replace=force)["hours"]
-            table.add_row(dataset.name, f"{dataset.start} to {dataset.end}", str(hours), "match the shipped ones")
-            advance(1)
+    options = {"open_meteo_url": open_meteo_url, "retries": retries, "notify": say}
+    made: list[Path] = []
+    new_out = not out.exists()
+    try:
+        with progress_bar(f"building {family}", len(datasets)) as advance:
+            for dataset in datasets:
+                target = out / dataset.name
+                manifest = DATASET.build_family_member(dataset, target, replace=force, **options)
+                made.append(target)
+                checked = "match the shipped ones" if dataset.pinned else "in its manifest.json (not pinned)"
+                table.add_row(dataset.name, f"{dataset.start} to {dataset.end}", str(manifest["hours"]), checked)
+                advance(1)
+    except BaseException:
+        for target in made:  # nothing half-written: the months this command built go too
+            shutil.rmtree(target, ignore_errors=True)
+        if new_out and out.is_dir() and not any(out.iterdir()):
+            out.rmdir()
+        raise
     console.print(table)
-    say(
-        f"{len(datasets)} datasets in {time.perf_counter() - began:.1f} s; weather: public NREL data (NSRDB)", err=False
-    )
+    say(f"{len(datasets)} datasets in {time.perf_counter() - began:.1f} s; weather: {datasets[0].weather}", err=False)
 
 
 @data_app.command("splits")

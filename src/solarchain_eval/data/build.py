@@ -232,6 +232,7 @@ def build_dataset(
     fdia: FdiaScenario | None = None,
     weather_files: Sequence[Mapping] | None = None,
     attribution: Mapping[str, str] | None = None,
+    family: str | None = None,
 ) -> BuildResult:
     """Build the four dataset CSVs and ``manifest.json`` into ``out_dir``.
 
@@ -240,7 +241,8 @@ def build_dataset(
     5 % of the records, uniform, the paper's multipliers); the manifest records it, and the
     weather's licence attribution when it is third-party data (Open-Meteo, CC BY 4.0).
     A build from standard weather files passes their ``weather_files`` entries (file, format,
-    sha256, site, licence) and their ``attribution``, which the manifest records.
+    sha256, site, licence) and their ``attribution``, which the manifest records. A dataset of a
+    held-out family passes the ``family``'s name, which the manifest records too.
     """
     if nodes_per_city < 1:
         raise ValueError("nodes_per_city must be at least 1")
@@ -287,6 +289,8 @@ def build_dataset(
         "fdia": fdia_entry,
         "package_versions": package_versions(),
     }
+    if family is not None:
+        manifest["family"] = family
     if weather_files is not None:
         manifest["weather_files"] = [dict(entry) for entry in weather_files]
     atomic_write_json(out / MANIFEST_FILE, manifest)

@@ -148,6 +148,7 @@ def build_heldout(dataset: HeldoutDataset, out_dir: str | Path, progress=None):
         weather_sha256=weather.sha256,
         weather_files=weather.entries,
         attribution=weather.attribution,
+        family=dataset.family,
         **extra,
     )
 
@@ -170,10 +171,13 @@ def heldout_dataset_dir(family: str, month: int, build: bool = True) -> Path:
     return build_checked(dataset, target)
 
 
-def build_checked(dataset: HeldoutDataset, target: str | Path, progress=None, replace: bool = False) -> Path:
-    """Build ``dataset`` into ``target`` only if its CSVs match the shipped sha256s.
+def build_checked(
+    dataset: HeldoutDataset, target: str | Path, progress=None, replace: bool = False, build=build_heldout
+) -> Path:
+    """Build ``dataset`` into ``target`` only if its CSVs match the shipped sha256s (when it has any).
 
-    As for the default dataset, the build goes to a temporary directory renamed into place only
+    ``build(dataset, out_dir, progress=...)`` writes the dataset (default: :func:`build_heldout`,
+    from the packaged weather). As for the default dataset, the build goes to a temporary directory renamed into place only
     when its CSVs match, so nothing half-built or different is ever left behind. ``replace``
     removes a complete dataset already in ``target`` first (otherwise it is kept).
 
@@ -186,7 +190,7 @@ def build_checked(dataset: HeldoutDataset, target: str | Path, progress=None, re
     target.parent.mkdir(parents=True, exist_ok=True)
     staging = Path(tempfile.mkdtemp(prefix=f".{dataset.name}.", dir=target.parent))
     try:
-        build_heldout(dataset, staging, progress=progress)
+        build(dataset, staging, progress=progress)
         wrong = mismatches(dataset.name, {name: sha256_file(staging / name) for name in DATASET_FILES})
         if wrong:
             listed = "; ".join(

@@ -20,6 +20,8 @@ from .weather import CityWeather, WeatherError
 
 DEFAULT_ARCHIVE_URL = "https://archive-api.open-meteo.com/v1/archive"
 SOURCE_NAME = "Open-Meteo Historical Weather API"
+#: What the error of an unreachable archive suggests to a ``data build`` user.
+OFFLINE_HINT = "Offline? Use --weather-cache FILE (a cached payload) or --weather synthetic."
 _RETRY_STATUS = {429, 500, 502, 503, 504}
 
 
@@ -73,8 +75,11 @@ def fetch_city(
     retries: int = 4,
     backoff_s: float = 1.0,
     sleep: Callable[[float], None] = time.sleep,
+    hint: str = OFFLINE_HINT,
 ) -> CityWeather:
-    """Fetch [start, end) for one city. ``end`` is exclusive; the API's end_date is inclusive."""
+    """Fetch [start, end) for one city. ``end`` is exclusive; the API's end_date is inclusive.
+
+    ``hint`` ends the error of an archive still unreachable after the retries (what to do instead)."""
     last_day = (dt.date.fromisoformat(end) - dt.timedelta(days=1)).isoformat()
     params = {
         "latitude": city.latitude,
@@ -105,8 +110,7 @@ def fetch_city(
             raise WeatherError(f"Open-Meteo answered for {city.name} with something that is not JSON") from None
         return parse_archive_response(payload, city, timezone)
     raise WeatherError(
-        f"could not get weather for {city.name} from {url} after {retries + 1} attempts ({problem}). "
-        "Offline? Use --weather-cache FILE (a cached payload) or --weather synthetic."
+        f"could not get weather for {city.name} from {url} after {retries + 1} attempts ({problem}). {hint}"
     )
 
 
@@ -121,14 +125,15 @@ def fetch_weather(
     retries: int = 4,
     backoff_s: float = 1.0,
     on_city: Callable[[str], None] | None = None,
+    hint: str = OFFLINE_HINT,
 ) -> dict[str, CityWeather]:
-    """Fetch every city's hourly weather from the archive API."""
+    """Fetch every city's hourly weather from the archive API (``hint``: as for :func:`fetch_city`)."""
     endpoint = url or archive_url()
     weather: dict[str, CityWeather] = {}
     with httpx.Client(timeout=timeout_s, headers={"User-Agent": "solarchain-eval"}) as client:
         for city in cities:
             weather[city.name] = fetch_city(
-                client, endpoint, city, start, end, timezone, retries=retries, backoff_s=backoff_s
+                client, endpoint, city, start, end, timezone, retries=retries, backoff_s=backoff_s, hint=hint
             )
             if on_city is not None:
                 on_city(city.name)

@@ -2,7 +2,8 @@
 
 The rule for a result that claims generality: **train and tune on ``train`` only**, and report
 ``test``. Users who must stay on the paper's data split its month by start day instead
-(``paper-early`` to train and tune, ``paper-late`` to report). A split lists datasets and, per
+(``paper-early`` to train and tune, ``paper-late`` to report). ``paper-cities`` reports the
+paper's own market in the six months after its month. A split lists datasets and, per
 dataset, the days an episode may start on (1 = the dataset's first midnight); ``None`` means
 every start day the dataset has.
 """
@@ -13,6 +14,8 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from .heldout import TMY_FAMILY, family_datasets, heldout_dataset_dir
+from .paper_cities import PAPER_CITIES_FAMILY, PAPER_CITIES_MONTHS, paper_cities_dataset_dir
+from .paper_cities import family_datasets as paper_cities_datasets
 
 #: The rule the docs state for results that claim generality.
 SPLIT_RULE = "train and tune on the train split only; report the test split"
@@ -74,6 +77,13 @@ SPLITS: dict[str, Split] = {
             f"the paper's dataset, episodes starting on days {PAPER_LAST_EARLY_DAY + 1}-{PAPER_DAYS}",
             (SplitEntry(PAPER_DATASET, _LATE),),
         ),
+        Split(
+            PAPER_CITIES_FAMILY,
+            "test",
+            f"the held-out family {PAPER_CITIES_FAMILY}: the paper's five cities, "
+            f"{PAPER_CITIES_MONTHS[0]} to {PAPER_CITIES_MONTHS[-1]}, every start day (built online once)",
+            tuple(SplitEntry(dataset.name) for dataset in paper_cities_datasets()),
+        ),
     )
 }
 
@@ -93,11 +103,15 @@ def get_split(name: str) -> Split:
 
 
 def dataset_dir(dataset: str, build: bool = True) -> Path:
-    """The directory of a dataset a split names (built offline on first use)."""
+    """The directory of a dataset a split names, built on first use: offline, except a month of
+    ``paper-cities`` (``paper-cities-YYYY-MM``), built online once and from the cache afterwards."""
     if dataset == PAPER_DATASET:
         from .default import default_dataset_dir
 
         return default_dataset_dir(build=build)
+    prefix = f"{PAPER_CITIES_FAMILY}-"
+    if dataset.startswith(prefix):
+        return paper_cities_dataset_dir(dataset.removeprefix(prefix), build=build)
     family, _, month = dataset.rpartition("-")
     if not month.isdigit():
         raise KeyError(f"unknown dataset '{dataset}'")

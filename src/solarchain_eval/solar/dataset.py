@@ -38,9 +38,12 @@ from ..data.fdia import (
 )
 from ..data.files import DATASET_FILES, GENERATION_FILE, MANIFEST_FILE
 from ..data.heldout import MONTHS, TMY_FAMILY, build_checked, heldout_dataset
+from ..data.paper_cities import PAPER_CITIES_FAMILY, PAPER_CITIES_MONTHS, build_online
+from ..data.paper_cities import family_datasets as paper_cities_datasets
 from ..data.published import PAPER_WEATHER_SHA256, matches_published
 from ..data.sources import WeatherSource, choose_weather
 from ..data.splits import SPLIT_RULE, SPLITS
+from ..data.weather import WeatherError
 from ..data.weather_files import FileWeather, etc_zone, parse_weather_file_spec, read_weather_file, weather_from_files
 from ..tasks.dataset import (
     SCENARIO_PARAMETERS,
@@ -70,7 +73,7 @@ class SolarDataset:
     downloaded_weather_sources: tuple[str, ...] = (WeatherSource.open_meteo.value,)
     paper_weather_sha256: str | None = PAPER_WEATHER_SHA256
     split_rule: str = SPLIT_RULE
-    families: tuple[str, ...] = (TMY_FAMILY,)
+    families: tuple[str, ...] = (TMY_FAMILY, PAPER_CITIES_FAMILY)
     #: The paper's five cities (the default of a build that names none).
     default_cities: tuple[City, ...] = PAPER_CITIES
     #: What :meth:`build_point` reads: the scenario's parameters, the cities and their weather.
@@ -197,13 +200,33 @@ class SolarDataset:
             out.append(SplitSummary(split.name, split.role, split.description, split.datasets, days))
         return tuple(out)
 
-    def family(self, family: str, months: Sequence[int] | None) -> tuple[FamilyMember, ...]:
-        members = (heldout_dataset(family, m) for m in (sorted(set(months)) if months else MONTHS))
-        return tuple(FamilyMember(d.name, d.start, d.end, handle=d) for d in members)
+    def family(self, family: str, months: Sequence[str | int] | None) -> tuple[FamilyMember, ...]:
+        """``tmy-3sites``: months 1-12 (default all twelve); ``paper-cities``: months ``YYYY-MM``
+        (default 2026-05 to 2026-10)."""
+        if family == PAPER_CITIES_FAMILY:
+            chosen = paper_cities_datasets(tuple(str(m) for m in months) if months else PAPER_CITIES_MONTHS)
+            weather = "Weather data by Open-Meteo.com (CC BY 4.0), fetched online once and cached"
+            return tuple(FamilyMember(d.name, d.start, d.end, d, pinned=False, weather=weather) for d in chosen)
+        if family != TMY_FAMILY:
+            raise WeatherError(f"unknown held-out family '{family}' (known: {', '.join(self.families)})")
+        numbers = sorted({_month_number(family, m) for m in months}) if months else MONTHS
+        members = (heldout_dataset(family, m) for m in numbers)
+        return tuple(FamilyMember(d.name, d.start, d.end, d, weather="public NREL data (NSRDB)") for d in members)
 
-    def build_family_member(self, member: FamilyMember, out: Path, *, replace: bool) -> dict[str, Any]:
-        target = build_checked(member.handle, out, replace=replace)
+    def build_family_member(self, member: FamilyMember, out: Path, *, replace: bool, **options: Any) -> dict[str, Any]:
+        if member.handle.family == PAPER_CITIES_FAMILY:
+            online = {key: options[key] for key in ("open_meteo_url", "retries", "notify") if key in options}
+            target = build_online(member.handle, out, replace=replace, **online)
+        else:
+            target = build_checked(member.handle, out, replace=replace)
         return json.loads((target / MANIFEST_FILE).read_text(encoding="utf-8"))
+
+
+def _month_number(family: str, month: str | int) -> int:
+    """A month of ``tmy-3sites`` as given on the command line (``4``, ``04``) as its number."""
+    if isinstance(month, int) or str(month).strip().isdigit():
+        return int(month)
+    raise WeatherError(f"{family}: month must be 1..12, got {month!r}")
 
 
 #: The solar market's dataset builder (``SOLAR_TASK.dataset``).

@@ -106,13 +106,17 @@ class SplitSummary:
 
 @dataclass(frozen=True)
 class FamilyMember:
-    """One dataset of a shipped family (``data build-family``): its directory name and dates, and
-    ``handle``, the builder's own description of it (generic code passes it back unread)."""
+    """One dataset of a shipped family (``data build-family``): its directory name and dates,
+    ``handle``, the builder's own description of it (generic code passes it back unread),
+    ``pinned``, whether its files are checked against sha256s shipped with the package, and
+    ``weather``, its weather and licence in a few words."""
 
     name: str
     start: str
     end: str
     handle: Any = None
+    pinned: bool = True
+    weather: str = ""
 
 
 #: ``progress(stage, done, total)`` of a build; the ``"generation"`` stage counts nodes.
@@ -237,12 +241,15 @@ class DatasetBuilder(ScenarioDatasetBuilder, Protocol):
         """The named splits, in order."""
         ...
 
-    def family(self, family: str, months: Sequence[int] | None) -> tuple[FamilyMember, ...]:
-        """The members of a shipped family (``months`` None: all); an error names an unknown family or month."""
+    def family(self, family: str, months: Sequence[str | int] | None) -> tuple[FamilyMember, ...]:
+        """The members of a shipped family (``months`` as the family names them; None: its default
+        ones); an error names an unknown family or month."""
         ...
 
-    def build_family_member(self, member: FamilyMember, out: Path, *, replace: bool) -> dict[str, Any]:
-        """Build ``member`` into ``out`` if it matches its shipped checksums; returns its manifest."""
+    def build_family_member(self, member: FamilyMember, out: Path, *, replace: bool, **options: Any) -> dict[str, Any]:
+        """Build ``member`` into ``out`` (if pinned, only when it matches its shipped checksums);
+        returns its manifest. ``options``: those of :meth:`choose_weather` for a family whose
+        weather is downloaded (``open_meteo_url``, ``retries``, ``notify``)."""
         ...
 
 

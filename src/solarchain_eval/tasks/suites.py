@@ -28,6 +28,7 @@ BUILTIN_SUITES = {
     "train": "solarchain_eval.solar.suites:TRAIN_SUITE",
     "paper-early": "solarchain_eval.solar.suites:PAPER_EARLY_SUITE",
     "paper-late": "solarchain_eval.solar.suites:PAPER_LATE_SUITE",
+    "paper-cities": "solarchain_eval.solar.suites:PAPER_CITIES_SUITE",
 }
 _NAME = re.compile(r"^[a-z][a-z0-9-]{0,39}$")
 
@@ -112,12 +113,16 @@ class Suite:
         The tasks, in order (names unique).
     reference : tuple of (str, str)
         The baselines a normalised score of 0 and 1 stand for, by name (run on every entry).
+    online : bool
+        Its datasets are downloaded on first use (built from the cache afterwards), so that
+        ``bench-suite``, which times the offline builds, builds them only when named.
     """
 
     name: str
     description: str
     entries: tuple[SuiteEntry, ...]
     reference: tuple[str, str] = ("random", "myopic")
+    online: bool = False
 
     def __post_init__(self) -> None:
         if not _NAME.match(self.name):
