@@ -62,6 +62,11 @@ def normalised(frame: pd.DataFrame) -> pd.DataFrame:
     return frame.assign(normalised=(frame["cumulative_reward"] - low) / (high - low))
 
 
+def learned(frame: pd.DataFrame) -> tuple[str, ...]:
+    """The learned policies a backend's runs hold (a training may leave one out, e.g. SB3's SAC)."""
+    return tuple(p for p in LEARNED if p in set(frame["policy"]))
+
+
 def matrix(frame: pd.DataFrame, policy: str) -> np.ndarray:
     """The (episodes, entries) score matrix of one policy."""
     rows = frame[frame["policy"] == policy].pivot_table(
@@ -73,7 +78,7 @@ def matrix(frame: pd.DataFrame, policy: str) -> np.ndarray:
 def lead_rows(frame: pd.DataFrame, backend: str, suite: str) -> list[dict]:
     myopic = matrix(frame, "myopic")
     rows = []
-    for policy in (*LEARNED, "static", "myopic", "random"):
+    for policy in (*learned(frame), "static", "myopic", "random"):
         scores = matrix(frame, policy)
         low, high = stratified_bootstrap_interval(scores, aggregate_iqm, reps=REPS, seed=SEED)
         rows.append(
@@ -106,7 +111,7 @@ def paired_difference(treated: pd.DataFrame, base: pd.DataFrame, metric: str) ->
 def contrast_rows(groups: dict[str, pd.DataFrame], backend: str, suite: str) -> list[dict]:
     rows = []
     for treated, base in (("no_physics", "main"), ("llm", "main")):
-        for policy in LEARNED:
+        for policy in learned(groups[base]):
             t = groups[treated][groups[treated]["policy"] == policy]
             b = groups[base][groups[base]["policy"] == policy]
             for metric in METRICS:
@@ -133,7 +138,7 @@ def heatmap(frames: dict[str, pd.DataFrame], path: Path) -> None:
     for backend, frame in frames.items():
         means = frame.groupby(["policy", "entry"])["normalised"].mean().unstack()
         entries = list(means.columns)
-        for policy in LEARNED:
+        for policy in learned(frame):
             labels.append(f"{policy} ({backend})")
             cells.append(means.loc[policy].to_numpy())
     data = np.vstack(cells)
@@ -156,7 +161,8 @@ def profiles(frames: dict[str, pd.DataFrame], path: Path) -> None:
     figure, panels = plt.subplots(1, len(frames), figsize=(5.0 * len(frames), 4.0), sharey=True, squeeze=False)
     colours = dict(zip((*LEARNED, "myopic", "static", "random"), plt.get_cmap("tab10").colors, strict=False))
     for axes, (backend, frame) in zip(panels[0], frames.items(), strict=True):
-        draw_performance_profile(axes, {p: matrix(frame, p) for p in colours}, colours)
+        shown = (*learned(frame), "myopic", "static", "random")
+        draw_performance_profile(axes, {p: matrix(frame, p) for p in shown}, colours)
         axes.set_title(f"held-out suite, {backend}")
         axes.set_xlim(-1.0, 3.0)  # the bulk of every profile; the tails run to the scores' extremes
     figure.tight_layout()
