@@ -158,9 +158,13 @@ def heatmap(frames: dict[str, pd.DataFrame], path: Path) -> None:
 
 def profiles(frames: dict[str, pd.DataFrame], path: Path) -> None:
     """One panel per backend: every policy's performance profile over the held-out entries."""
-    figure, panels = plt.subplots(1, len(frames), figsize=(5.0 * len(frames), 4.0), sharey=True, squeeze=False)
+    columns = min(2, len(frames))
+    rows = -(-len(frames) // columns)
+    figure, panels = plt.subplots(rows, columns, figsize=(5.5 * columns, 4.0 * rows), sharey=True, squeeze=False)
     colours = dict(zip((*LEARNED, "myopic", "static", "random"), plt.get_cmap("tab10").colors, strict=False))
-    for axes, (backend, frame) in zip(panels[0], frames.items(), strict=True):
+    for axes in panels.ravel()[len(frames) :]:
+        axes.set_visible(False)
+    for axes, (backend, frame) in zip(panels.ravel(), frames.items(), strict=False):
         shown = (*learned(frame), "myopic", "static", "random")
         draw_performance_profile(axes, {p: matrix(frame, p) for p in shown}, colours)
         axes.set_title(f"held-out suite, {backend}")
