@@ -129,14 +129,24 @@ def tmy_weather(dataset: HeldoutDataset) -> tuple[tuple[City, ...], FileWeather]
     return weather_from_files(read_tmy_files(), dataset.timezone, dataset.start, dataset.end)
 
 
-def build_heldout(dataset: HeldoutDataset, out_dir: str | Path, progress=None):
-    """Build ``dataset`` into ``out_dir`` (four CSVs and manifest.json); returns the build's result."""
+def build_design(
+    dataset: HeldoutDataset,
+    out_dir: str | Path,
+    cities,
+    weather_payload,
+    *,
+    weather_source: str,
+    weather_sha256: str,
+    progress=None,
+    **manifest,
+):
+    """Build a held-out family's ``dataset`` from its cities and weather into ``out_dir`` (four CSVs
+    and manifest.json, which records the family and ``manifest``'s entries); returns the build's result."""
     from .build import build_dataset
 
-    cities, weather = tmy_weather(dataset)
     extra = {"progress": progress} if progress is not None else {}
     return build_dataset(
-        weather.payload,
+        weather_payload,
         out_dir,
         cities=cities,
         seed=dataset.seed,
@@ -144,12 +154,27 @@ def build_heldout(dataset: HeldoutDataset, out_dir: str | Path, progress=None):
         end=dataset.end,
         nodes_per_city=dataset.nodes_per_city,
         timezone=dataset.timezone,
+        weather_source=weather_source,
+        weather_sha256=weather_sha256,
+        family=dataset.family,
+        **manifest,
+        **extra,
+    )
+
+
+def build_heldout(dataset: HeldoutDataset, out_dir: str | Path, progress=None):
+    """Build ``dataset`` from the packaged weather files into ``out_dir``; returns the build's result."""
+    cities, weather = tmy_weather(dataset)
+    return build_design(
+        dataset,
+        out_dir,
+        cities,
+        weather.payload,
         weather_source=f"held-out family {dataset.family} (packaged): {weather.source}",
         weather_sha256=weather.sha256,
         weather_files=weather.entries,
         attribution=weather.attribution,
-        family=dataset.family,
-        **extra,
+        progress=progress,
     )
 
 

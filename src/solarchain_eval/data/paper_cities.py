@@ -21,7 +21,7 @@ from ..common.atomic_files import sha256_file
 from .cities import DEFAULT_NODES_PER_CITY, DEFAULT_SEED, DEFAULT_START, DEFAULT_TIMEZONE, PAPER_CITIES
 from .default import cache_dir
 from .files import MANIFEST_FILE
-from .heldout import HeldoutDataset, build_checked
+from .heldout import HeldoutDataset, build_checked, build_design
 from .sources import Weather, open_meteo_cache_path
 from .weather import CityWeather, WeatherError, read_weather_cache, write_weather_cache
 
@@ -128,22 +128,14 @@ def paper_cities_weather(
 
 def build_paper_cities(dataset: HeldoutDataset, weather: Weather, out_dir: str | Path, progress=None):
     """Build ``dataset`` from ``weather`` into ``out_dir`` (four CSVs and manifest.json); returns the build's result."""
-    from .build import build_dataset
-
-    extra = {"progress": progress} if progress is not None else {}
-    return build_dataset(
-        weather.payload,
+    return build_design(
+        dataset,
         out_dir,
-        cities=PAPER_CITIES,
-        seed=dataset.seed,
-        start=dataset.start,
-        end=dataset.end,
-        nodes_per_city=dataset.nodes_per_city,
-        timezone=dataset.timezone,
+        PAPER_CITIES,
+        weather.payload,
         weather_source=weather.source,
         weather_sha256=weather.sha256,
-        family=dataset.family,
-        **extra,
+        progress=progress,
     )
 
 
