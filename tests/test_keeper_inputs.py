@@ -19,6 +19,7 @@ from solarchain_eval.common.atomic_files import sha256_file
 from solarchain_eval.config import BenchmarkConfig
 from solarchain_eval.evaluation.fingerprint import protocol_fingerprint, protocol_id
 from solarchain_eval.evaluation.verify_checks import rollout_set_problem
+from submission_tarball import pack
 
 RUN_SEED = 5
 
@@ -162,16 +163,6 @@ def test_the_board_refuses_an_out_folder_inside_an_input(run):
     assert result.exit_code == 2
     assert f"--out {run / 'board'} lies inside the input {run}" in " ".join(result.output.split())
     assert not (run / "board").exists()
-
-
-def pack(tarball: Path, run: Path, extra: dict[str, bytes] | None = None) -> Path:
-    with tarfile.open(tarball, "w:gz") as archive:
-        archive.add(run, arcname="submission")
-        for name, data in (extra or {}).items():
-            info = tarfile.TarInfo(f"submission/{name}")
-            info.size = len(data)
-            archive.addfile(info, io.BytesIO(data))
-    return tarball
 
 
 @pytest.fixture

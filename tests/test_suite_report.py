@@ -29,6 +29,7 @@ from solarchain_eval.report.leaderboard import make_leaderboards
 from solarchain_eval.report.leaderboard.inputs import LeaderboardError
 from solarchain_eval.report.options import LeaderboardOptions, ReportDataError
 from solarchain_eval.tasks.suites import Suite, SuiteEntry, register_suite, unregister_suite
+from submission_tarball import pack
 
 runner = CliRunner()
 SEEDS, EPISODES = (20260511,), 4
@@ -198,22 +199,9 @@ def test_verify_checks_every_entry_and_the_suite_files(roots, tmp_path):
     assert done.output.count("static: verified (1 episode)") == 2  # the entries' runs are untouched
 
 
-def _pack(tarball: Path, root: Path, extra: dict[str, bytes] | None = None) -> Path:
-    import io
-    import tarfile
-
-    with tarfile.open(tarball, "w:gz") as archive:
-        archive.add(root, arcname="submission")
-        for name, data in (extra or {}).items():
-            info = tarfile.TarInfo(f"submission/{name}")
-            info.size = len(data)
-            archive.addfile(info, io.BytesIO(data))
-    return tarball
-
-
 def test_a_packed_suite_root_is_ranked_as_the_folder_and_a_stray_file_refused(roots, tmp_path):
     folder = make_leaderboards([roots["heldout"]], tmp_path / "folder").boards[0]
-    tarball = _pack(tmp_path / "suite.tar.gz", roots["heldout"])
+    tarball = pack(tmp_path / "suite.tar.gz", roots["heldout"])
     done = runner.invoke(app, ["leaderboard", str(tarball), "--out", str(tmp_path / "packed")])
     assert done.exit_code == 0, done.output
     packed, unpacked = (pd.read_csv(tmp_path / name / "leaderboard.csv") for name in ("packed", "folder"))
@@ -221,7 +209,7 @@ def test_a_packed_suite_root_is_ranked_as_the_folder_and_a_stray_file_refused(ro
     pd.testing.assert_frame_equal(packed.drop(columns="source"), unpacked.drop(columns="source"))
     assert folder.board_id in (tmp_path / "packed" / "leaderboard.md").read_text()
     # a file beside an entry's run files that its run_metadata.json does not record: refused, nothing written
-    stray = _pack(tmp_path / "stray.tar.gz", roots["heldout"], {"m01/notes.bin": b"\0" * 100})
+    stray = pack(tmp_path / "stray.tar.gz", roots["heldout"], {"m01/notes.bin": b"\0" * 100})
     done = runner.invoke(app, ["leaderboard", str(stray), "--out", str(tmp_path / "never")])
     assert done.exit_code == 2 and "submission/m01/notes.bin is not vouched for" in done.output
     assert "pack only the suite root" in done.output and not (tmp_path / "never").exists()
