@@ -21,6 +21,7 @@ from pathlib import Path
 from typing import Any
 
 from ..common.errors import OptionsError
+from .registry import get_task
 
 #: Built-in suites: name -> "module:attribute" of the Suite object.
 BUILTIN_SUITES = {
@@ -85,8 +86,6 @@ class SuiteEntry:
         """
         if not self.config_overrides:
             return config
-        from .registry import get_task
-
         task = get_task(self.task)
         default = task.config_record(task.default_config())
         record = task.config_record(task.default_config() if config is None else config)
